@@ -1,0 +1,21 @@
+//! # pavlov — the pure core of a Pavlovian-control lab server
+//!
+//! Everything in this crate is synchronous and deterministic: no async runtime, no sockets, no clocks,
+//! no threads. The runtime in `actors/` is a thin async shell that moves data between channels and calls
+//! into these modules once per 20 ms tick.
+//!
+//! - [`oi`]: the iRobot Create 1 / Create 2 Open Interface: commands, the sensor-packet table, the stream parser.
+//! - [`obs`]: a sensor snapshot as a named observation vector scaled to `[0, 1]`.
+//! - [`learn`]: tile coding and TD(λ) predictions (Modayil & Sutton, "Prediction Driven Behavior").
+//! - [`control`]: stimulus detectors, the mixing function and gate, default policies and fixed responses.
+//! - [`skeleton`]: joints, elbow angles and their smoothing, for the gesture-command experiment.
+//! - [`sim`]: a byte-exact simulated Create and a simulated human operator.
+//! - [`rng`]: the seeded random-number generator every stochastic part of the core draws from.
+
+pub mod control;
+pub mod learn;
+pub mod obs;
+pub mod oi;
+pub mod rng;
+pub mod sim;
+pub mod skeleton;

@@ -1,0 +1,20 @@
+//! The iRobot Create Open Interface (OI), Create 1 and Create 2, as pure data and functions.
+//!
+//! - [`model`]: the two robot models and what differs between them (baud, groups, budgets).
+//! - [`sensors`]: [`SensorValues`], a snapshot of raw packet values indexed by packet id.
+//! - [`packets`]: the table of sensor packets 7–58 and groups, and their byte encoding.
+//! - [`command`]: host-to-robot commands, encoded and parsed per model.
+//! - [`frame`]: stream frames (header 19, length, id/data pairs, checksum).
+//! - [`parser`]: the incremental, resynchronising stream parser.
+//!
+//! Facts: `../shared/reference/create_oi.md` (the two OI specifications, cited there as [C1] and [C2]).
+
+pub mod command;
+pub mod frame;
+pub mod model;
+pub mod packets;
+pub mod parser;
+pub mod sensors;
+
+pub use model::Model;
+pub use sensors::SensorValues;

@@ -1,0 +1,96 @@
+//! The two robot models the server drives, and the facts that differ between them.
+
+use serde::{Deserialize, Serialize};
+
+/// An iRobot Create model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Model {
+    /// The original Create (OI spec v2, 2006): 57600 baud, packets 7–42, group 6.
+    Create1,
+    /// The Create 2 (Roomba 600 OI): 115200 baud, packets 7–58, group 100.
+    Create2,
+}
+
+impl Model {
+    /// Default serial rate [C1 p5; C2 p4].
+    pub fn baud(self) -> u32 {
+        match self {
+            Model::Create1 => 57_600,
+            Model::Create2 => 115_200,
+        }
+    }
+
+    /// The group packet that holds every sensor packet from 7 up: 6 on the Create 1 (packets 7–42),
+    /// 100 on the Create 2 (packets 7–58).
+    pub fn all_sensors_group(self) -> u8 {
+        match self {
+            Model::Create1 => 6,
+            Model::Create2 => 100,
+        }
+    }
+
+    /// The highest single sensor packet id the model answers.
+    pub fn last_packet(self) -> u8 {
+        match self {
+            Model::Create1 => 42,
+            Model::Create2 => 58,
+        }
+    }
+
+    /// Bytes the robot can send in one 15 ms stream slot at its default baud (10 bits a byte on the wire):
+    /// 86 at 57600, 172 at 115200 [C1 p14; C2 p22].
+    pub fn stream_budget_bytes(self) -> usize {
+        stream_budget_bytes(self.baud())
+    }
+
+    /// A short lowercase name, as used in the configuration and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::Create1 => "create1",
+            Model::Create2 => "create2",
+        }
+    }
+}
+
+/// Bytes that fit in one 15 ms stream slot at `baud` (10 bits per byte on the wire).
+pub fn stream_budget_bytes(baud: u32) -> usize {
+    (baud as usize * 15) / 10_000
+}
+
+impl std::fmt::Display for Model {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Model {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "create1" => Ok(Model::Create1),
+            "create2" => Ok(Model::Create2),
+            other => Err(format!("unknown model `{other}` (expected create1 or create2)")),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stream_budgets_match_the_spec() {
+        assert_eq!(Model::Create1.stream_budget_bytes(), 86);
+        assert_eq!(Model::Create2.stream_budget_bytes(), 172);
+        assert_eq!(stream_budget_bytes(19_200), 28);
+    }
+
+    #[test]
+    fn names_round_trip() {
+        for m in [Model::Create1, Model::Create2] {
+            assert_eq!(m.name().parse::<Model>(), Ok(m));
+        }
+        assert!("roomba".parse::<Model>().is_err());
+    }
+}

@@ -1,0 +1,95 @@
+//! [`SensorValues`]: one snapshot of raw sensor packet values, indexed by packet id.
+//!
+//! Values are kept exactly as the robot reports them (after big-endian decoding and sign extension),
+//! in the packet's own units: mm, mV, mA, bit fields as integers. Scaling to `[0, 1]` happens in
+//! [`crate::obs`]; meaning (sizes, signedness, bit layouts) lives in the packet table.
+
+use serde::{Deserialize, Serialize};
+
+/// The number of packet-id slots: ids 0..=58 (only 7..=58 hold single packets).
+pub const PACKET_SLOTS: usize = 59;
+
+/// Raw values of single sensor packets 7–58, each present or absent.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SensorValues {
+    values: Vec<i32>,
+    present: u64,
+}
+
+impl Default for SensorValues {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl SensorValues {
+    /// An empty snapshot: no packet present.
+    pub fn new() -> Self {
+        SensorValues {
+            values: vec![0; PACKET_SLOTS],
+            present: 0,
+        }
+    }
+
+    /// The value of packet `id`, if the snapshot holds it.
+    pub fn get(&self, id: u8) -> Option<i32> {
+        let i = id as usize;
+        if i < PACKET_SLOTS && self.present & (1 << i) != 0 {
+            Some(self.values[i])
+        } else {
+            None
+        }
+    }
+
+    /// The value of packet `id`, or 0 when absent.
+    pub fn get_or_zero(&self, id: u8) -> i32 {
+        self.get(id).unwrap_or(0)
+    }
+
+    /// Sets packet `id` (ids above 58 are ignored).
+    pub fn set(&mut self, id: u8, value: i32) {
+        let i = id as usize;
+        if i < PACKET_SLOTS {
+            self.values[i] = value;
+            self.present |= 1 << i;
+        }
+    }
+
+    /// Copies every packet present in `other` into `self`.
+    pub fn merge(&mut self, other: &SensorValues) {
+        for (id, v) in other.iter() {
+            self.set(id, v);
+        }
+    }
+
+    /// `(id, value)` for every present packet, in increasing id order.
+    pub fn iter(&self) -> impl Iterator<Item = (u8, i32)> + '_ {
+        (0..PACKET_SLOTS as u8).filter_map(move |id| self.get(id).map(|v| (id, v)))
+    }
+
+    /// True when no packet is present.
+    pub fn is_empty(&self) -> bool {
+        self.present == 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn set_get_merge() {
+        let mut a = SensorValues::new();
+        assert!(a.is_empty());
+        a.set(22, 15_000);
+        a.set(23, -300);
+        a.set(200, 1);
+        assert_eq!(a.get(22), Some(15_000));
+        assert_eq!(a.get(23), Some(-300));
+        assert_eq!(a.get(24), None);
+        let mut b = SensorValues::new();
+        b.set(23, 5);
+        b.merge(&a);
+        assert_eq!(b.iter().collect::<Vec<_>>(), vec![(22, 15_000), (23, -300)]);
+    }
+}
