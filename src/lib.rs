@@ -10,12 +10,14 @@
 //! - [`control`]: stimulus detectors, the mixing function and gate, default policies and fixed responses.
 //! - [`skeleton`]: joints, elbow angles and their smoothing, for the gesture-command experiment.
 //! - [`sim`]: a byte-exact simulated Create and a simulated human operator.
+//! - [`record`]: [`record::TickRecord`], everything that happened on one tick.
 //! - [`rng`]: the seeded random-number generator every stochastic part of the core draws from.
 
 pub mod control;
 pub mod learn;
 pub mod obs;
 pub mod oi;
+pub mod record;
 pub mod rng;
 pub mod sim;
 pub mod skeleton;

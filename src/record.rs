@@ -1,0 +1,108 @@
+//! [`TickRecord`]: everything that happened on one 20 ms tick, the single source for the dashboard,
+//! the recorder, the metrics and replay.
+//!
+//! The record is plain data (serde), built by the runtime's actuation stage after the motor command has
+//! been written, so it states what the robot was actually told to do.
+
+use serde::{Deserialize, Serialize};
+
+use crate::control::{Action, Mode};
+
+/// The robot-side readings the dashboard, the metrics and the experiments need on every tick, in the
+/// OI's own units. `None` where the snapshot did not carry the packet.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SensorSummary {
+    /// Packet 14 bit 4: the left wheel's over-current flag.
+    pub overcurrent_left: bool,
+    /// Packet 14 bit 3: the right wheel's over-current flag.
+    pub overcurrent_right: bool,
+    /// Packet 7 bit 1 / bit 0: bumpers.
+    pub bump_left: bool,
+    /// Packet 7 bit 0.
+    pub bump_right: bool,
+    /// Packet 23, mA (negative = discharging).
+    pub battery_current_ma: Option<i32>,
+    /// Packet 22, mV.
+    pub battery_voltage_mv: Option<i32>,
+    /// Packet 25, mAh.
+    pub battery_charge_mah: Option<i32>,
+    /// Packet 19 summed over the frames since the previous tick, mm.
+    pub distance_mm: i32,
+    /// Packet 20 summed over the frames since the previous tick, degrees.
+    pub angle_deg: i32,
+    /// Packet 35 as reported (0 Off, 1 Passive, 2 Safe, 3 Full).
+    pub oi_mode: Option<i32>,
+}
+
+/// One prediction's output on a tick.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PredictionValue {
+    /// The prediction's configured name.
+    pub name: String,
+    /// σ(wᵀx) on this tick's features, before this tick's learning update.
+    pub value: f64,
+    /// The gate's threshold θ for this prediction.
+    pub threshold: f64,
+}
+
+/// Elbow angles seen on the tick (interaction experiment), degrees; `None` = invalid.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ElbowSummary {
+    /// Left elbow interior angle.
+    pub left: Option<f64>,
+    /// Exponentially weighted average of the left angle.
+    pub left_avg: Option<f64>,
+    /// Right elbow interior angle.
+    pub right: Option<f64>,
+    /// Exponentially weighted average of the right angle.
+    pub right_avg: Option<f64>,
+}
+
+/// Why actuation overrode the gate's action with a stop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SafetyStop {
+    /// The e-stop is latched.
+    EStop,
+    /// The newest observation is too old (sensor stream stale).
+    StaleObservation,
+    /// No fresh action arrived from the gate in time (pipeline stalled).
+    NoFreshAction,
+    /// The robot link is down.
+    LinkDown,
+}
+
+/// Everything that happened on one tick.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TickRecord {
+    /// Tick sequence number (0 = first tick of the run).
+    pub seq: u64,
+    /// The tick's scheduled time since the run started, ms.
+    pub t_ms: f64,
+    /// Control mode in force.
+    pub mode: Mode,
+    /// Age of the observation used, in ticks (`None` = none received yet).
+    pub obs_age_ticks: Option<u32>,
+    /// Raw readings of interest.
+    pub sensors: SensorSummary,
+    /// The scaled observation vector (names are announced once, in the run's header).
+    pub obs: Vec<f32>,
+    /// Elbow angles (interaction experiment only).
+    pub elbow: Option<ElbowSummary>,
+    /// The stimulus E on this tick.
+    pub stimulus: bool,
+    /// Every prediction with its threshold.
+    pub predictions: Vec<PredictionValue>,
+    /// Whether the fixed response ϱ was selected (f(v) = 1).
+    pub gate: bool,
+    /// The default policy's action π on this tick.
+    pub default_action: Action,
+    /// The command written to the robot.
+    pub command: Action,
+    /// Set when actuation overrode the gate's action.
+    pub safety_stop: Option<SafetyStop>,
+    /// Whether the e-stop is latched.
+    pub estop: bool,
+    /// How late the tick fired, µs.
+    pub lateness_us: u32,
+}
