@@ -1,1 +1,94 @@
-//! placeholder
+//! Stream frames: `[19][N][id1][data1…]…[idk][datak…][checksum]`, sent every 15 ms [C1 p14; C2 p22].
+//!
+//! `N` counts the id and data bytes between the length byte and the checksum. The checksum makes the
+//! sum of every byte of the frame, header through checksum, ≡ 0 (mod 256) [C2 p22]. ([C1 p14] words it
+//! as excluding the header, but prints an example that only works header-included when paired with
+//! [C2]'s, and every working Create 1 driver includes it; see the reference's CONFLICT note.)
+//! A frame must fit in one 15 ms slot at the link's baud rate or the stream corrupts [C1 p14; C2 p22].
+
+use super::model::stream_budget_bytes;
+use super::packets::{data_len, encode_data};
+use super::{OiError, SensorValues};
+
+/// The first byte of every stream frame.
+pub const STREAM_HEADER: u8 = 19;
+
+/// The length byte N of a frame for `ids`: Σ(1 + data bytes).
+pub fn stream_payload_len(ids: &[u8]) -> Result<usize, OiError> {
+    if ids.is_empty() {
+        return Err(OiError::EmptyStreamList);
+    }
+    let mut n = 0usize;
+    for &id in ids {
+        n += 1 + data_len(id).ok_or(OiError::UnknownPacket(id))?;
+    }
+    if n > usize::from(u8::MAX) {
+        return Err(OiError::FrameTooLong { data_bytes: n });
+    }
+    Ok(n)
+}
+
+/// Total bytes of one frame for `ids` (single packets and/or groups): 3 + Σ(1 + data bytes).
+pub fn stream_frame_len(ids: &[u8]) -> Result<usize, OiError> {
+    stream_payload_len(ids).map(|n| n + 3)
+}
+
+/// The frame length, or [`OiError::OverBudget`] if a frame would not fit in one 15 ms slot at `baud`
+/// (15 ms × baud / 10 bits: 86 bytes at 57600, 172 at 115200 [C1 p14; C2 p22]).
+pub fn check_stream_budget(ids: &[u8], baud: u32) -> Result<usize, OiError> {
+    let frame_bytes = stream_frame_len(ids)?;
+    let budget = stream_budget_bytes(baud);
+    if frame_bytes > budget {
+        Err(OiError::OverBudget {
+            frame_bytes,
+            budget,
+            baud,
+        })
+    } else {
+        Ok(frame_bytes)
+    }
+}
+
+/// The byte that makes `bytes` plus it sum to 0 mod 256.
+pub fn checksum_for(bytes: &[u8]) -> u8 {
+    byte_sum(bytes).wrapping_neg()
+}
+
+/// The low byte of the sum of `bytes`.
+pub fn byte_sum(bytes: &[u8]) -> u8 {
+    bytes.iter().fold(0u8, |acc, &b| acc.wrapping_add(b))
+}
+
+/// The robot's side: one whole frame for `ids` with `values` (absent values are sent as 0).
+pub fn encode_stream_frame(ids: &[u8], values: &SensorValues) -> Result<Vec<u8>, OiError> {
+    let n = stream_payload_len(ids)?;
+    let mut frame = Vec::with_capacity(n + 3);
+    frame.push(STREAM_HEADER);
+    frame.push(n as u8); // stream_payload_len guarantees n <= 255
+    for &id in ids {
+        frame.push(id);
+        encode_data(id, values, &mut frame)?;
+    }
+    frame.push(checksum_for(&frame));
+    Ok(frame)
+}
+
+/// True when the bytes of a whole frame (header through checksum) sum to 0 mod 256.
+pub fn checksum_ok(frame: &[u8]) -> bool {
+    !frame.is_empty() && byte_sum(frame) == 0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spec_example_frame_for_29_and_13() {
+        let mut v = SensorValues::new();
+        v.set(29, 0x0219);
+        v.set(13, 0);
+        let frame = encode_stream_frame(&[29, 13], &v).unwrap();
+        assert_eq!(frame, vec![19, 5, 29, 2, 25, 13, 0, 163]);
+        assert!(checksum_ok(&frame));
+    }
+}

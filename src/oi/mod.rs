@@ -2,6 +2,7 @@
 //!
 //! - [`model`]: the two robot models and what differs between them (baud, groups, budgets).
 //! - [`sensors`]: [`SensorValues`], a snapshot of raw packet values indexed by packet id.
+//! - [`error`]: [`OiError`], what can be wrong with a packet id, value, command or stream request.
 //! - [`packets`]: the table of sensor packets 7–58 and groups, and their byte encoding.
 //! - [`command`]: host-to-robot commands, encoded and parsed per model.
 //! - [`frame`]: stream frames (header 19, length, id/data pairs, checksum).
@@ -10,11 +11,13 @@
 //! Facts: `../shared/reference/create_oi.md` (the two OI specifications, cited there as [C1] and [C2]).
 
 pub mod command;
+pub mod error;
 pub mod frame;
 pub mod model;
 pub mod packets;
 pub mod parser;
 pub mod sensors;
 
+pub use error::OiError;
 pub use model::Model;
 pub use sensors::SensorValues;
