@@ -81,14 +81,83 @@ pub fn checksum_ok(frame: &[u8]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::oi::Model;
+    use crate::oi::packets::id;
 
     #[test]
     fn spec_example_frame_for_29_and_13() {
+        // [C2 p22]: 19 5 29 2 25 13 0 163, checksum including the header.
         let mut v = SensorValues::new();
-        v.set(29, 0x0219);
-        v.set(13, 0);
+        v.set(id::CLIFF_FRONT_LEFT_SIGNAL, 0x0219);
+        v.set(id::VIRTUAL_WALL, 0);
         let frame = encode_stream_frame(&[29, 13], &v).unwrap();
         assert_eq!(frame, vec![19, 5, 29, 2, 25, 13, 0, 163]);
         assert!(checksum_ok(&frame));
+        assert_eq!(stream_frame_len(&[29, 13]), Ok(frame.len()));
+    }
+
+    #[test]
+    fn reference_vector_with_signed_values() {
+        let mut v = SensorValues::new();
+        v.set(id::BUMPS_WHEEL_DROPS, 1);
+        v.set(id::DISTANCE, 15);
+        v.set(id::ANGLE, -3);
+        let frame = encode_stream_frame(&[7, 19, 20], &v).unwrap();
+        assert_eq!(frame, vec![19, 8, 7, 1, 19, 0, 15, 20, 255, 253, 171]);
+    }
+
+    #[test]
+    fn checksum_detects_a_changed_byte() {
+        let frame = [19u8, 5, 29, 2, 25, 13, 0, 163];
+        for i in 0..frame.len() {
+            let mut bad = frame;
+            bad[i] ^= 0x10;
+            assert!(!checksum_ok(&bad), "flipping byte {i}");
+        }
+        assert!(!checksum_ok(&[]));
+        assert_eq!(checksum_for(&frame[..7]), 163);
+    }
+
+    #[test]
+    fn whole_sensor_groups_fit_their_default_baud() {
+        assert_eq!(stream_frame_len(&[6]), Ok(56));
+        assert_eq!(stream_frame_len(&[100]), Ok(84));
+        assert_eq!(check_stream_budget(&[6], Model::Create1.baud()), Ok(56));
+        assert_eq!(check_stream_budget(&[100], Model::Create2.baud()), Ok(84));
+        assert_eq!(check_stream_budget(&[100, 100], 115_200), Ok(165));
+        assert_eq!(
+            check_stream_budget(&[100, 6], 57_600),
+            Err(OiError::OverBudget {
+                frame_bytes: 137,
+                budget: 86,
+                baud: 57_600
+            })
+        );
+        assert_eq!(
+            check_stream_budget(&[6], 19_200),
+            Err(OiError::OverBudget {
+                frame_bytes: 56,
+                budget: 28,
+                baud: 19_200
+            })
+        );
+        let frame = encode_stream_frame(&[100], &SensorValues::new()).unwrap();
+        assert_eq!(&frame[..3], &[19, 81, 100]);
+        assert_eq!(frame.len(), 84);
+        assert!(checksum_ok(&frame));
+    }
+
+    #[test]
+    fn bad_lists_are_refused() {
+        assert_eq!(stream_frame_len(&[]), Err(OiError::EmptyStreamList));
+        assert_eq!(stream_frame_len(&[7, 59]), Err(OiError::UnknownPacket(59)));
+        assert_eq!(
+            stream_frame_len(&[100, 100, 100, 100]),
+            Err(OiError::FrameTooLong { data_bytes: 324 })
+        );
+        assert_eq!(
+            encode_stream_frame(&[105], &SensorValues::new()),
+            Err(OiError::UnknownPacket(105))
+        );
     }
 }

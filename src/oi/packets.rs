@@ -155,18 +155,15 @@ pub mod bits {
     pub const STASIS_DISABLED: i32 = 1 << 1;
 }
 
-/// Table builder: `p(id, name, size, signed, unit, min, max, create1, create2)`.
-#[allow(clippy::too_many_arguments)]
+/// Table builder: `p(id, name, size, signed, unit, min, max, (create1, create2))`.
 const fn p(
     id: u8,
     name: &'static str,
     size: u8,
     signed: bool,
     unit: &'static str,
-    min: i32,
-    max: i32,
-    create1: bool,
-    create2: bool,
+    range: (i32, i32),
+    models: (bool, bool),
 ) -> PacketSpec {
     PacketSpec {
         id,
@@ -174,243 +171,79 @@ const fn p(
         size,
         signed,
         unit,
-        min,
-        max,
-        create1,
-        create2,
+        min: range.0,
+        max: range.1,
+        create1: models.0,
+        create2: models.1,
     }
 }
 
 const U: bool = false;
 const S: bool = true;
-const I16_MIN: i32 = i16::MIN as i32;
-const I16_MAX: i32 = i16::MAX as i32;
-const U16_MAX: i32 = u16::MAX as i32;
+const BOTH: (bool, bool) = (true, true);
+const C2: (bool, bool) = (false, true);
+const BOOL: (i32, i32) = (0, 1);
+const BYTE: (i32, i32) = (0, 255);
+const I16: (i32, i32) = (i16::MIN as i32, i16::MAX as i32);
+const U16: (i32, i32) = (0, u16::MAX as i32);
+const SIGNAL: (i32, i32) = (0, 4095);
+const WHEEL_MM_S: (i32, i32) = (-500, 500);
 
 /// Every single sensor packet, indexed by `id - 7` [C1 pp17–21, 24–25; C2 pp23–32, 37–39].
+#[rustfmt::skip]
 pub static PACKETS: [PacketSpec; 52] = [
-    p(7, "bumps_wheel_drops", 1, U, "bits", 0, 31, true, true), // C2 has no caster bit: 0–15
-    p(8, "wall", 1, U, "bool", 0, 1, true, true),
-    p(9, "cliff_left", 1, U, "bool", 0, 1, true, true),
-    p(10, "cliff_front_left", 1, U, "bool", 0, 1, true, true),
-    p(11, "cliff_front_right", 1, U, "bool", 0, 1, true, true),
-    p(12, "cliff_right", 1, U, "bool", 0, 1, true, true),
-    p(13, "virtual_wall", 1, U, "bool", 0, 1, true, true),
-    p(14, "overcurrents", 1, U, "bits", 0, 31, true, true),
-    p(15, "dirt_detect", 1, U, "", 0, 255, true, true), // C1: unused, always 0
-    p(16, "unused_16", 1, U, "", 0, 255, true, true),   // always 0 on both
-    p(17, "ir_omni", 1, U, "code", 0, 255, true, true), // none: 255 on C1, 0 on C2
-    p(18, "buttons", 1, U, "bits", 0, 255, true, true),
-    p(19, "distance", 2, S, "mm", I16_MIN, I16_MAX, true, true),
-    p(20, "angle", 2, S, "deg", I16_MIN, I16_MAX, true, true),
-    p(21, "charging_state", 1, U, "code", 0, 6, true, true), // 0–5 in the text, 0–6 in C2's table
-    p(22, "voltage", 2, U, "mV", 0, U16_MAX, true, true),
-    p(23, "current", 2, S, "mA", I16_MIN, I16_MAX, true, true),
-    p(24, "temperature", 1, S, "degC", -128, 127, true, true),
-    p(25, "battery_charge", 2, U, "mAh", 0, U16_MAX, true, true),
-    p(26, "battery_capacity", 2, U, "mAh", 0, U16_MAX, true, true),
-    p(27, "wall_signal", 2, U, "", 0, 4095, true, true), // C2: 0–1023
-    p(28, "cliff_left_signal", 2, U, "", 0, 4095, true, true),
-    p(29, "cliff_front_left_signal", 2, U, "", 0, 4095, true, true),
-    p(
-        30,
-        "cliff_front_right_signal",
-        2,
-        U,
-        "",
-        0,
-        4095,
-        true,
-        true,
-    ),
-    p(31, "cliff_right_signal", 2, U, "", 0, 4095, true, true),
-    p(
-        32,
-        "cargo_bay_digital_inputs",
-        1,
-        U,
-        "bits",
-        0,
-        31,
-        true,
-        true,
-    ), // C2: unused byte
-    p(33, "cargo_bay_analog_signal", 2, U, "", 0, 1023, true, true), // C2: unused bytes
-    p(34, "charging_sources", 1, U, "bits", 0, 3, true, true),
-    p(35, "oi_mode", 1, U, "code", 0, 3, true, true),
-    p(36, "song_number", 1, U, "", 0, 15, true, true), // C2: 0–4
-    p(37, "song_playing", 1, U, "bool", 0, 1, true, true),
-    p(38, "stream_packet_count", 1, U, "", 0, 108, true, true), // C1: 0–43
-    p(
-        39,
-        "requested_velocity",
-        2,
-        S,
-        "mm/s",
-        -500,
-        500,
-        true,
-        true,
-    ),
-    p(
-        40,
-        "requested_radius",
-        2,
-        S,
-        "mm",
-        I16_MIN,
-        I16_MAX,
-        true,
-        true,
-    ),
-    p(
-        41,
-        "requested_right_velocity",
-        2,
-        S,
-        "mm/s",
-        -500,
-        500,
-        true,
-        true,
-    ),
-    p(
-        42,
-        "requested_left_velocity",
-        2,
-        S,
-        "mm/s",
-        -500,
-        500,
-        true,
-        true,
-    ),
-    p(
-        43,
-        "left_encoder",
-        2,
-        S,
-        "counts",
-        I16_MIN,
-        I16_MAX,
-        false,
-        true,
-    ), // wraps
-    p(
-        44,
-        "right_encoder",
-        2,
-        S,
-        "counts",
-        I16_MIN,
-        I16_MAX,
-        false,
-        true,
-    ), // wraps
-    p(45, "light_bumper", 1, U, "bits", 0, 127, false, true),
-    p(46, "light_bump_left_signal", 2, U, "", 0, 4095, false, true),
-    p(
-        47,
-        "light_bump_front_left_signal",
-        2,
-        U,
-        "",
-        0,
-        4095,
-        false,
-        true,
-    ),
-    p(
-        48,
-        "light_bump_center_left_signal",
-        2,
-        U,
-        "",
-        0,
-        4095,
-        false,
-        true,
-    ),
-    p(
-        49,
-        "light_bump_center_right_signal",
-        2,
-        U,
-        "",
-        0,
-        4095,
-        false,
-        true,
-    ),
-    p(
-        50,
-        "light_bump_front_right_signal",
-        2,
-        U,
-        "",
-        0,
-        4095,
-        false,
-        true,
-    ),
-    p(
-        51,
-        "light_bump_right_signal",
-        2,
-        U,
-        "",
-        0,
-        4095,
-        false,
-        true,
-    ),
-    p(52, "ir_left", 1, U, "code", 0, 255, false, true),
-    p(53, "ir_right", 1, U, "code", 0, 255, false, true),
-    p(
-        54,
-        "left_motor_current",
-        2,
-        S,
-        "mA",
-        I16_MIN,
-        I16_MAX,
-        false,
-        true,
-    ),
-    p(
-        55,
-        "right_motor_current",
-        2,
-        S,
-        "mA",
-        I16_MIN,
-        I16_MAX,
-        false,
-        true,
-    ),
-    p(
-        56,
-        "main_brush_current",
-        2,
-        S,
-        "mA",
-        I16_MIN,
-        I16_MAX,
-        false,
-        true,
-    ),
-    p(
-        57,
-        "side_brush_current",
-        2,
-        S,
-        "mA",
-        I16_MIN,
-        I16_MAX,
-        false,
-        true,
-    ),
-    p(58, "stasis", 1, U, "bits", 0, 3, false, true),
+    p(7,  "bumps_wheel_drops",        1, U, "bits",   (0, 31),    BOTH), // C2 has no caster bit: 0–15
+    p(8,  "wall",                     1, U, "bool",   BOOL,       BOTH), // C2: = light-bumper right
+    p(9,  "cliff_left",               1, U, "bool",   BOOL,       BOTH),
+    p(10, "cliff_front_left",         1, U, "bool",   BOOL,       BOTH),
+    p(11, "cliff_front_right",        1, U, "bool",   BOOL,       BOTH),
+    p(12, "cliff_right",              1, U, "bool",   BOOL,       BOTH),
+    p(13, "virtual_wall",             1, U, "bool",   BOOL,       BOTH),
+    p(14, "overcurrents",             1, U, "bits",   (0, 31),    BOTH),
+    p(15, "dirt_detect",              1, U, "",       BYTE,       BOTH), // C1: unused, always 0
+    p(16, "unused_16",                1, U, "",       BYTE,       BOTH), // always 0
+    p(17, "ir_omni",                  1, U, "code",   BYTE,       BOTH), // none: C1 255, C2 0
+    p(18, "buttons",                  1, U, "bits",   BYTE,       BOTH),
+    p(19, "distance",                 2, S, "mm",     I16,        BOTH),
+    p(20, "angle",                    2, S, "deg",    I16,        BOTH),
+    p(21, "charging_state",           1, U, "code",   (0, 6),     BOTH), // text 0–5, C2 table 0–6
+    p(22, "voltage",                  2, U, "mV",     U16,        BOTH),
+    p(23, "current",                  2, S, "mA",     I16,        BOTH),
+    p(24, "temperature",              1, S, "degC",   (-128, 127), BOTH),
+    p(25, "battery_charge",           2, U, "mAh",    U16,        BOTH),
+    p(26, "battery_capacity",         2, U, "mAh",    U16,        BOTH),
+    p(27, "wall_signal",              2, U, "",       SIGNAL,     BOTH), // C2: 0–1023
+    p(28, "cliff_left_signal",        2, U, "",       SIGNAL,     BOTH),
+    p(29, "cliff_front_left_signal",  2, U, "",       SIGNAL,     BOTH),
+    p(30, "cliff_front_right_signal", 2, U, "",       SIGNAL,     BOTH),
+    p(31, "cliff_right_signal",       2, U, "",       SIGNAL,     BOTH),
+    p(32, "cargo_bay_digital_inputs", 1, U, "bits",   (0, 31),    BOTH), // C2: unused byte
+    p(33, "cargo_bay_analog_signal",  2, U, "",       (0, 1023),  BOTH), // C2: unused bytes
+    p(34, "charging_sources",         1, U, "bits",   (0, 3),     BOTH),
+    p(35, "oi_mode",                  1, U, "code",   (0, 3),     BOTH),
+    p(36, "song_number",              1, U, "",       (0, 15),    BOTH), // C2: 0–4
+    p(37, "song_playing",             1, U, "bool",   BOOL,       BOTH),
+    p(38, "stream_packet_count",      1, U, "",       (0, 108),   BOTH), // C1: 0–43
+    p(39, "requested_velocity",       2, S, "mm/s",   WHEEL_MM_S, BOTH),
+    p(40, "requested_radius",         2, S, "mm",     I16,        BOTH),
+    p(41, "requested_right_velocity", 2, S, "mm/s",   WHEEL_MM_S, BOTH),
+    p(42, "requested_left_velocity",  2, S, "mm/s",   WHEEL_MM_S, BOTH),
+    p(43, "left_encoder",             2, S, "counts", I16,        C2), // wraps
+    p(44, "right_encoder",            2, S, "counts", I16,        C2), // wraps
+    p(45, "light_bumper",             1, U, "bits",   (0, 127),   C2),
+    p(46, "light_bump_left_signal",         2, U, "", SIGNAL,     C2),
+    p(47, "light_bump_front_left_signal",   2, U, "", SIGNAL,     C2),
+    p(48, "light_bump_center_left_signal",  2, U, "", SIGNAL,     C2),
+    p(49, "light_bump_center_right_signal", 2, U, "", SIGNAL,     C2),
+    p(50, "light_bump_front_right_signal",  2, U, "", SIGNAL,     C2),
+    p(51, "light_bump_right_signal",        2, U, "", SIGNAL,     C2),
+    p(52, "ir_left",                  1, U, "code",   BYTE,       C2),
+    p(53, "ir_right",                 1, U, "code",   BYTE,       C2),
+    p(54, "left_motor_current",       2, S, "mA",     I16,        C2),
+    p(55, "right_motor_current",      2, S, "mA",     I16,        C2),
+    p(56, "main_brush_current",       2, S, "mA",     I16,        C2),
+    p(57, "side_brush_current",       2, S, "mA",     I16,        C2),
+    p(58, "stasis",                   1, U, "bits",   (0, 3),     C2),
 ];
 
 /// First and last single packet ids.
@@ -539,8 +372,8 @@ fn wire_range(s: &PacketSpec) -> (i32, i32) {
     match (s.size, s.signed) {
         (1, false) => (0, 255),
         (1, true) => (-128, 127),
-        (_, false) => (0, U16_MAX),
-        (_, true) => (I16_MIN, I16_MAX),
+        (_, false) => U16,
+        (_, true) => I16,
     }
 }
 
@@ -608,10 +441,196 @@ pub fn decode_data(id: u8, bytes: &[u8], into: &mut SensorValues) -> Result<(), 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    /// Two-byte and signed packets as listed in the reference's §3.2 table [C1 pp17–21; C2 pp23–32].
+    const TWO_BYTE: &[u8] = &[
+        19, 20, 22, 23, 25, 26, 27, 28, 29, 30, 31, 33, 39, 40, 41, 42, 43, 44, 46, 47, 48, 49, 50,
+        51, 54, 55, 56, 57,
+    ];
+    const SIGNED: &[u8] = &[19, 20, 23, 24, 39, 40, 41, 42, 43, 44, 54, 55, 56, 57];
 
     #[test]
-    fn group_sizes_match_the_spec() {
-        assert_eq!(data_len(6), Some(52));
-        assert_eq!(data_len(100), Some(80));
+    fn every_single_packet_has_an_entry_with_the_spec_size_and_sign() {
+        for id in 7..=58u8 {
+            let s = spec(id).unwrap();
+            assert_eq!(s.id, id);
+            assert_eq!(
+                s.size,
+                if TWO_BYTE.contains(&id) { 2 } else { 1 },
+                "size of {id}"
+            );
+            assert_eq!(s.signed, SIGNED.contains(&id), "signedness of {id}");
+            assert!(s.min <= s.max && !s.name.is_empty());
+            assert_eq!(s.create1, id <= 42, "Create 1 availability of {id}");
+            assert!(s.create2);
+        }
+        for id in (0..7).chain(59..=255) {
+            assert!(spec(id).is_none(), "{id} is not a single packet");
+        }
+        let names: std::collections::HashSet<_> = PACKETS.iter().map(|s| s.name).collect();
+        assert_eq!(names.len(), PACKETS.len(), "names are unique");
+    }
+
+    #[test]
+    fn group_sizes_and_members_match_the_spec() {
+        let sizes = [
+            (0, 26, 7, 26),
+            (1, 10, 7, 16),
+            (2, 6, 17, 20),
+            (3, 10, 21, 26),
+            (4, 14, 27, 34),
+            (5, 12, 35, 42),
+            (6, 52, 7, 42),
+            (100, 80, 7, 58),
+            (101, 28, 43, 58),
+            (106, 12, 46, 51),
+            (107, 9, 54, 58),
+        ];
+        for (group, bytes, first, last) in sizes {
+            assert_eq!(data_len(group), Some(bytes), "size of group {group}");
+            let members: Vec<u8> = (first..=last).collect();
+            assert_eq!(
+                group_members(group),
+                Some(&members[..]),
+                "members of {group}"
+            );
+        }
+        for undefined in [7, 59, 99, 102, 103, 104, 105, 108, 255] {
+            assert!(
+                group_members(undefined).is_none(),
+                "{undefined} is no group"
+            );
+        }
+        assert_eq!(data_len(103), None);
+        assert_eq!(data_len(19), Some(2));
+    }
+
+    #[test]
+    fn availability_per_model() {
+        for g in 0..=6 {
+            assert!(available_on(g, Model::Create1) && available_on(g, Model::Create2));
+        }
+        for g in [100, 101, 106, 107] {
+            assert!(!available_on(g, Model::Create1) && available_on(g, Model::Create2));
+        }
+        assert!(available_on(42, Model::Create1) && !available_on(43, Model::Create1));
+        assert!(!available_on(102, Model::Create2) && !available_on(59, Model::Create2));
+        assert_eq!(
+            check_available(59, Model::Create2),
+            Err(OiError::UnknownPacket(59))
+        );
+        assert_eq!(
+            check_available(100, Model::Create1),
+            Err(OiError::NotOnModel {
+                id: 100,
+                model: Model::Create1
+            })
+        );
+        assert_eq!(Model::Create1.all_sensors_group(), id::GROUP_ALL_CREATE1);
+        assert_eq!(Model::Create2.all_sensors_group(), id::GROUP_ALL_CREATE2);
+    }
+
+    #[test]
+    fn decode_is_big_endian_and_sign_extends() {
+        assert_eq!(decode_value(id::DISTANCE, &[255, 253]), Ok(-3));
+        assert_eq!(decode_value(id::VOLTAGE, &[0x3E, 0x9C]), Ok(16_028));
+        assert_eq!(decode_value(id::VOLTAGE, &[0xFF, 0xFF]), Ok(65_535));
+        assert_eq!(decode_value(id::TEMPERATURE, &[0x80]), Ok(-128));
+        assert_eq!(decode_value(id::OI_MODE, &[0x80]), Ok(128));
+        assert_eq!(
+            decode_value(id::CURRENT, &[1]),
+            Err(OiError::BadLength {
+                id: 23,
+                expected: 2,
+                got: 1
+            })
+        );
+        assert_eq!(decode_value(3, &[1]), Err(OiError::UnknownPacket(3)));
+    }
+
+    #[test]
+    fn encode_saturates_like_the_firmware_except_encoders_wrap() {
+        let enc = |id, v| {
+            let mut out = Vec::new();
+            encode_value(id, v, &mut out).unwrap();
+            out
+        };
+        assert_eq!(enc(id::DISTANCE, 40_000), vec![0x7F, 0xFF]);
+        assert_eq!(enc(id::ANGLE, -40_000), vec![0x80, 0x00]);
+        assert_eq!(enc(id::VOLTAGE, -5), vec![0, 0]);
+        assert_eq!(enc(id::TEMPERATURE, 200), vec![127]);
+        assert_eq!(enc(id::BUMPS_WHEEL_DROPS, 300), vec![255]);
+        assert_eq!(enc(id::LEFT_ENCODER, 32_768), vec![0x80, 0x00]);
+        assert_eq!(enc(id::RIGHT_ENCODER, 65_537), vec![0x00, 0x01]);
+        let mut out = Vec::new();
+        assert_eq!(
+            encode_value(59, 0, &mut out),
+            Err(OiError::UnknownPacket(59))
+        );
+    }
+
+    #[test]
+    fn group_data_round_trips_and_absent_values_are_zero() {
+        let mut v = SensorValues::new();
+        v.set(
+            id::BUMPS_WHEEL_DROPS,
+            bits::BUMP_LEFT | bits::WHEEL_DROP_RIGHT,
+        );
+        v.set(id::DISTANCE, -1234);
+        v.set(id::STASIS, bits::STASIS_TOGGLING);
+        let mut bytes = Vec::new();
+        encode_data(100, &v, &mut bytes).unwrap();
+        assert_eq!(bytes.len(), 80);
+        assert_eq!(bytes[0], 6);
+        assert_eq!(&bytes[12..14], &(-1234i16).to_be_bytes());
+        let mut back = SensorValues::new();
+        decode_data(100, &bytes, &mut back).unwrap();
+        assert_eq!(back.iter().count(), 52, "every member decoded");
+        for id in 7..=58 {
+            assert_eq!(back.get(id), Some(v.get_or_zero(id)), "packet {id}");
+        }
+        assert_eq!(
+            decode_data(6, &bytes, &mut back),
+            Err(OiError::BadLength {
+                id: 6,
+                expected: 52,
+                got: 80
+            })
+        );
+        assert_eq!(
+            decode_data(104, &[], &mut back),
+            Err(OiError::UnknownPacket(104))
+        );
+    }
+
+    /// A packet id 7–58 and a value in its wire range.
+    fn packet_and_value() -> impl Strategy<Value = (u8, i32)> {
+        (7u8..=58).prop_flat_map(|id| {
+            let (lo, hi) = spec(id).map(wire_range).unwrap_or((0, 0));
+            (Just(id), lo..=hi)
+        })
+    }
+
+    proptest! {
+        #[test]
+        fn every_packet_round_trips((id, value) in packet_and_value()) {
+            let mut out = Vec::new();
+            encode_value(id, value, &mut out).unwrap();
+            prop_assert_eq!(out.len(), usize::from(spec(id).unwrap().size));
+            prop_assert_eq!(decode_value(id, &out), Ok(value));
+        }
+
+        #[test]
+        fn every_group_round_trips(group in prop::sample::select(vec![0u8, 1, 2, 3, 4, 5, 6, 100, 101, 106, 107]),
+                                   raw in prop::collection::vec(any::<u8>(), 80)) {
+            // Any data bytes decode, and re-encode to the same bytes.
+            let n = data_len(group).unwrap();
+            let mut values = SensorValues::new();
+            decode_data(group, &raw[..n], &mut values).unwrap();
+            let mut again = Vec::new();
+            encode_data(group, &values, &mut again).unwrap();
+            prop_assert_eq!(&again[..], &raw[..n]);
+        }
     }
 }
