@@ -1,1 +1,17 @@
-//! placeholder, filled by the control work
+//! Control: stimulus detectors, the mixing function and gate, default policies π and fixed responses ϱ.
+//!
+//! - [`action`]: [`Action`], a pair of wheel velocities for Drive Direct.
+//! - [`stall`]: [`StallDetector`], the leaky integrator of over-current flags that defines a stall E.
+//! - [`gate`]: [`Mode`], [`gate`] (reactive `I{E}` or Pavlovian `I{E ∨ v > θ}`) and [`mix`].
+//! - [`policy`]: [`Policy`], the configurable default policies and fixed responses, and
+//!   [`StallDefaultPolicy`], the stall experiment's 20 s driving cycle.
+
+pub mod action;
+pub mod gate;
+pub mod policy;
+pub mod stall;
+
+pub use action::{Action, MAX_WHEEL_MM_S};
+pub use gate::{Mode, gate, mix};
+pub use policy::{ControlError, Policy, StallDefaultPolicy};
+pub use stall::{StallDetector, wheel_overcurrent};

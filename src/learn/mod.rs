@@ -1,1 +1,29 @@
-//! placeholder, filled by the learn work
+//! Learning: tile coding and TD(λ) predictions, after Modayil & Sutton, "Prediction Driven Behavior".
+//!
+//! - [`tiles`]: [`TileCoder`], continuous inputs in `[0, 1]` to sparse binary features.
+//! - [`sigma`]: [`Sigma`], the output nonlinearity (identity or logistic) and its derivative.
+//! - [`td`]: [`TdLambda`], the paper's TD(λ) update over active-index feature lists.
+//! - [`spec`]: [`PredictionSpec`], one prediction as configuration (TOML).
+//! - [`inputs`]: [`SignalNames`] and [`FeatureInputs`], the named signals predictions read.
+//! - [`set`]: [`PredictionSet`], many predictions learned side by side, act first then learn.
+//! - [`snapshot`]: [`SetSnapshot`], checkpoints of weights, traces and the previous step.
+//!
+//! Facts: `shared/reference/learning.md` (§3.1 tile coding, §4.1 the update equations).
+
+pub mod error;
+pub mod inputs;
+pub mod set;
+pub mod sigma;
+pub mod snapshot;
+pub mod spec;
+pub mod td;
+pub mod tiles;
+
+pub use error::LearnError;
+pub use inputs::{FeatureInputs, SignalNames};
+pub use set::{PredictionOut, PredictionSet};
+pub use sigma::Sigma;
+pub use snapshot::{PredictionSnapshot, PreviousStep, SetSnapshot};
+pub use spec::{Cumulant, FeatureSpec, PairSpec, PredictionSpec, Threshold};
+pub use td::{TdLambda, TdParams};
+pub use tiles::{TileCoder, TileSpec};

@@ -1,0 +1,91 @@
+//! [`LearnError`]: every way a prediction configuration or a learning call can be wrong, with the
+//! prediction and the offending value named.
+
+use thiserror::Error;
+
+/// An invalid prediction configuration, or a learning call that does not fit the configuration.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum LearnError {
+    /// A prediction without a name.
+    #[error("a prediction has an empty name")]
+    EmptyName,
+    /// Two predictions with the same name.
+    #[error("prediction `{0}` is defined twice")]
+    DuplicatePrediction(String),
+    /// Two input signals or two stimuli with the same name.
+    #[error("signal `{0}` is named twice")]
+    DuplicateSignal(String),
+    /// τ is not a finite number above 1.
+    #[error("prediction `{name}`: tau must be a finite number of ticks > 1, got {tau}")]
+    InvalidTau { name: String, tau: f64 },
+    /// α is not a finite positive number.
+    #[error("prediction `{name}`: alpha must be finite and > 0, got {alpha}")]
+    InvalidAlpha { name: String, alpha: f64 },
+    /// λ is outside `[0, 1]`.
+    #[error("prediction `{name}`: lambda must be in [0, 1], got {lambda}")]
+    InvalidLambda { name: String, lambda: f64 },
+    /// The initial weight is not finite.
+    #[error("prediction `{name}`: initial_weight must be finite, got {value}")]
+    InvalidInitialWeight { name: String, value: f64 },
+    /// A fixed threshold that is not finite.
+    #[error("prediction `{name}`: a fixed threshold must be finite, got {value}")]
+    InvalidThreshold { name: String, value: f64 },
+    /// A tile coder with no tiles per dimension.
+    #[error("tile coder: tiles per dimension must be >= 1, got {0}")]
+    NoTiles(usize),
+    /// A tile coder with no tilings (no inputs or no pairs).
+    #[error("tile coder: it must have at least one tiling (one input or one pair)")]
+    NoTilings,
+    /// A pair tiling offset outside `[0, 1)` of a tile width.
+    #[error("tile coder: pair offset must be a fraction of a tile in [0, 1), got {0}")]
+    InvalidOffset(f64),
+    /// A pair tiling that names an input position beyond the coder's inputs.
+    #[error("tile coder: pair ({0}, {1}) refers to an input position >= {2}")]
+    PairOutOfRange(usize, usize, usize),
+    /// A feature count that does not fit in memory.
+    #[error("tile coder: {0} tilings of {1} tiles each is too many features")]
+    TooManyFeatures(usize, usize),
+    /// A prediction reads an input signal nobody provides.
+    #[error("prediction `{prediction}`: unknown input `{input}` (known: {known})")]
+    UnknownInput {
+        prediction: String,
+        input: String,
+        known: String,
+    },
+    /// A prediction's cumulant names a stimulus nobody provides.
+    #[error("prediction `{prediction}`: unknown stimulus `{stimulus}` (known: {known})")]
+    UnknownStimulus {
+        prediction: String,
+        stimulus: String,
+        known: String,
+    },
+    /// A weight or trace vector of the wrong length.
+    #[error("prediction `{name}`: features sized wrong: expected {expected} weights, got {got}")]
+    FeatureCountMismatch {
+        name: String,
+        expected: usize,
+        got: usize,
+    },
+    /// A snapshot value that is not finite.
+    #[error("prediction `{0}`: snapshot holds a non-finite weight or trace")]
+    NonFiniteSnapshot(String),
+    /// A snapshot whose chain state names a feature index out of range.
+    #[error("prediction `{name}`: snapshot feature index {index} >= {features}")]
+    SnapshotIndexOutOfRange {
+        name: String,
+        index: usize,
+        features: usize,
+    },
+    /// A runtime change or snapshot for a prediction that does not exist.
+    #[error("no prediction named `{0}`")]
+    UnknownPrediction(String),
+    /// A snapshot whose set of predictions differs from the running set.
+    #[error("snapshot has {got} predictions, the running set has {expected}")]
+    SnapshotCountMismatch { expected: usize, got: usize },
+    /// `learn` was called without a `predict` for this tick (nothing to learn from).
+    #[error("learn called without a predict for this tick")]
+    LearnWithoutPredict,
+    /// The stimulus slice given to `learn` has the wrong length.
+    #[error("learn: expected {expected} stimulus values, got {got}")]
+    StimulusCountMismatch { expected: usize, got: usize },
+}

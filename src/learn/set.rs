@@ -1,0 +1,286 @@
+//! [`PredictionSet`]: many predictions learned side by side, each with its own cumulant, τ, λ, α, σ
+//! and features, so that adding a prediction is configuration, not code.
+//!
+//! # The online bookkeeping ("act first, then learn")
+//!
+//! At each tick t the caller does, in this order:
+//! 1. [`PredictionSet::predict`] with the tick's inputs: for every prediction, compute x_t and output
+//!    `v_t = σ(wᵀx_t)` with the current weights, to be used for acting right away.
+//! 2. [`PredictionSet::learn`] with the tick's stimuli E_t: R_t = I{E_t}, γ_t = γ(E_t), and the TD(λ)
+//!    update of the transition from the previous tick,
+//!    `δ_{t−1} = R_t + γ_t σ(wᵀx_t) − σ(wᵀx_{t−1})`, `e_{t−1} = γ_{t−1} λ e_{t−2} + σ′(wᵀx_{t−1}) x_{t−1}`,
+//!    `w ← w + α δ_{t−1} e_{t−1}` (the paper's equations with t − 1 in place of t). Then x_t and γ_t
+//!    are kept as "previous" for the next tick.
+//!
+//! The weights used in step 1 at tick t are those from after the update at tick t − 1, so the value
+//! acted on, `σ(wᵀx_t)`, is exactly the bootstrap term of the δ computed in step 2 of the same tick:
+//! acting never waits for learning, and nothing is computed with stale features.
+//!
+//! The first tick (or the first after a break) only records x_t and γ_t. The chain breaks, and the
+//! traces are cleared, when a tick is predicted without being learned (two `predict` calls in a row:
+//! the skipped transition cannot be learned from) or on [`PredictionSet::break_chain`].
+
+use super::LearnError;
+use super::inputs::{FeatureInputs, SignalNames, resolve};
+use super::spec::{Cumulant, PredictionSpec, Threshold, check_threshold};
+use super::td::{TdLambda, check_alpha, check_lambda};
+use super::tiles::TileCoder;
+
+/// One prediction's output on one tick.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PredictionOut {
+    /// The prediction's name.
+    pub name: String,
+    /// v_t = σ(wᵀx_t).
+    pub value: f64,
+    /// The mixing-function threshold θ.
+    pub threshold: f64,
+    /// How many features were active (fewer than `tilings` when some inputs were missing or invalid).
+    pub active_features: usize,
+    /// How many tilings the coder has: the active count for a fully valid input.
+    pub tilings: usize,
+}
+
+impl PredictionOut {
+    /// The value when it rests on a fully valid input (every tiling active, finite value), else `None`:
+    /// the gate then falls back to the stimulus alone.
+    pub fn valid_value(&self) -> Option<f64> {
+        (self.active_features == self.tilings && self.value.is_finite()).then_some(self.value)
+    }
+}
+
+/// The state that links one tick to the next: the previous features and discount.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Chain {
+    pub x_prev: Vec<usize>,
+    pub gamma_prev: f64,
+    pub has_prev: bool,
+}
+
+/// One prediction and its learner.
+#[derive(Debug, Clone)]
+pub(crate) struct Learner {
+    pub spec: PredictionSpec,
+    pub gather: Vec<usize>,
+    pub coder: TileCoder,
+    pub td: TdLambda,
+    pub stimulus: usize,
+    pub threshold: f64,
+    pub chain: Chain,
+    scratch: Vec<f64>,
+    x_now: Vec<usize>,
+    fresh: bool,
+}
+
+impl Learner {
+    fn new(spec: PredictionSpec, names: &SignalNames) -> Result<Self, LearnError> {
+        spec.validate()?;
+        let resolved = resolve(&spec.name, &spec.features, names)?;
+        let stimulus = match &spec.cumulant {
+            Cumulant::Stimulus(s) => names.resolve_stimulus(&spec.name, s)?,
+        };
+        let td = TdLambda::new(resolved.coder.num_features(), spec.td_params())?;
+        let tilings = resolved.coder.num_tilings();
+        Ok(Learner {
+            threshold: spec.threshold_value(),
+            scratch: Vec::with_capacity(resolved.gather.len()),
+            x_now: Vec::with_capacity(tilings),
+            chain: Chain {
+                x_prev: Vec::with_capacity(tilings),
+                gamma_prev: 0.0,
+                has_prev: false,
+            },
+            fresh: false,
+            gather: resolved.gather,
+            coder: resolved.coder,
+            td,
+            stimulus,
+            spec,
+        })
+    }
+
+    fn predict(&mut self, inputs: &FeatureInputs) -> PredictionOut {
+        if self.fresh {
+            self.break_chain();
+        }
+        self.scratch.clear();
+        self.scratch
+            .extend(self.gather.iter().map(|&i| inputs.get(i)));
+        self.coder.active(&self.scratch, &mut self.x_now);
+        self.fresh = true;
+        PredictionOut {
+            name: self.spec.name.clone(),
+            value: self.td.predict(&self.x_now),
+            threshold: self.threshold,
+            active_features: self.x_now.len(),
+            tilings: self.coder.num_tilings(),
+        }
+    }
+
+    fn learn(&mut self, stimulus: bool) -> Option<f64> {
+        let reward = self.spec.reward(stimulus);
+        let gamma = self.spec.gamma(stimulus);
+        let delta = self.chain.has_prev.then(|| {
+            self.td.update(
+                &self.chain.x_prev,
+                self.chain.gamma_prev,
+                reward,
+                gamma,
+                &self.x_now,
+            )
+        });
+        std::mem::swap(&mut self.chain.x_prev, &mut self.x_now);
+        self.chain.gamma_prev = gamma;
+        self.chain.has_prev = true;
+        self.fresh = false;
+        delta
+    }
+
+    /// Forgets a `predict` that has not been learned from.
+    pub fn clear_pending(&mut self) {
+        self.fresh = false;
+    }
+
+    pub fn break_chain(&mut self) {
+        self.chain.has_prev = false;
+        self.fresh = false;
+        self.td.clear_traces();
+    }
+}
+
+/// A set of predictions learned together from the same inputs.
+#[derive(Debug, Clone)]
+pub struct PredictionSet {
+    pub(crate) learners: Vec<Learner>,
+    names: SignalNames,
+}
+
+impl PredictionSet {
+    /// Validates every spec and resolves its features and cumulant against `names`.
+    pub fn new(specs: Vec<PredictionSpec>, names: &SignalNames) -> Result<Self, LearnError> {
+        names.check_unique()?;
+        let mut learners: Vec<Learner> = Vec::with_capacity(specs.len());
+        for spec in specs {
+            if learners.iter().any(|l| l.spec.name == spec.name) {
+                return Err(LearnError::DuplicatePrediction(spec.name));
+            }
+            learners.push(Learner::new(spec, names)?);
+        }
+        Ok(PredictionSet {
+            learners,
+            names: names.clone(),
+        })
+    }
+
+    /// Step 1 of a tick: features and predictions for this tick's inputs, in spec order.
+    pub fn predict(&mut self, inputs: &FeatureInputs) -> Vec<PredictionOut> {
+        self.learners
+            .iter_mut()
+            .map(|l| l.predict(inputs))
+            .collect()
+    }
+
+    /// Step 2 of a tick: the TD(λ) update for the transition from the previous tick to this one,
+    /// given this tick's stimuli (in [`SignalNames::stimuli`] order). Returns each prediction's δ,
+    /// or `None` where there was no previous tick to learn from.
+    pub fn learn(&mut self, stimuli: &[bool]) -> Result<Vec<Option<f64>>, LearnError> {
+        if stimuli.len() != self.names.stimuli.len() {
+            return Err(LearnError::StimulusCountMismatch {
+                expected: self.names.stimuli.len(),
+                got: stimuli.len(),
+            });
+        }
+        if self.learners.iter().any(|l| !l.fresh) {
+            return Err(LearnError::LearnWithoutPredict);
+        }
+        Ok(self
+            .learners
+            .iter_mut()
+            .map(|l| l.learn(stimuli.get(l.stimulus).copied().unwrap_or(false)))
+            .collect())
+    }
+
+    /// Forgets the previous tick and clears every trace (e.g. after a sensor gap): the next tick
+    /// starts a new chain of credit. Weights are kept.
+    pub fn break_chain(&mut self) {
+        self.learners.iter_mut().for_each(Learner::break_chain);
+    }
+
+    /// Back to the initial weights, zero traces and no previous tick.
+    pub fn reset(&mut self) {
+        for l in &mut self.learners {
+            l.break_chain();
+            l.td.reset();
+        }
+    }
+
+    /// The number of predictions.
+    pub fn len(&self) -> usize {
+        self.learners.len()
+    }
+
+    /// True for a set without predictions.
+    pub fn is_empty(&self) -> bool {
+        self.learners.is_empty()
+    }
+
+    /// The signal names the set was built against.
+    pub fn signal_names(&self) -> &SignalNames {
+        &self.names
+    }
+
+    /// The specs, in order, with any runtime changes to α, λ and the threshold applied.
+    pub fn specs(&self) -> impl Iterator<Item = &PredictionSpec> + '_ {
+        self.learners.iter().map(|l| &l.spec)
+    }
+
+    /// The learner of prediction `name` (weights, traces, parameters).
+    pub fn learner(&self, name: &str) -> Option<&TdLambda> {
+        self.learners
+            .iter()
+            .find(|l| l.spec.name == name)
+            .map(|l| &l.td)
+    }
+
+    /// The tile coder of prediction `name`.
+    pub fn coder(&self, name: &str) -> Option<&TileCoder> {
+        self.learners
+            .iter()
+            .find(|l| l.spec.name == name)
+            .map(|l| &l.coder)
+    }
+
+    /// Changes α of prediction `name` from the next update on.
+    pub fn set_alpha(&mut self, name: &str, alpha: f64) -> Result<(), LearnError> {
+        check_alpha(name, alpha)?;
+        let l = self.find_mut(name)?;
+        l.td.set_alpha(alpha)?;
+        l.spec.alpha = alpha;
+        Ok(())
+    }
+
+    /// Changes λ of prediction `name` from the next update on.
+    pub fn set_lambda(&mut self, name: &str, lambda: f64) -> Result<(), LearnError> {
+        check_lambda(name, lambda)?;
+        let l = self.find_mut(name)?;
+        l.td.set_lambda(lambda)?;
+        l.spec.lambda = lambda;
+        Ok(())
+    }
+
+    /// Changes the threshold of prediction `name` from the next prediction on.
+    pub fn set_threshold(&mut self, name: &str, threshold: Threshold) -> Result<(), LearnError> {
+        check_threshold(name, threshold)?;
+        let l = self.find_mut(name)?;
+        l.spec.threshold = threshold;
+        l.threshold = l.spec.threshold_value();
+        Ok(())
+    }
+
+    fn find_mut(&mut self, name: &str) -> Result<&mut Learner, LearnError> {
+        self.learners
+            .iter_mut()
+            .find(|l| l.spec.name == name)
+            .ok_or_else(|| LearnError::UnknownPrediction(name.to_string()))
+    }
+}

@@ -1,0 +1,294 @@
+//! [`PredictionSpec`]: everything that defines one prediction (the question, the features, the learning
+//! parameters), as plain data that deserialises from TOML.
+//!
+//! The question follows the paper: the cumulant is the indicator of a stimulus event E, `R_t = I{E}`,
+//! and the discount is `γ_t = (1 − I{E})(1 − 1/τ)`, so the prediction terminates on E or after τ steps
+//! in expectation. Example (the interaction experiment):
+//!
+//! ```toml
+//! name = "command"
+//! tau = 25.0
+//! lambda = 0.8
+//! alpha = 0.02
+//! sigma = "logistic"
+//! initial_weight = -1.0
+//! threshold = { steps = 15 }
+//! cumulant = { stimulus = "left_elbow_command" }
+//! [features]
+//! kind = "pairs"
+//! tiles = 10
+//! pairs = [
+//!   { x = "left_elbow", y = "left_elbow_avg", offset = 0.0 },
+//!   { x = "left_elbow", y = "left_elbow_avg", offset = 0.5 },
+//!   { x = "right_elbow", y = "right_elbow_avg", offset = 0.0 },
+//!   { x = "right_elbow", y = "right_elbow_avg", offset = 0.5 },
+//!   { x = "left_elbow", y = "right_elbow", offset = 0.0 },
+//! ]
+//! ```
+
+use serde::{Deserialize, Serialize};
+
+use super::td::{TdParams, check_alpha, check_lambda};
+use super::{LearnError, Sigma};
+
+/// The threshold θ of the mixing function `f_E(v) = I{E ∨ v > θ}`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Threshold {
+    /// A fixed θ (the stall experiment used 0.5).
+    Fixed(f64),
+    /// θ = (1 − 1/τ)^K for a response that takes K steps (the interaction experiment used K = 15).
+    Steps(u32),
+}
+
+/// Which signal the prediction is about.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Cumulant {
+    /// The indicator of the named stimulus event: R = I{E}, and E terminates the prediction.
+    Stimulus(String),
+}
+
+/// Which tile coder, over which named input signals.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum FeatureSpec {
+    /// One tiling of `tiles` tiles per input: every observation dimension (if `all_obs`), then the
+    /// named `inputs` (stall experiment: `all_obs = true, tiles = 10`).
+    OneDim {
+        #[serde(default)]
+        all_obs: bool,
+        #[serde(default)]
+        inputs: Vec<String>,
+        tiles: usize,
+    },
+    /// One `tiles × tiles` tiling per pair of named inputs, each with its own offset.
+    Pairs { pairs: Vec<PairSpec>, tiles: usize },
+}
+
+/// One 2-D tiling over inputs `x` and `y`, shifted by `offset` (a fraction of a tile, in `[0, 1)`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PairSpec {
+    pub x: String,
+    pub y: String,
+    #[serde(default)]
+    pub offset: f64,
+}
+
+/// One prediction: question (cumulant, τ), features, and learning parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PredictionSpec {
+    /// A unique name (used in records, the dashboard and runtime commands).
+    pub name: String,
+    /// The timescale in ticks (> 1): γ = 1 − 1/τ while the stimulus is absent.
+    pub tau: f64,
+    /// Bootstrapping parameter λ in `[0, 1]`.
+    pub lambda: f64,
+    /// Step size α > 0.
+    pub alpha: f64,
+    /// The output nonlinearity.
+    pub sigma: Sigma,
+    /// The initial value of every weight (default 0).
+    #[serde(default)]
+    pub initial_weight: f64,
+    /// The threshold of the Pavlovian mixing function.
+    pub threshold: Threshold,
+    /// The tile coder and its inputs.
+    pub features: FeatureSpec,
+    /// The signal being predicted.
+    pub cumulant: Cumulant,
+}
+
+impl PredictionSpec {
+    /// `1 − 1/τ`, the discount while the stimulus is absent.
+    pub fn continuation(&self) -> f64 {
+        1.0 - 1.0 / self.tau
+    }
+
+    /// γ_t = (1 − I{E})(1 − 1/τ).
+    pub fn gamma(&self, stimulus: bool) -> f64 {
+        if stimulus { 0.0 } else { self.continuation() }
+    }
+
+    /// R_t = I{E}.
+    pub fn reward(&self, stimulus: bool) -> f64 {
+        if stimulus { 1.0 } else { 0.0 }
+    }
+
+    /// θ: the fixed value, or (1 − 1/τ)^K.
+    pub fn threshold_value(&self) -> f64 {
+        match self.threshold {
+            Threshold::Fixed(theta) => theta,
+            Threshold::Steps(k) => self.continuation().powf(f64::from(k)),
+        }
+    }
+
+    /// The TD(λ) parameters.
+    pub fn td_params(&self) -> TdParams {
+        TdParams {
+            alpha: self.alpha,
+            lambda: self.lambda,
+            sigma: self.sigma,
+            initial_weight: self.initial_weight,
+        }
+    }
+
+    /// Checks the scalar fields (name, τ, α, λ, initial weight, threshold); the features are checked
+    /// when they are resolved against the available signals.
+    pub fn validate(&self) -> Result<(), LearnError> {
+        let name = self.name.as_str();
+        if name.is_empty() {
+            return Err(LearnError::EmptyName);
+        }
+        if !(self.tau.is_finite() && self.tau > 1.0) {
+            return Err(LearnError::InvalidTau {
+                name: name.to_string(),
+                tau: self.tau,
+            });
+        }
+        check_alpha(name, self.alpha)?;
+        check_lambda(name, self.lambda)?;
+        self.td_params().validate(name)?;
+        check_threshold(name, self.threshold)
+    }
+}
+
+pub(crate) fn check_threshold(name: &str, threshold: Threshold) -> Result<(), LearnError> {
+    match threshold {
+        Threshold::Fixed(value) if !value.is_finite() => Err(LearnError::InvalidThreshold {
+            name: name.to_string(),
+            value,
+        }),
+        _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const COMMAND: &str = r#"
+        name = "command"
+        tau = 25.0
+        lambda = 0.8
+        alpha = 0.02
+        sigma = "logistic"
+        initial_weight = -1.0
+        threshold = { steps = 15 }
+        cumulant = { stimulus = "left_elbow_command" }
+        [features]
+        kind = "pairs"
+        tiles = 10
+        pairs = [
+          { x = "left_elbow", y = "left_elbow_avg", offset = 0.0 },
+          { x = "left_elbow", y = "left_elbow_avg", offset = 0.5 },
+          { x = "right_elbow", y = "right_elbow_avg" },
+          { x = "right_elbow", y = "right_elbow_avg", offset = 0.5 },
+          { x = "left_elbow", y = "right_elbow", offset = 0.0 },
+        ]
+    "#;
+
+    const STALL: &str = r#"
+        name = "stall"
+        tau = 25.0
+        lambda = 0.5
+        alpha = 0.022727272727272728
+        sigma = "identity"
+        threshold = { fixed = 0.5 }
+        cumulant = { stimulus = "stall" }
+        features = { kind = "one_dim", all_obs = true, tiles = 10 }
+    "#;
+
+    #[test]
+    fn the_papers_two_predictions_parse_from_toml() {
+        let command: PredictionSpec = toml::from_str(COMMAND).unwrap();
+        command.validate().unwrap();
+        assert_eq!(command.sigma, Sigma::Logistic);
+        assert_eq!(command.initial_weight, -1.0);
+        match &command.features {
+            FeatureSpec::Pairs { pairs, tiles } => {
+                assert_eq!((pairs.len(), *tiles), (5, 10));
+                assert_eq!(pairs[2].offset, 0.0);
+                assert_eq!(pairs[3].offset, 0.5);
+            }
+            other => panic!("{other:?}"),
+        }
+        // (1 - 1/25)^15 = 0.96^15
+        assert!((command.threshold_value() - 0.542_086_379_860_908_8).abs() < 1e-12);
+
+        let stall: PredictionSpec = toml::from_str(STALL).unwrap();
+        stall.validate().unwrap();
+        assert_eq!(stall.initial_weight, 0.0);
+        assert_eq!(stall.threshold_value(), 0.5);
+        assert_eq!(stall.cumulant, Cumulant::Stimulus("stall".into()));
+    }
+
+    #[test]
+    fn unknown_keys_are_rejected() {
+        let typo = STALL.replace("lambda", "lamda");
+        assert!(toml::from_str::<PredictionSpec>(&typo).is_err());
+        let extra = STALL.replace("tiles = 10", "tiles = 10, hashing = true");
+        assert!(toml::from_str::<PredictionSpec>(&extra).is_err());
+        let kind = STALL.replace("one_dim", "three_dim");
+        assert!(toml::from_str::<PredictionSpec>(&kind).is_err());
+    }
+
+    #[test]
+    fn gamma_and_reward_follow_the_stimulus() {
+        let stall: PredictionSpec = toml::from_str(STALL).unwrap();
+        assert_eq!(stall.gamma(false), 0.96);
+        assert_eq!(stall.gamma(true), 0.0);
+        assert_eq!(stall.reward(true), 1.0);
+        assert_eq!(stall.reward(false), 0.0);
+    }
+
+    #[test]
+    fn invalid_scalars_are_named() {
+        let base: PredictionSpec = toml::from_str(STALL).unwrap();
+        let with = |f: &dyn Fn(&mut PredictionSpec)| {
+            let mut s = base.clone();
+            f(&mut s);
+            s.validate()
+        };
+        assert!(matches!(
+            with(&|s| s.tau = 1.0),
+            Err(LearnError::InvalidTau { .. })
+        ));
+        assert!(matches!(
+            with(&|s| s.tau = f64::INFINITY),
+            Err(LearnError::InvalidTau { .. })
+        ));
+        assert!(matches!(
+            with(&|s| s.alpha = 0.0),
+            Err(LearnError::InvalidAlpha { .. })
+        ));
+        assert!(matches!(
+            with(&|s| s.alpha = f64::NAN),
+            Err(LearnError::InvalidAlpha { .. })
+        ));
+        assert!(matches!(
+            with(&|s| s.lambda = 1.01),
+            Err(LearnError::InvalidLambda { .. })
+        ));
+        assert!(matches!(
+            with(&|s| s.lambda = -0.1),
+            Err(LearnError::InvalidLambda { .. })
+        ));
+        assert!(matches!(
+            with(&|s| s.initial_weight = f64::NAN),
+            Err(LearnError::InvalidInitialWeight { .. })
+        ));
+        assert!(matches!(
+            with(&|s| s.threshold = Threshold::Fixed(f64::NAN)),
+            Err(LearnError::InvalidThreshold { .. })
+        ));
+        assert_eq!(with(&|s| s.name.clear()), Err(LearnError::EmptyName));
+        let message = with(&|s| s.tau = 0.5).unwrap_err().to_string();
+        assert!(
+            message.contains("stall") && message.contains("tau"),
+            "{message}"
+        );
+    }
+}
