@@ -31,6 +31,18 @@ pub struct PacketSpec {
     pub create2: bool,
 }
 
+impl PacketSpec {
+    /// The range the packet's bytes can carry: u8, i8, u16 or i16.
+    pub fn wire_range(&self) -> (i32, i32) {
+        match (self.size, self.signed) {
+            (1, false) => (0, 255),
+            (1, true) => (-128, 127),
+            (_, false) => U16,
+            (_, true) => I16,
+        }
+    }
+}
+
 /// Named packet and group ids.
 pub mod id {
     pub const BUMPS_WHEEL_DROPS: u8 = 7;
@@ -353,7 +365,7 @@ fn wraps_around(id: u8) -> bool {
 /// except the encoders, which wrap like the firmware's 16-bit counters [C2 p30].
 pub fn encode_value(id: u8, value: i32, out: &mut Vec<u8>) -> Result<(), OiError> {
     let s = spec(id).ok_or(OiError::UnknownPacket(id))?;
-    let (lo, hi) = wire_range(s);
+    let (lo, hi) = s.wire_range();
     let v = if wraps_around(id) {
         value
     } else {
@@ -365,16 +377,6 @@ pub fn encode_value(id: u8, value: i32, out: &mut Vec<u8>) -> Result<(), OiError
         out.extend_from_slice(&(v as u16).to_be_bytes());
     }
     Ok(())
-}
-
-/// The range the packet's bytes can carry: u8/i8/u16/i16.
-fn wire_range(s: &PacketSpec) -> (i32, i32) {
-    match (s.size, s.signed) {
-        (1, false) => (0, 255),
-        (1, true) => (-128, 127),
-        (_, false) => U16,
-        (_, true) => I16,
-    }
 }
 
 /// Decodes single packet `id` from exactly its data bytes (big-endian; signed packets sign-extended).
@@ -607,7 +609,7 @@ mod tests {
     /// A packet id 7–58 and a value in its wire range.
     fn packet_and_value() -> impl Strategy<Value = (u8, i32)> {
         (7u8..=58).prop_flat_map(|id| {
-            let (lo, hi) = spec(id).map(wire_range).unwrap_or((0, 0));
+            let (lo, hi) = spec(id).map(PacketSpec::wire_range).unwrap_or((0, 0));
             (Just(id), lo..=hi)
         })
     }
