@@ -134,6 +134,41 @@ mod tests {
     }
 
     #[test]
+    fn real_kinect_v2_frame_in_metres() {
+        // First body of the Kinectron recording (ShoulderLeft, ElbowLeft, HandLeft, camera metres); the
+        // expected angle was computed independently with acos in Python.
+        let s = [-0.2119881957769394, 0.04860438406467438, 2.296380043029785];
+        let e = [
+            -0.2618103325366974,
+            -0.18715129792690277,
+            2.2373390197753906,
+        ];
+        let h = [-0.263294517993927, -0.39554375410079956, 2.101314067840576];
+        let a = elbow_angle_deg(s, e, h).unwrap();
+        assert!(close(a, 157.9754271490163, 1e-9), "{a}");
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn agrees_with_acos_is_symmetric_and_scale_free(
+            s in proptest::array::uniform3(-3000.0..3000.0_f64),
+            e in proptest::array::uniform3(-3000.0..3000.0_f64),
+            h in proptest::array::uniform3(-3000.0..3000.0_f64),
+            k in 1e-4..1e4_f64,
+        ) {
+            let (u, v) = (sub(s, e), sub(h, e));
+            proptest::prop_assume!(norm(u) > 1.0 && norm(v) > 1.0);
+            let a = elbow_angle_deg(s, e, h).unwrap();
+            let by_acos = (dot(u, v) / (norm(u) * norm(v))).clamp(-1.0, 1.0).acos().to_degrees();
+            proptest::prop_assert!((0.0..=180.0).contains(&a));
+            proptest::prop_assert!(close(a, by_acos, 1e-5), "{} vs {}", a, by_acos);
+            proptest::prop_assert!(close(elbow_angle_deg(h, e, s).unwrap(), a, 1e-9));
+            let sc = |p: [f64; 3]| [p[0] * k, p[1] * k, p[2] * k];
+            proptest::prop_assert!(close(elbow_angle_deg(sc(s), sc(e), sc(h)).unwrap(), a, 1e-7));
+        }
+    }
+
+    #[test]
     fn osceleton_normalized_round_trip() {
         for p in [
             [0.0, 0.0, 0.0],
