@@ -420,6 +420,34 @@ mod tests {
         assert_eq!(out.iter().filter(|v| v.is_nan()).count(), 63);
     }
 
+    proptest::proptest! {
+        /// Any complete snapshot, whatever its raw values, scales into `[0, 1]` and activates exactly one
+        /// tile per dimension in the paper's one-tiling-per-dimension coder (44 of 440 on a Create 1).
+        #[test]
+        fn every_complete_snapshot_activates_one_tile_per_dimension(
+            raw in proptest::collection::vec(proptest::num::i32::ANY, 52),
+            create2 in proptest::bool::ANY,
+        ) {
+            let model = if create2 { Model::Create2 } else { Model::Create1 };
+            let layout = ObsLayout::for_model(model);
+            let mut snapshot = SensorValues::new();
+            for (id, v) in (7..=model.last_packet()).zip(&raw) {
+                snapshot.set(id, *v);
+            }
+            let mut obs = Vec::new();
+            layout.scale(&snapshot, &mut obs);
+            proptest::prop_assert!(obs.iter().all(|v| (0.0..=1.0).contains(v)));
+            let coder = crate::learn::TileCoder::one_dim(layout.len(), 10).unwrap();
+            let mut active = Vec::new();
+            coder.active(&obs, &mut active);
+            proptest::prop_assert_eq!(active.len(), layout.len());
+            proptest::prop_assert_eq!(coder.num_features(), 10 * layout.len());
+            for (d, &i) in active.iter().enumerate() {
+                proptest::prop_assert!(i / 10 == d, "feature {} outside tiling {}", i, d);
+            }
+        }
+    }
+
     #[test]
     fn extreme_raw_values_stay_in_range() {
         for model in [Model::Create1, Model::Create2] {

@@ -284,3 +284,6 @@ impl PredictionSet {
             .ok_or_else(|| LearnError::UnknownPrediction(name.to_string()))
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -207,3 +207,6 @@ impl TdLambda {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests;
