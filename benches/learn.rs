@@ -1,1 +1,176 @@
-fn main() {}
+//! Benchmarks of one learning step (tile coding + prediction + TD(λ) update) at the paper's two sizes:
+//! - stall: 44 observation dimensions × 10 tiles = 440 features, 44 active, identity σ, λ = 0.5;
+//! - command: 5 pair tilings × 100 tiles = 500 features, 5 active, logistic σ, λ = 0.8.
+//!
+//! Each is measured twice: through [`PredictionSet`] (gather inputs, tile, predict, learn, and the
+//! per-tick output vector, i.e. what the learning actor pays per tick) and on the bare kernel
+//! ([`TileCoder::active`] + [`TdLambda::update`], no allocation). Inputs cycle through 1024 random
+//! ticks drawn beforehand from a seeded generator.
+
+use std::hint::black_box;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use pavlov::learn::{
+    Cumulant, FeatureInputs, FeatureSpec, PairSpec, PredictionSet, PredictionSpec, Sigma,
+    SignalNames, TdLambda, TdParams, Threshold, TileCoder,
+};
+use pavlov::obs::ObsLayout;
+use pavlov::oi::Model;
+use pavlov::rng::Rng;
+
+const TICKS: usize = 1024;
+const ELBOWS: [&str; 4] = [
+    "left_elbow",
+    "left_elbow_avg",
+    "right_elbow",
+    "right_elbow_avg",
+];
+
+fn stall_spec() -> PredictionSpec {
+    PredictionSpec {
+        name: "stall".into(),
+        tau: 25.0,
+        lambda: 0.5,
+        alpha: 1.0 / 44.0,
+        sigma: Sigma::Identity,
+        initial_weight: 0.0,
+        threshold: Threshold::Fixed(0.5),
+        features: FeatureSpec::OneDim {
+            all_obs: true,
+            inputs: vec![],
+            tiles: 10,
+        },
+        cumulant: Cumulant::Stimulus("stall".into()),
+    }
+}
+
+fn command_spec() -> PredictionSpec {
+    let pair = |x: &str, y: &str, offset| PairSpec {
+        x: x.into(),
+        y: y.into(),
+        offset,
+    };
+    PredictionSpec {
+        name: "command".into(),
+        tau: 25.0,
+        lambda: 0.8,
+        alpha: 0.1 / 5.0,
+        sigma: Sigma::Logistic,
+        initial_weight: -1.0,
+        threshold: Threshold::Steps(15),
+        features: FeatureSpec::Pairs {
+            pairs: vec![
+                pair("left_elbow", "left_elbow_avg", 0.0),
+                pair("left_elbow", "left_elbow_avg", 0.5),
+                pair("right_elbow", "right_elbow_avg", 0.0),
+                pair("right_elbow", "right_elbow_avg", 0.5),
+                pair("left_elbow", "right_elbow", 0.0),
+            ],
+            tiles: 10,
+        },
+        cumulant: Cumulant::Stimulus("left_elbow_command".into()),
+    }
+}
+
+/// `TICKS` random input vectors of length `len` and stimuli with probability `p`.
+fn stream(len: usize, p: f64, seed: u64) -> (Vec<Vec<f64>>, Vec<bool>) {
+    let mut rng = Rng::new(seed);
+    let inputs = (0..TICKS)
+        .map(|_| (0..len).map(|_| rng.next_f64()).collect())
+        .collect();
+    let stimuli = (0..TICKS).map(|_| rng.chance(p)).collect();
+    (inputs, stimuli)
+}
+
+fn bench_set(c: &mut Criterion, label: &str, spec: PredictionSpec, obs_len: usize, extra: bool) {
+    let layout = ObsLayout::for_model(Model::Create1);
+    let names = SignalNames::for_layout(&layout, &ELBOWS, &["stall", "left_elbow_command"]);
+    let mut set = PredictionSet::new(vec![spec], &names).expect("valid spec");
+    let (inputs, stimuli) = stream(if extra { 4 } else { obs_len }, 0.05, 1);
+    let obs = vec![0.5; obs_len];
+    let mut t = 0;
+    c.bench_function(label, |b| {
+        b.iter(|| {
+            let x = &inputs[t % TICKS];
+            let feature_inputs = if extra {
+                FeatureInputs {
+                    obs: &obs,
+                    extra: x,
+                }
+            } else {
+                FeatureInputs { obs: x, extra: &[] }
+            };
+            let out = set.predict(black_box(&feature_inputs));
+            let stim = [stimuli[t % TICKS], stimuli[t % TICKS]];
+            let delta = set.learn(&stim).expect("two stimuli");
+            t += 1;
+            black_box((out, delta))
+        })
+    });
+}
+
+fn bench_kernel(c: &mut Criterion, label: &str, coder: TileCoder, params: TdParams, len: usize) {
+    let mut td = TdLambda::new(coder.num_features(), params).expect("valid params");
+    let (inputs, stimuli) = stream(len, 0.05, 2);
+    let gamma = |e: bool| if e { 0.0 } else { 0.96 };
+    let mut x_prev = Vec::with_capacity(coder.num_tilings());
+    let mut x_now = Vec::with_capacity(coder.num_tilings());
+    coder.active(&inputs[0], &mut x_prev);
+    let mut gamma_prev = 0.96;
+    let mut t = 1;
+    c.bench_function(label, |b| {
+        b.iter(|| {
+            coder.active(black_box(&inputs[t % TICKS]), &mut x_now);
+            let v = td.predict(&x_now);
+            let e = stimuli[t % TICKS];
+            let delta = td.update(
+                &x_prev,
+                gamma_prev,
+                f64::from(u8::from(e)),
+                gamma(e),
+                &x_now,
+            );
+            std::mem::swap(&mut x_prev, &mut x_now);
+            gamma_prev = gamma(e);
+            t += 1;
+            black_box((v, delta))
+        })
+    });
+}
+
+fn learning_step(c: &mut Criterion) {
+    bench_set(c, "set/stall_440_44_identity_l0.5", stall_spec(), 44, false);
+    bench_set(
+        c,
+        "set/command_500_5_logistic_l0.8",
+        command_spec(),
+        44,
+        true,
+    );
+    let stall = stall_spec();
+    bench_kernel(
+        c,
+        "kernel/stall_440_44_identity_l0.5",
+        TileCoder::one_dim(44, 10).expect("valid"),
+        stall.td_params(),
+        44,
+    );
+    let command = command_spec();
+    let pairs = vec![
+        (0, 1, 0.0),
+        (0, 1, 0.5),
+        (2, 3, 0.0),
+        (2, 3, 0.5),
+        (0, 2, 0.0),
+    ];
+    bench_kernel(
+        c,
+        "kernel/command_500_5_logistic_l0.8",
+        TileCoder::pairs(pairs, 10).expect("valid"),
+        command.td_params(),
+        4,
+    );
+}
+
+criterion_group!(benches, learning_step);
+criterion_main!(benches);
