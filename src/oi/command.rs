@@ -436,7 +436,12 @@ impl Command {
                     0,
                     i32::from(last_song_number(model)),
                 )?;
-                check_range("song length (notes)", notes.len() as i32, 1, 16)
+                check_range(
+                    "song length (notes)",
+                    i32::try_from(notes.len()).unwrap_or(i32::MAX),
+                    1,
+                    16,
+                )
             }
             Command::Play(number) => check_range(
                 "song number",

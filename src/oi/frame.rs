@@ -1,9 +1,9 @@
 //! Stream frames: `[19][N][id1][data1…]…[idk][datak…][checksum]`, sent every 15 ms [C1 p14; C2 p22].
 //!
 //! `N` counts the id and data bytes between the length byte and the checksum. The checksum makes the
-//! sum of every byte of the frame, header through checksum, ≡ 0 (mod 256) [C2 p22]. ([C1 p14] words it
-//! as excluding the header, but prints an example that only works header-included when paired with
-//! [C2]'s, and every working Create 1 driver includes it; see the reference's CONFLICT note.)
+//! sum of every byte of the frame, header through checksum, ≡ 0 (mod 256) [C2 p22], on both models:
+//! [C1 p14] words it as excluding the header (and prints checksum 182 for the same example), but every
+//! working Create 1 driver includes the header (the reference's §2 CONFLICT note).
 //! A frame must fit in one 15 ms slot at the link's baud rate or the stream corrupts [C1 p14; C2 p22].
 
 use super::model::stream_budget_bytes;
