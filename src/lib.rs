@@ -4,6 +4,8 @@
 //! no threads. The runtime in `actors/` is a thin async shell that moves data between channels and calls
 //! into these modules once per 20 ms tick.
 //!
+//! - [`agent`]: the per-tick learning and gating stages that the runtime, replay and experiments share.
+//! - [`config`]: the TOML configuration, validated with errors that name the key.
 //! - [`oi`]: the iRobot Create 1 / Create 2 Open Interface: commands, the sensor-packet table, the stream parser.
 //! - [`obs`]: a sensor snapshot as a named observation vector scaled to `[0, 1]`.
 //! - [`learn`]: tile coding and TD(λ) predictions (Modayil & Sutton, "Prediction Driven Behavior").
@@ -13,6 +15,8 @@
 //! - [`record`]: [`record::TickRecord`], everything that happened on one tick.
 //! - [`rng`]: the seeded random-number generator every stochastic part of the core draws from.
 
+pub mod agent;
+pub mod config;
 pub mod control;
 pub mod learn;
 pub mod obs;

@@ -72,6 +72,19 @@ pub enum SafetyStop {
     LinkDown,
 }
 
+/// The robot link's state on a tick.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LinkSummary {
+    /// False once the link has failed or closed.
+    pub up: bool,
+    /// Stream frames that passed every check, so far.
+    pub good_frames: u64,
+    /// Candidate frames rejected (wrong length, ids or checksum), so far.
+    pub bad_frames: u64,
+    /// Bytes skipped while searching for a frame, so far.
+    pub skipped_bytes: u64,
+}
+
 /// Everything that happened on one tick.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TickRecord {
@@ -105,4 +118,6 @@ pub struct TickRecord {
     pub estop: bool,
     /// How late the tick fired, µs.
     pub lateness_us: u32,
+    /// The robot link.
+    pub link: LinkSummary,
 }

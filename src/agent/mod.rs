@@ -1,0 +1,15 @@
+//! The per-tick stages of the control loop as plain, synchronous state machines.
+//!
+//! The runtime's learning and gating actors are thin async shells around these, and replay and the
+//! experiments call the very same code, so a recording can be checked bit for bit.
+//!
+//! - [`learning`]: observation → stimulus, features, predictions (act first), then the TD(λ) update.
+//! - [`gating`]: prediction + stimulus + mode → the action, with manual teleop and the e-stop.
+//! - [`summary`]: the raw readings a tick record carries.
+
+pub mod gating;
+pub mod learning;
+pub mod summary;
+
+pub use gating::{GateOutput, GatingStage};
+pub use learning::{LearnInput, LearnOutput, LearningStage};
