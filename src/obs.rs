@@ -1,7 +1,7 @@
 //! The observation vector: one sensor snapshot as a named vector of every sensor dimension, each
 //! scaled to `[0, 1]`.
 //!
-//! Modayil & Sutton scaled "each dimension of the robot's observation vector … to between [0,1]" and
+//! Modayil & Sutton scaled "each dimension of the robot's observation vector … to between \[0,1\]" and
 //! tiled each one into 10 tiles of width 0.1. On a Create 1 the vector has 44 dimensions: the 36 single
 //! packets of group 6 (ids 7–42), with packet 7 (bumps and wheel drops) and packet 14 (overcurrents)
 //! each expanded into one dimension per bit: 36 − 2 + 5 + 5 = 44. Every other packet is one dimension,

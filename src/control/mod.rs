@@ -2,7 +2,7 @@
 //!
 //! - [`action`]: [`Action`], a pair of wheel velocities for Drive Direct.
 //! - [`stall`]: [`StallDetector`], the leaky integrator of over-current flags that defines a stall E.
-//! - [`gate`]: [`Mode`], [`gate`] (reactive `I{E}` or Pavlovian `I{E ∨ v > θ}`) and [`mix`].
+//! - [`mod@gate`]: [`Mode`], [`fn@gate`] (reactive `I{E}` or Pavlovian `I{E ∨ v > θ}`) and [`mix`].
 //! - [`policy`]: [`Policy`], the configurable default policies and fixed responses, and
 //!   [`StallDefaultPolicy`], the stall experiment's 20 s driving cycle.
 

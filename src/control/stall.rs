@@ -1,5 +1,5 @@
 //! [`StallDetector`]: the paper's stall event E, "a leaky integrator of the over-current sensor
-//! readings [that] exceeded 3 (… incremented on an over-current signal, decremented otherwise, and
+//! readings \[that\] exceeded 3 (… incremented on an over-current signal, decremented otherwise, and
 //! clamped to values between 0 and 5)".
 //!
 //! "Exceeded 3" is read as strictly greater: E holds at levels 4 and 5, so it takes at least four
