@@ -1,0 +1,247 @@
+//! The firmware's sensing: once per 15 ms step it turns the physical truth of the [`World`] into
+//! sensor readings, with measurement noise and the stochastic wheel over-current flags.
+//!
+//! Over-current: each step, the bit of a wheel is set with probability
+//! `1 / (1 + exp(-(|I| − limit) / scale))` of its sensed current `I` — the chance that the current's
+//! ripple and the floor's irregularities push the instantaneous value over the 1.0 A limit [C1 p10].
+//! Cruising (≈0.2 A) this is about one frame in a thousand per wheel; overcoming static friction at
+//! a start (≈0.5 A) about one in seventy; a stalled wheel (≈1.5 A) has it in 98 % of frames, so the
+//! flags persist (paper: "isolated
+//! observations of an over-current condition occurred regularly in normal operation", a stall makes
+//! them persistent).
+
+use super::params::SimParams;
+use super::world::{LEFT, RIGHT, World};
+use crate::oi::packets::bits;
+use crate::rng::Rng;
+
+/// Sensor readings of one step, in packet units.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Readings {
+    /// Packet 7: bumps, wheel drops (and the Create 1 caster drop).
+    pub bumps_drops: i32,
+    /// Packet 8: wall seen.
+    pub wall: bool,
+    /// Packets 9–12: cliffs left, front left, front right, right.
+    pub cliffs: [bool; 4],
+    /// Packet 14: over-current bits (wheels: bit 4 left, bit 3 right).
+    pub overcurrents: i32,
+    /// Packet 22, mV.
+    pub voltage_mv: i32,
+    /// Packet 23, mA (negative: discharging).
+    pub current_ma: i32,
+    /// Packet 24, °C.
+    pub temperature_c: i32,
+    /// Packet 25, mAh.
+    pub charge_mah: i32,
+    /// Packet 26, mAh.
+    pub capacity_mah: i32,
+    /// Packet 27.
+    pub wall_signal: i32,
+    /// Packets 28–31.
+    pub cliff_signals: [i32; 4],
+    /// Packet 45 (Create 2).
+    pub light_bumper: i32,
+    /// Packets 46–51 (Create 2).
+    pub light_bump_signals: [i32; 6],
+    /// Packets 54, 55 (Create 2): left and right wheel motor current, mA.
+    pub wheel_current_ma: [i32; 2],
+    /// Packet 58 (Create 2).
+    pub stasis: i32,
+}
+
+/// Noise sources and per-sensor calibration of the firmware's sensing.
+#[derive(Debug, Clone)]
+pub struct Sensing {
+    params: SimParams,
+    caster_bit: bool,
+    cliff_offsets: [f64; 4],
+    noise: Rng,
+    overcurrent: Rng,
+}
+
+impl Sensing {
+    /// Sensing for a robot described by `params`; `caster_bit` is true on the Create 1 (packet 7 bit 4).
+    pub fn new(params: &SimParams, caster_bit: bool, rng: &Rng) -> Self {
+        let mut calibration = rng.fork(1);
+        let spread = params.cliff_signal_spread;
+        let cliff_offsets = [(); 4].map(|_| calibration.normal(0.0, spread));
+        Sensing {
+            params: params.clone(),
+            caster_bit,
+            cliff_offsets,
+            noise: rng.fork(2),
+            overcurrent: rng.fork(3),
+        }
+    }
+
+    /// Reads every sensor once.
+    pub fn read(&mut self, world: &World) -> Readings {
+        let p = &self.params;
+        let mut r = Readings::default();
+
+        let [bump_l, bump_r] = world.bumps();
+        let [drop_l, drop_r] = world.wheel_drops();
+        r.bumps_drops = flag(bump_r, bits::BUMP_RIGHT)
+            | flag(bump_l, bits::BUMP_LEFT)
+            | flag(drop_r, bits::WHEEL_DROP_RIGHT)
+            | flag(drop_l, bits::WHEEL_DROP_LEFT)
+            | flag(self.caster_bit && drop_l && drop_r, bits::WHEEL_DROP_CASTER);
+
+        for side in [LEFT, RIGHT] {
+            let amps = world.wheel_current_a(side).abs();
+            let z = (amps - p.overcurrent_limit_a) / p.overcurrent_scale_a.max(1e-9);
+            let probability = 1.0 / (1.0 + (-z).exp());
+            if self.overcurrent.chance(probability) {
+                r.overcurrents |= if side == LEFT {
+                    bits::OC_LEFT_WHEEL
+                } else {
+                    bits::OC_RIGHT_WHEEL
+                };
+            }
+            let ma = world.wheel_current_a(side) * 1000.0;
+            r.wheel_current_ma[side] = round_in(
+                ma + self.noise.normal(0.0, p.wheel_current_noise_ma),
+                f64::from(i16::MIN),
+                f64::from(i16::MAX),
+            );
+        }
+
+        let b = world.battery();
+        let ma = -b.sensed_current_a() * 1000.0 + self.noise.normal(0.0, p.current_noise_ma);
+        r.current_ma = round_in(ma, f64::from(i16::MIN), f64::from(i16::MAX));
+        let mv = b.voltage_v() * 1000.0 + self.noise.normal(0.0, p.voltage_noise_mv);
+        r.voltage_mv = round_in(mv, 0.0, 65_535.0);
+        r.temperature_c = round_in(b.temperature_c(), -128.0, 127.0);
+        r.charge_mah = round_in(b.charge_mah(), 0.0, 65_535.0);
+        r.capacity_mah = round_in(b.capacity_mah(), 0.0, 65_535.0);
+
+        let cliffs = world.cliffs();
+        r.cliffs = cliffs;
+        for (i, signal) in r.cliff_signals.iter_mut().enumerate() {
+            let level =
+                (p.cliff_signal_mean + self.cliff_offsets[i]) * if cliffs[i] { 0.05 } else { 1.0 };
+            let noisy = level + self.noise.normal(0.0, p.cliff_signal_noise);
+            *signal = round_in(noisy, 0.0, 4095.0);
+        }
+
+        let (mount, look) = p.wall_sensor_bearings_rad;
+        let noise = &mut self.noise;
+        let sd = p.wall_signal_noise;
+        let wall_clean = ir_signal(
+            world,
+            mount,
+            look,
+            p.wall_signal_peak,
+            p.wall_signal_scale_m,
+        );
+        let wall = wall_clean + noise.normal(0.0, sd);
+        r.wall_signal = round_in(wall, 0.0, 4095.0);
+        for (i, &bearing) in p.light_bump_bearings_rad.iter().enumerate() {
+            let (peak, scale) = (p.light_bump_peak, p.light_bump_scale_m);
+            let s = ir_signal(world, bearing, bearing, peak, scale) + noise.normal(0.0, sd);
+            r.light_bump_signals[i] = round_in(s, 0.0, 4095.0);
+            if s > p.light_bump_threshold {
+                r.light_bumper |= 1 << i;
+            }
+        }
+        r.wall = if self.caster_bit {
+            wall > p.wall_signal_threshold
+        } else {
+            // Create 2: packet 8 is deprecated and mirrors the right light bumper [C2 p24].
+            r.light_bumper & bits::LIGHT_BUMP_RIGHT != 0
+        };
+
+        let forward = (world.wheel_speed_mm_s(LEFT) + world.wheel_speed_mm_s(RIGHT)) / 2.0;
+        if forward > 20.0 && !world.blocked() {
+            r.stasis = bits::STASIS_TOGGLING;
+        }
+        r
+    }
+}
+
+/// Reflected infrared from the nearest wall seen by a sensor (before noise).
+fn ir_signal(world: &World, mount: f64, look: f64, peak: f64, scale: f64) -> f64 {
+    match world.ir_range_m(mount, look) {
+        Some(d) if scale > 0.0 => peak * (-d.max(0.0) / scale).exp(),
+        _ => 0.0,
+    }
+}
+
+fn flag(on: bool, bit: i32) -> i32 {
+    if on { bit } else { 0 }
+}
+
+/// `v` rounded and limited to `lo..=hi`.
+fn round_in(v: f64, lo: f64, hi: f64) -> i32 {
+    v.round().clamp(lo, hi) as i32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::oi::Model;
+    use crate::sim::world::{DriveTarget, Pose};
+
+    fn setup(model: Model) -> (World, Sensing) {
+        let p = SimParams::for_model(model);
+        let rng = Rng::new(9);
+        let s = Sensing::new(&p, model == Model::Create1, &rng);
+        (World::new(p, rng.fork(10)), s)
+    }
+
+    #[test]
+    fn idle_readings_are_plausible() {
+        let (mut w, mut s) = setup(Model::Create2);
+        w.step();
+        let r = s.read(&w);
+        assert_eq!(r.bumps_drops, 0);
+        assert_eq!(r.overcurrents, 0);
+        assert!((-140..=-80).contains(&r.current_ma), "{}", r.current_ma);
+        assert!(
+            (15_900..=16_200).contains(&r.voltage_mv),
+            "{}",
+            r.voltage_mv
+        );
+        assert_eq!(r.capacity_mah, 2068);
+        assert!(r.cliff_signals.iter().all(|&c| c > 1500));
+        assert_eq!(r.cliffs, [false; 4]);
+    }
+
+    #[test]
+    fn a_lifted_create1_reports_both_drops_and_the_caster() {
+        let (mut w, mut s) = setup(Model::Create1);
+        w.set_lifted(true);
+        w.step();
+        let r = s.read(&w);
+        let all = bits::WHEEL_DROP_LEFT | bits::WHEEL_DROP_RIGHT | bits::WHEEL_DROP_CASTER;
+        assert_eq!(r.bumps_drops, all);
+        w.set_cliff(2, true);
+        w.step();
+        let r = s.read(&w);
+        assert_eq!(r.cliffs, [false, false, true, false]);
+        assert!(r.cliff_signals[2] < r.cliff_signals[1] / 4);
+    }
+
+    #[test]
+    fn walls_light_up_the_infrared_sensors_on_their_side() {
+        let (mut w, mut s) = setup(Model::Create2);
+        // Parallel to the x-axis wall, 5 mm away, with the wall on the right.
+        w.set_pose(Pose {
+            x_m: 0.5,
+            y_m: 0.17,
+            heading_rad: 0.0,
+        });
+        w.step();
+        let r = s.read(&w);
+        assert!(r.light_bump_signals[5] > r.light_bump_signals[0] + 100);
+        assert!(r.light_bumper & bits::LIGHT_BUMP_RIGHT != 0);
+        assert!(r.wall);
+        let (mut w1, mut s1) = setup(Model::Create1);
+        w1.set_pose(w.pose());
+        w1.step();
+        let r1 = s1.read(&w1);
+        assert!(r1.wall && r1.wall_signal > 500, "{}", r1.wall_signal);
+        w1.command(DriveTarget::STOP);
+    }
+}

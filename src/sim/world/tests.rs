@@ -1,0 +1,195 @@
+//! Physics tests of [`World`]: driving, turning, walls, stalls, bumpers, battery.
+
+use super::*;
+use crate::oi::Model;
+
+fn world(model: Model) -> World {
+    World::new(SimParams::for_model(model), Rng::new(1))
+}
+
+fn run(w: &mut World, seconds: f64) {
+    let n = (seconds / STEP_SECONDS).round() as usize;
+    for _ in 0..n {
+        w.step();
+    }
+}
+
+fn forward(v: f64) -> DriveTarget {
+    DriveTarget::Speed {
+        left_mm_s: v,
+        right_mm_s: v,
+    }
+}
+
+/// Distance from the body's edge to the nearest wall, m (negative: overlapping).
+fn clearance(w: &World) -> f64 {
+    let p = w.pose();
+    let c = Vec2::new(p.x_m, p.y_m);
+    w.enclosure()
+        .walls()
+        .iter()
+        .map(|s| (c - s.closest_point(c)).length())
+        .fold(f64::INFINITY, f64::min)
+        - w.params().body_radius_m
+}
+
+#[test]
+fn nothing_moves_before_the_command_latency() {
+    let mut w = world(Model::Create1);
+    w.command(forward(300.0));
+    // The 60 ms latency ends in the fourth step.
+    run(&mut w, 0.045);
+    assert_eq!(w.wheel_duty(LEFT), 0.0);
+    assert_eq!(w.battery().current_a(), w.params().idle_current_a);
+    w.step();
+    assert!(w.wheel_duty(LEFT) > 0.0);
+}
+
+#[test]
+fn forward_into_the_wall_from_the_start_stalls_both_wheels_and_backing_off_frees_them() {
+    let mut w = world(Model::Create1);
+    assert_eq!(w.bumps(), [false, false]);
+    w.command(forward(200.0));
+    run(&mut w, 3.0);
+    assert_eq!(
+        w.bumps(),
+        [true, true],
+        "head-on contact presses both halves"
+    );
+    assert!(w.blocked());
+    assert!(w.stalled(LEFT) && w.stalled(RIGHT));
+    assert_eq!(w.wheel_speed_mm_s(LEFT), 0.0);
+    for side in [LEFT, RIGHT] {
+        let i = w.wheel_current_a(side);
+        assert!(i > 1.0 && i < 2.0, "stall current {i}");
+    }
+    assert!(w.battery().current_a() > 2.5);
+    assert!(clearance(&w).abs() < 0.002, "clearance {}", clearance(&w));
+    // Free path to the hypotenuse was 23.6 − 16.5 = 7.1 cm.
+    assert!((w.odometer_m() - 0.071).abs() < 0.003, "{}", w.odometer_m());
+
+    w.command(forward(-200.0));
+    run(&mut w, 0.6);
+    assert_eq!(w.bumps(), [false, false]);
+    assert!(!w.stalled(LEFT) && !w.stalled(RIGHT));
+    assert!(w.wheel_speed_mm_s(LEFT) < -50.0);
+    assert!(w.wheel_current_a(LEFT).abs() < 0.6);
+}
+
+#[test]
+fn turning_in_place_at_a_wall_stays_free() {
+    let mut w = world(Model::Create2);
+    w.command(forward(150.0));
+    run(&mut w, 2.0);
+    assert!(w.stalled(LEFT));
+    let before = w.pose();
+    w.command(DriveTarget::Speed {
+        left_mm_s: 150.0,
+        right_mm_s: -150.0,
+    });
+    run(&mut w, 1.0);
+    let after = w.pose();
+    assert!(!w.stalled(LEFT) && !w.stalled(RIGHT));
+    assert!(
+        after.heading_rad < before.heading_rad - 0.5,
+        "turned clockwise"
+    );
+    let moved = ((after.x_m - before.x_m).powi(2) + (after.y_m - before.y_m).powi(2)).sqrt();
+    assert!(moved < 0.002, "moved {moved}");
+}
+
+#[test]
+fn spin_in_place_turns_by_the_wheel_travel_over_the_base() {
+    let mut w = world(Model::Create1);
+    let start = w.pose();
+    w.command(DriveTarget::Speed {
+        left_mm_s: -100.0,
+        right_mm_s: 100.0,
+    });
+    run(&mut w, 1.5);
+    let [l, r] = w.total_travel_mm();
+    let expected = (r - l) / 258.0;
+    let turned = wrap_angle(w.pose().heading_rad - start.heading_rad);
+    assert!(turned > 0.5, "counter-clockwise: {turned}");
+    assert!((turned - expected).abs() < 1e-6);
+    // The wheels differ a little (floor irregularities), so the centre drifts a few millimetres.
+    assert!((w.pose().x_m - start.x_m).abs() < 0.005);
+}
+
+#[test]
+fn backing_into_a_wall_stalls_without_a_bump() {
+    let mut w = world(Model::Create1);
+    w.command(forward(-200.0));
+    run(&mut w, 4.0);
+    assert!(w.stalled(LEFT) && w.stalled(RIGHT));
+    assert_eq!(w.bumps(), [false, false], "the Create has no rear bumper");
+    assert!(clearance(&w).abs() < 0.002);
+}
+
+#[test]
+fn the_contact_bearing_picks_the_bumper_half() {
+    let mut w = world(Model::Create1);
+    let r = w.params().body_radius_m;
+    // Against the x-axis wall (below the robot); the wall's bearing is −π/2 − heading.
+    let at = |heading: f64| Pose {
+        x_m: 0.5,
+        y_m: r,
+        heading_rad: heading,
+    };
+    let cases = [
+        (-std::f64::consts::FRAC_PI_4, [false, true]),
+        (-3.0 * std::f64::consts::FRAC_PI_4, [true, false]),
+        (-std::f64::consts::FRAC_PI_2, [true, true]),
+        (std::f64::consts::FRAC_PI_2, [false, false]),
+    ];
+    for (heading, bumps) in cases {
+        w.set_pose(at(heading));
+        assert_eq!(w.bumps(), bumps, "heading {heading}");
+    }
+}
+
+#[test]
+fn lifted_robot_spins_its_wheels_but_does_not_move() {
+    let mut w = world(Model::Create1);
+    w.set_lifted(true);
+    w.command(forward(300.0));
+    run(&mut w, 1.0);
+    assert!(w.wheel_speed_mm_s(LEFT) > 200.0);
+    assert_eq!(w.odometer_m(), 0.0);
+    assert_eq!(w.wheel_drops(), [true, true]);
+    assert!(!w.touching_wall());
+}
+
+#[test]
+fn battery_drains_faster_when_stalled_than_idle() {
+    let mut idle = world(Model::Create2);
+    let mut stalled = world(Model::Create2);
+    stalled.command(forward(300.0));
+    run(&mut idle, 10.0);
+    run(&mut stalled, 10.0);
+    let used = |w: &World| {
+        w.params().capacity_mah * w.params().initial_charge_fraction - w.battery().charge_mah()
+    };
+    assert!(used(&idle) > 0.0);
+    assert!(used(&stalled) > 10.0 * used(&idle));
+    assert!(stalled.battery().energy_j() > 10.0 * idle.battery().energy_j());
+}
+
+#[test]
+fn pwm_drives_open_loop() {
+    let mut w = world(Model::Create2);
+    w.command(DriveTarget::Duty {
+        left: -0.5,
+        right: 0.5,
+    });
+    run(&mut w, 1.0);
+    assert!((w.wheel_duty(RIGHT) - 0.5).abs() < 1e-12);
+    assert!(w.wheel_speed_mm_s(RIGHT) > 100.0 && w.wheel_speed_mm_s(LEFT) < -100.0);
+}
+
+#[test]
+fn angles_wrap_into_one_turn() {
+    assert!((wrap_angle(3.0 * std::f64::consts::PI) - std::f64::consts::PI).abs() < 1e-12);
+    assert!((wrap_angle(-0.5) + 0.5).abs() < 1e-12);
+    assert!((wrap_angle(7.0) - (7.0 - std::f64::consts::TAU)).abs() < 1e-12);
+}
