@@ -189,15 +189,15 @@ pub struct SimParams {
     pub battery_thermal_conductance_w_per_k: f64,
 
     // ----- infrared sensors -----
-    /// Mean cliff signal over the enclosure's wooden floor, 0–4095 [C1 p20; C2 p29] (*estimate* of the
+    /// Mean cliff signal over the enclosure's wooden floor, 0–4095 [reference §3.2] (*estimate* of the
     /// level: a bright floor reads high). Each of the four sensors gets its own offset (seeded).
     pub cliff_signal_mean: f64,
     /// Sensor-to-sensor spread of the cliff signal level (*estimate*).
     pub cliff_signal_spread: f64,
     /// Per-reading noise of the cliff signals (*estimate*).
     pub cliff_signal_noise: f64,
-    /// Highest wall / light-bump signal (wall touching the sensor): 4095 on the Create 1 wall sensor
-    /// [C1 p20], 1023 for the Create 2 wall signal [C2 p29] (*estimate* of the level actually reached).
+    /// Wall signal (packet 27) with a wall touching the sensor. The packet's range is 0–4095 on the
+    /// Create 1 and 0–1023 on the Create 2 [reference §3.2]; the level reached is an *estimate*.
     pub wall_signal_peak: f64,
     /// Distance over which the wall signal falls by e, m (*estimate*: the Create's side sensor sees a
     /// wall a few centimetres away).
@@ -207,14 +207,14 @@ pub struct SimParams {
     /// Noise of the wall and light-bump signals (*estimate*).
     pub wall_signal_noise: f64,
     /// The Create 1 wall sensor: `(mount, look)` bearings relative to the heading, rad. It sits on the
-    /// right of the bumper and looks to the right [C1 p20: "wall sensor … on the right side"]; the exact
+    /// right of the bumper and looks to the right (the Create's wall sensor is on its right side); the exact
     /// angles are an *estimate* (mounted at −60°, looking at −90°).
     pub wall_sensor_bearings_rad: (f64, f64),
     /// Bearings of the Create 2's six light-bump sensors (left, front left, centre left, centre right,
     /// front right, right), rad; each looks outward along its bearing (*estimate* of the Roomba 600
-    /// layout across the bumper face [C2 p32]).
+    /// layout across the bumper face; packets 46–51 [reference §3.2]).
     pub light_bump_bearings_rad: [f64; 6],
-    /// Highest light-bump signal, 0–4095 [C2 p32] (*estimate* of the level reached at a wall).
+    /// Highest light-bump signal, 0–4095 [reference §3.2] (*estimate* of the level reached at a wall).
     pub light_bump_peak: f64,
     /// Distance over which a light-bump signal falls by e, m (*estimate*: they see walls ~10 cm away).
     pub light_bump_scale_m: f64,

@@ -95,8 +95,10 @@ impl SimRobot {
         self.mode = mode;
     }
 
-    /// Create 2 Reset (7): like re-inserting the battery [C2 p8, p27].
+    /// Create 2 Reset (7): like re-inserting the battery [C2 p8, p27]. The banner is a short one built
+    /// from the lines a real Create 2 prints (pycreate2#12, reference §5.5), not a byte-exact copy.
     fn reset(&mut self) {
+        self.odometry = crate::sim::odometry::Odometry::new(self.world.params());
         self.stream_ids.clear();
         self.stream_paused = false;
         self.requested = Requested::default();

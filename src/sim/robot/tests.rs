@@ -487,3 +487,37 @@ fn battery_charge_and_energy_fall_while_driving() {
     assert!(r.world().battery().energy_j() > 30.0 * 2.0 * 14.0);
     assert!(after.get_or_zero(id::VOLTAGE) < before.get_or_zero(id::VOLTAGE));
 }
+
+#[test]
+fn songs_play_for_their_length_in_safe_mode_only() {
+    let mut r = robot(Model::Create1);
+    // Song 3: two notes of 32/64 s = 1 s in all.
+    r.receive(&[START, 140, 3, 2, 60, 32, 64, 32]);
+    r.receive(&[141, 3]);
+    assert_eq!(r.counters().ignored_in_passive, 1);
+    assert_eq!(r.sensors().get(id::SONG_PLAYING), Some(0));
+    r.receive(&[SAFE, 141, 3]);
+    steps(&mut r, 60);
+    assert_eq!(r.sensors().get(id::SONG_PLAYING), Some(1));
+    assert_eq!(r.sensors().get(id::SONG_NUMBER), Some(3));
+    steps(&mut r, 10);
+    assert_eq!(r.sensors().get(id::SONG_PLAYING), Some(0));
+    // An undefined song is refused.
+    r.receive(&[141, 9]);
+    assert_eq!(r.counters().rejected_requests, 1);
+}
+
+#[test]
+fn a_slower_baud_shrinks_the_stream_budget() {
+    let mut r = robot(Model::Create1);
+    r.receive(&[START, 129, 7]); // 19200 baud: 28 bytes per 15 ms
+    r.receive(&stream(&[6]));
+    steps(&mut r, 20);
+    assert!(r.counters().dropped_tx_bytes > 0);
+    r.receive(&[129, 12]);
+    assert_eq!(
+        r.counters().rejected_requests,
+        1,
+        "baud code 12 does not exist"
+    );
+}
