@@ -19,6 +19,7 @@ pub mod agent;
 pub mod config;
 pub mod control;
 pub mod learn;
+pub mod metrics;
 pub mod obs;
 pub mod oi;
 pub mod record;
