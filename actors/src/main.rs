@@ -1,1 +1,271 @@
-fn main() {}
+//! `pavlov`: the lab server for Pavlovian control on an iRobot Create.
+//!
+//! The binary's edge: command-line parsing (clap), logging (tracing-subscriber with `RUST_LOG`), signals,
+//! and `anyhow` error reports. Everything else lives in the `pavlov-actors` library and the `pavlov` core.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use pavlov::config::Config;
+use pavlov::control::Mode;
+use pavlov::oi::Model;
+use pavlov::sim::params::SimParams;
+use pavlov::sim::robot::SimRobot;
+use pavlov_actors::server::{RobotTarget, Server};
+use pavlov_actors::ws::Dashboard;
+use pavlov_actors::{bench, link::transport};
+use tokio_util::sync::CancellationToken;
+
+/// The stall experiment's configuration, built in so that `pavlov serve` works with no files at all.
+const DEFAULT_CONFIG: &str = include_str!("../../config/stall.toml");
+
+#[derive(Parser)]
+#[command(
+    name = "pavlov",
+    version,
+    about = "Pavlovian control of an iRobot Create: online TD(λ) predictions driving fixed responses",
+    long_about = "A lab server that runs Pavlovian control (Modayil & Sutton, \"Prediction Driven Behavior\") on an \
+iRobot Create 1 or 2: every 20 ms it reads the robot's sensors, learns TD(λ) predictions online, and lets a fixed \
+response take over from the default policy when a prediction crosses its threshold. Without --robot it drives a \
+simulated Create that speaks the real Open Interface bytes.\n\nLogging: set RUST_LOG (e.g. RUST_LOG=debug or \
+RUST_LOG=pavlov_actors=trace); the default is info."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(clap::Args, Clone)]
+struct ConfigArgs {
+    /// Experiment configuration (TOML; see config/README.md). Default: the built-in stall experiment
+    /// (config/stall.toml).
+    #[arg(long, short = 'c', value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Override [robot] model: create1 (57600 baud) or create2 (115200 baud).
+    #[arg(long, value_name = "MODEL")]
+    model: Option<Model>,
+    /// Override [control] mode at start-up: reactive, pavlovian or manual.
+    #[arg(long, value_name = "MODE", value_parser = parse_mode)]
+    mode: Option<Mode>,
+    /// Override [sim] seed: the seed of the simulated robot (and human).
+    #[arg(long, value_name = "N")]
+    seed: Option<u64>,
+}
+
+/// The dashboard endpoint's command-line overrides.
+#[derive(clap::Args, Clone)]
+struct DashboardArgs {
+    /// Override [dashboard] bind: where the dashboard page and its websocket listen (default 127.0.0.1:8080).
+    /// Any non-loopback address requires --token.
+    #[arg(long, value_name = "ADDR")]
+    bind: Option<String>,
+    /// Override [dashboard] token: the secret a websocket client presents before it may send commands
+    /// (open the page as http://HOST:PORT/#token=TOKEN).
+    #[arg(long, value_name = "TOKEN")]
+    token: Option<String>,
+    /// Where the dashboard's npm packages are installed (its node_modules/uplot); default: the repository's web/.
+    #[arg(long, value_name = "DIR")]
+    web_dir: Option<PathBuf>,
+}
+
+impl DashboardArgs {
+    fn apply(&self, cfg: &mut Config) -> Result<()> {
+        if let Some(b) = &self.bind {
+            cfg.dashboard.bind = b.clone();
+        }
+        if let Some(t) = &self.token {
+            cfg.dashboard.token = Some(t.clone());
+        }
+        cfg.validate()
+            .context("invalid dashboard settings (--bind / --token)")?;
+        Ok(())
+    }
+
+    fn web_dir(&self) -> PathBuf {
+        self.web_dir
+            .clone()
+            .unwrap_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../web")))
+    }
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the server. Without --robot it drives the simulated Create in process.
+    Serve {
+        #[command(flatten)]
+        config: ConfigArgs,
+        /// Serial device of a real Create (e.g. /dev/ttyUSB0), or the PTY printed by `pavlov sim --pty`.
+        #[arg(long, value_name = "DEVICE")]
+        robot: Option<String>,
+        #[command(flatten)]
+        dashboard: DashboardArgs,
+    },
+    /// Run the simulated Create on its own, on a pseudo-terminal that any OI client can open.
+    Sim {
+        /// Create the PTY and print its path (the only transport for now; required).
+        #[arg(long, required = true)]
+        pty: bool,
+        /// Robot model to simulate.
+        #[arg(long, default_value = "create1", value_name = "MODEL")]
+        model: Model,
+        /// Seed of the simulation's random draws.
+        #[arg(long, default_value_t = 1, value_name = "N")]
+        seed: u64,
+    },
+    /// Benchmark: run the server on the simulator in real time and print tick lateness and
+    /// tick-to-command latency percentiles.
+    Bench {
+        #[command(flatten)]
+        config: ConfigArgs,
+        /// How long to run, in seconds of real time.
+        #[arg(long, default_value_t = 60, value_name = "SECONDS")]
+        seconds: u64,
+    },
+}
+
+fn parse_mode(s: &str) -> Result<Mode, String> {
+    match s {
+        "reactive" => Ok(Mode::Reactive),
+        "pavlovian" => Ok(Mode::Pavlovian),
+        "manual" => Ok(Mode::Manual),
+        other => Err(format!(
+            "unknown mode `{other}` (expected reactive, pavlovian or manual)"
+        )),
+    }
+}
+
+fn load_config(args: &ConfigArgs) -> Result<Config> {
+    let (text, origin) = match &args.config {
+        Some(path) => (
+            std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read configuration {}", path.display()))?,
+            path.display().to_string(),
+        ),
+        None => (
+            DEFAULT_CONFIG.to_string(),
+            "built-in config/stall.toml".into(),
+        ),
+    };
+    let mut cfg =
+        Config::from_toml(&text).with_context(|| format!("invalid configuration in {origin}"))?;
+    if let Some(m) = args.model {
+        cfg.robot.model = m;
+        // The built-in stream list names the Create 1's group; follow the model unless one was configured.
+        if args.config.is_none() {
+            cfg.robot.stream.clear();
+        }
+    }
+    if let Some(m) = args.mode {
+        cfg.control.mode = m;
+    }
+    if let Some(s) = args.seed {
+        cfg.sim.seed = s;
+    }
+    cfg.validate().with_context(|| {
+        format!("invalid configuration in {origin} after command-line overrides")
+    })?;
+    Ok(cfg)
+}
+
+async fn shutdown_signal() {
+    let ctrl_c = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut term) => {
+                tokio::select! {
+                    _ = ctrl_c => {},
+                    _ = term.recv() => {},
+                }
+            }
+            Err(_) => {
+                let _ = ctrl_c.await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = ctrl_c.await;
+    }
+}
+
+async fn serve(args: ConfigArgs, robot: Option<String>, dashboard: DashboardArgs) -> Result<()> {
+    let mut cfg = load_config(&args)?;
+    dashboard.apply(&mut cfg)?;
+    let target = match robot {
+        Some(path) => RobotTarget::Serial(path),
+        None => RobotTarget::Simulated,
+    };
+    let robot_name = match &target {
+        RobotTarget::Simulated => format!("a simulated {}", cfg.robot.model),
+        RobotTarget::Serial(p) => format!("the {} on {p}", cfg.robot.model),
+    };
+    tracing::info!(?target, mode = ?cfg.control.mode, "starting pavlov");
+    let server = Server::start(cfg, target)
+        .await
+        .context("cannot start the server")?;
+    let dash = match Dashboard::start(&server, dashboard.web_dir()).await {
+        Ok(d) => d,
+        Err(e) => {
+            server.shutdown().await;
+            return Err(e).context("cannot start the dashboard");
+        }
+    };
+    println!("pavlov is driving {robot_name}; press Ctrl-C to stop");
+    println!("dashboard: {}", dash.url());
+    shutdown_signal().await;
+    tracing::info!("shutting down: stopping the robot");
+    dash.shutdown().await;
+    server.shutdown().await;
+    Ok(())
+}
+
+async fn sim_pty(model: Model, seed: u64) -> Result<()> {
+    let cancel = CancellationToken::new();
+    let robot = SimRobot::new(model, SimParams::for_model(model), seed);
+    let pty = transport::spawn_sim_pty(robot, cancel.clone())
+        .context("cannot start the simulated robot")?;
+    println!("{}", pty.path);
+    tracing::info!(path = %pty.path, %model, seed, "simulated Create listening on a pseudo-terminal");
+    shutdown_signal().await;
+    cancel.cancel();
+    let _ = pty.robot.await;
+    Ok(())
+}
+
+fn main() -> Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    rt.block_on(async move {
+        match cli.command {
+            Command::Serve {
+                config,
+                robot,
+                dashboard,
+            } => serve(config, robot, dashboard).await,
+            Command::Sim {
+                pty: _,
+                model,
+                seed,
+            } => sim_pty(model, seed).await,
+            Command::Bench { config, seconds } => {
+                let cfg = load_config(&config)?;
+                let report = bench::run_realtime(cfg, Duration::from_secs(seconds)).await?;
+                println!("{report}");
+                Ok(())
+            }
+        }
+    })
+}

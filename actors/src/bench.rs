@@ -1,0 +1,95 @@
+//! The real-time benchmark behind `pavlov bench`: runs the whole server on the simulated robot for a span of
+//! wall-clock time and reports tick lateness and tick-to-command latency. A benchmark, not a test: it
+//! prints figures and asserts nothing about them.
+
+use std::fmt;
+use std::time::Duration;
+
+use pavlov::config::Config;
+
+use crate::histogram::LatencySummary;
+use crate::server::{RobotTarget, Server, ServerError};
+
+/// What a benchmark run measured.
+#[derive(Debug, Clone)]
+pub struct BenchReport {
+    /// Wall-clock duration of the run.
+    pub duration: Duration,
+    /// Ticks fired.
+    pub ticks: u64,
+    /// Ticks skipped.
+    pub skipped: u64,
+    /// Lateness of each tick.
+    pub lateness: LatencySummary,
+    /// Tick deadline to motor command written.
+    pub tick_to_command: LatencySummary,
+    /// Records published.
+    pub records: u64,
+}
+
+impl fmt::Display for BenchReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "ran {:.1} s: {} ticks fired, {} skipped, {} tick records",
+            self.duration.as_secs_f64(),
+            self.ticks,
+            self.skipped,
+            self.records
+        )?;
+        writeln!(
+            f,
+            "{:<28}{:>10}{:>10}{:>10}{:>10}",
+            "µs", "p50", "p99", "max", "mean"
+        )?;
+        for (name, s) in [
+            ("tick lateness", &self.lateness),
+            ("tick → command written", &self.tick_to_command),
+        ] {
+            writeln!(
+                f,
+                "{:<28}{:>10}{:>10}{:>10}{:>10.1}",
+                name, s.p50_us, s.p99_us, s.max_us, s.mean_us
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// Runs the server on the simulated robot for `duration` of real time.
+pub async fn run_realtime(config: Config, duration: Duration) -> Result<BenchReport, ServerError> {
+    let server = Server::start(config, RobotTarget::Simulated).await?;
+    let mut feed = server.feed.subscribe();
+    let counter = tokio::spawn(async move {
+        let mut n = 0u64;
+        loop {
+            match feed.recv().await {
+                Ok(_) => n += 1,
+                Err(tokio::sync::broadcast::error::RecvError::Lagged(k)) => n += k,
+                Err(tokio::sync::broadcast::error::RecvError::Closed) => break,
+            }
+        }
+        n
+    });
+    let start = std::time::Instant::now();
+    tokio::time::sleep(duration).await;
+    let elapsed = start.elapsed();
+    let (lateness, ticks, skipped) = match server.tick_stats.lock() {
+        Ok(s) => (s.lateness.summary(), s.fired, s.skipped),
+        Err(_) => Default::default(),
+    };
+    let tick_to_command = match server.writer_stats.lock() {
+        Ok(s) => s.tick_to_command.summary(),
+        Err(_) => LatencySummary::default(),
+    };
+    server.shutdown().await;
+    let records = counter.await.unwrap_or(0);
+    Ok(BenchReport {
+        duration: elapsed,
+        ticks,
+        skipped,
+        lateness,
+        tick_to_command,
+        records,
+    })
+}

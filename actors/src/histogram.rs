@@ -1,0 +1,183 @@
+//! A fixed-size latency histogram with logarithmic buckets, for tick lateness and tick-to-command time.
+//!
+//! Recording is O(1) and allocation-free so it can sit on the tick path. Buckets are 1 µs wide up to 64 µs
+//! and then grow by 1/16 of an octave, so quantiles are exact to about ±4 %; values above ~67 s share the last bucket.
+
+use serde::Serialize;
+use std::time::Duration;
+
+const LINEAR: u64 = 64;
+const SUB: u64 = 16; // sub-buckets per octave above LINEAR
+const OCTAVES: u64 = 20;
+const BUCKETS: usize = (LINEAR + SUB * OCTAVES) as usize;
+
+/// Counts of durations in logarithmic buckets.
+#[derive(Clone)]
+pub struct LatencyHistogram {
+    counts: Box<[u64; BUCKETS]>,
+    total: u64,
+    max_us: u64,
+    sum_us: u128,
+}
+
+/// Quantiles of a histogram, µs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct LatencySummary {
+    /// Number of samples.
+    pub count: u64,
+    /// Median.
+    pub p50_us: u64,
+    /// 99th percentile.
+    pub p99_us: u64,
+    /// Largest sample.
+    pub max_us: u64,
+    /// Mean.
+    pub mean_us: f64,
+}
+
+impl Default for LatencyHistogram {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+fn bucket_of(us: u64) -> usize {
+    if us < LINEAR {
+        return us as usize;
+    }
+    let octave = 63 - us.leading_zeros() as u64 - 6; // 0 for 64..127
+    let base = 64u64 << octave;
+    let sub = ((us - base) * SUB) / base;
+    let idx =
+        LINEAR + octave.min(OCTAVES - 1) * SUB + if octave >= OCTAVES { SUB - 1 } else { sub };
+    (idx as usize).min(BUCKETS - 1)
+}
+
+fn bucket_upper(idx: usize) -> u64 {
+    let idx = idx as u64;
+    if idx < LINEAR {
+        return idx;
+    }
+    let octave = (idx - LINEAR) / SUB;
+    let sub = (idx - LINEAR) % SUB;
+    let base = 64u64 << octave;
+    base + (base * (sub + 1)) / SUB - 1
+}
+
+impl LatencyHistogram {
+    /// An empty histogram.
+    pub fn new() -> Self {
+        LatencyHistogram {
+            counts: Box::new([0; BUCKETS]),
+            total: 0,
+            max_us: 0,
+            sum_us: 0,
+        }
+    }
+
+    /// Adds one sample.
+    pub fn record(&mut self, d: Duration) {
+        let us = d.as_micros().min(u64::MAX as u128) as u64;
+        self.counts[bucket_of(us)] += 1;
+        self.total += 1;
+        self.max_us = self.max_us.max(us);
+        self.sum_us += us as u128;
+    }
+
+    /// The smallest bucket bound below which a fraction `q` of the samples lie (0 when empty).
+    pub fn quantile_us(&self, q: f64) -> u64 {
+        if self.total == 0 {
+            return 0;
+        }
+        let rank = ((q.clamp(0.0, 1.0) * self.total as f64).ceil() as u64).max(1);
+        let mut seen = 0;
+        for (i, c) in self.counts.iter().enumerate() {
+            seen += c;
+            if seen >= rank {
+                return bucket_upper(i).min(self.max_us);
+            }
+        }
+        self.max_us
+    }
+
+    /// p50, p99, max and mean.
+    pub fn summary(&self) -> LatencySummary {
+        LatencySummary {
+            count: self.total,
+            p50_us: self.quantile_us(0.5),
+            p99_us: self.quantile_us(0.99),
+            max_us: self.max_us,
+            mean_us: if self.total == 0 {
+                0.0
+            } else {
+                self.sum_us as f64 / self.total as f64
+            },
+        }
+    }
+
+    /// Cumulative counts at the given upper bounds (µs), for a Prometheus histogram.
+    pub fn cumulative_at(&self, bounds_us: &[u64]) -> Vec<u64> {
+        bounds_us
+            .iter()
+            .map(|&b| {
+                self.counts
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| bucket_upper(*i) <= b)
+                    .map(|(_, c)| c)
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// Sum of all samples, µs.
+    pub fn sum_us(&self) -> u128 {
+        self.sum_us
+    }
+
+    /// Forgets every sample.
+    pub fn clear(&mut self) {
+        *self = Self::new();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn buckets_are_monotonic_and_cover_their_values() {
+        let mut last = 0;
+        for us in [
+            0u64, 1, 63, 64, 65, 100, 127, 128, 1000, 20_000, 1_000_000, 60_000_000,
+        ] {
+            let b = bucket_of(us);
+            assert!(b >= last, "bucket order at {us}");
+            last = b;
+            assert!(
+                bucket_upper(b) >= us || b == BUCKETS - 1,
+                "upper bound of {us}"
+            );
+        }
+    }
+
+    #[test]
+    fn quantiles_are_within_the_bucket_resolution() {
+        let mut h = LatencyHistogram::new();
+        for us in 1..=1000u64 {
+            h.record(Duration::from_micros(us));
+        }
+        let s = h.summary();
+        assert_eq!(s.count, 1000);
+        assert!((480..=530).contains(&s.p50_us), "p50 {}", s.p50_us);
+        assert!((960..=1000).contains(&s.p99_us), "p99 {}", s.p99_us);
+        assert_eq!(s.max_us, 1000);
+        assert!((s.mean_us - 500.5).abs() < 1e-9);
+        assert_eq!(h.cumulative_at(&[63, 2000]), vec![63, 1000]);
+    }
+
+    #[test]
+    fn empty_histogram_reports_zero() {
+        assert_eq!(LatencyHistogram::new().summary(), LatencySummary::default());
+    }
+}

@@ -1,0 +1,142 @@
+//! The learning actor: a thin shell over [`pavlov::agent::LearningStage`].
+//!
+//! For each [`Observation`] it reads the newest pose, acts first (stimulus and predictions go to gating at
+//! once) and then learns (the TD(λ) update runs after the prediction has left). It also applies the commands
+//! learning owns: parameters, reset, save, and injected human requests.
+
+use pavlov::agent::{LearnInput, LearnOutput, LearningStage, summary};
+use pavlov::config::Config;
+use pavlov::learn::LearnError;
+use pavlov::record::SensorSummary;
+use pavlov::skeleton::{ElbowFeatureTracker, PoseTracker};
+use tokio::sync::{mpsc, watch};
+use tokio::time::Instant;
+use tokio_util::sync::CancellationToken;
+
+use crate::command::{ControlCommand, LearningCommand};
+use crate::sensor_ingest::Observation;
+
+/// Learning's output for one tick.
+#[derive(Debug, Clone)]
+pub struct Prediction {
+    /// The observation it was computed from.
+    pub observation: Observation,
+    /// The tick's scheduled time since the run started, ms.
+    pub t_ms: f64,
+    /// Raw readings of interest.
+    pub sensors: SensorSummary,
+    /// Stimulus, predictions and the gate's inputs.
+    pub learned: LearnOutput,
+}
+
+/// Learning's state.
+pub struct Learning {
+    stage: LearningStage,
+    elbows: Option<ElbowFeatureTracker>,
+    request_until: u64,
+    period_ms: u64,
+}
+
+impl Learning {
+    /// Learning for `config`.
+    pub fn new(config: &Config) -> Result<Self, LearnError> {
+        let uses_skeleton = matches!(
+            config.control.stimulus,
+            pavlov::config::StimulusSpec::LeftElbow { .. }
+        );
+        Ok(Learning {
+            stage: LearningStage::new(config)?,
+            elbows: uses_skeleton.then(ElbowFeatureTracker::new),
+            request_until: 0,
+            period_ms: config.tick.period_ms.max(1),
+        })
+    }
+
+    /// Names of the observation vector's dimensions.
+    pub fn obs_names(&self) -> Vec<String> {
+        self.stage.layout().names().map(str::to_string).collect()
+    }
+
+    fn apply(&mut self, cmd: ControlCommand, seq: u64) -> Result<serde_json::Value, String> {
+        match cmd {
+            ControlCommand::HumanRequest { duration_ms } => {
+                self.request_until = seq + duration_ms.div_ceil(self.period_ms);
+                Ok(serde_json::json!({ "request_until_tick": self.request_until }))
+            }
+            ControlCommand::SetParams {
+                prediction,
+                alpha,
+                lambda,
+                threshold,
+            } => self
+                .stage
+                .set_params(prediction.as_deref(), alpha, lambda, threshold)
+                .map(|name| serde_json::json!({ "prediction": name }))
+                .map_err(|e| e.to_string()),
+            ControlCommand::ResetWeights => {
+                self.stage.reset();
+                Ok(serde_json::json!({ "reset": true }))
+            }
+            ControlCommand::SaveWeights { path } => {
+                let path = path.unwrap_or_else(|| "pavlov-weights.json".to_string());
+                let snapshot = self.stage.snapshot();
+                let json = serde_json::to_vec_pretty(&snapshot).map_err(|e| e.to_string())?;
+                // The disk is not touched on the tick path: the write happens on the blocking pool.
+                let p = path.clone();
+                tokio::task::spawn_blocking(move || {
+                    if let Err(e) = std::fs::write(&p, json) {
+                        tracing::error!("could not save weights to {p}: {e}");
+                    }
+                });
+                Ok(serde_json::json!({ "path": path }))
+            }
+            other => Err(format!("learning cannot apply {other:?}")),
+        }
+    }
+}
+
+/// Runs until `cancel` fires or observations stop.
+pub async fn run(
+    mut learning: Learning,
+    started: Instant,
+    mut observations: mpsc::Receiver<Observation>,
+    pose: watch::Receiver<PoseTracker>,
+    mut commands: mpsc::Receiver<LearningCommand>,
+    out: mpsc::Sender<Prediction>,
+    cancel: CancellationToken,
+) {
+    let mut seq = 0;
+    loop {
+        tokio::select! {
+            biased;
+            _ = cancel.cancelled() => break,
+            Some(LearningCommand::Apply(cmd, reply)) = commands.recv() => {
+                let _ = reply.send(learning.apply(cmd, seq));
+            }
+            o = observations.recv() => {
+                let Some(obs) = o else { break };
+                seq = obs.tick.seq;
+                let since = obs.tick.deadline.saturating_duration_since(started);
+                let now_ms = since.as_millis() as u64;
+                let elbow = learning.elbows.as_mut().map(|t| t.step(&pose.borrow(), now_ms));
+                let learned = learning.stage.act(LearnInput {
+                    values: obs.values.as_ref(),
+                    elbow,
+                    forced_stimulus: seq < learning.request_until,
+                });
+                let p = Prediction {
+                    sensors: summary::summarize(obs.values.as_ref(), obs.distance_mm, obs.angle_deg),
+                    t_ms: since.as_secs_f64() * 1000.0,
+                    observation: obs,
+                    learned,
+                };
+                if out.try_send(p).is_err() {
+                    tracing::debug!("gating is behind; a prediction was dropped");
+                }
+                if let Err(e) = learning.stage.learn() {
+                    tracing::error!("learning step failed: {e}");
+                }
+            }
+        }
+    }
+}

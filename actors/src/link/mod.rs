@@ -1,0 +1,39 @@
+//! The robot link: the byte stream to an iRobot Create, real (tokio-serial) or simulated, and the
+//! start-up and shut-down sequences spoken over it.
+//!
+//! - [`transport`]: opening a serial port, or spawning the simulated robot behind an in-process stream or a PTY.
+//! - [`handshake`]: Start, Safe/Full and Stream at start-up; stop, pause and Passive at shut-down.
+//! - [`writer`]: the writer actor, the only task that writes to the robot.
+
+pub mod handshake;
+pub mod transport;
+pub mod writer;
+
+use tokio::io::{AsyncRead, AsyncWrite};
+
+/// The robot-to-host half of a link.
+pub type LinkReader = Box<dyn AsyncRead + Send + Unpin>;
+/// The host-to-robot half of a link.
+pub type LinkWriter = Box<dyn AsyncWrite + Send + Unpin>;
+
+/// Errors of the robot link.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// The serial port could not be opened or configured.
+    #[error("cannot open serial port {path}: {source}")]
+    Open {
+        /// The device path.
+        path: String,
+        /// The driver's error.
+        source: tokio_serial::Error,
+    },
+    /// The stream request does not fit or is invalid.
+    #[error("invalid sensor stream request: {0}")]
+    Stream(#[from] pavlov::oi::OiError),
+    /// An I/O error on the link.
+    #[error("robot link I/O error: {0}")]
+    Io(#[from] std::io::Error),
+    /// A PTY could not be created.
+    #[error("cannot create a pseudo-terminal: {0}")]
+    Pty(tokio_serial::Error),
+}

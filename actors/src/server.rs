@@ -1,0 +1,309 @@
+//! Wiring: starts every actor of one server run, and stops them in an order that leaves the robot safe.
+//!
+//! ```text
+//! ticker ─Tick─► sensor ingest ─Observation─► learning ─Prediction─► gating ─Decision─► actuation ─bytes─► writer ─► robot
+//!    │                                   ▲ pose (skeleton ingest)        ▲ mode/teleop        ▲ e-stop latch
+//!    └────────────── Tick (watchdog) ─────┼─────────────────────────────────┼────────────────────┘
+//! commands ─► router ─────────────────────┴─ params/reset/save/request ───┘          TickRecord ─► feed (dashboard, recorder)
+//! ```
+//!
+//! Shut-down: the actors are cancelled; actuation writes a stop and drops the writer's queue; the writer then
+//! sends stop, pause-stream and Start (→ Passive) and closes the link; only then does the server return.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use pavlov::config::Config;
+use pavlov::oi::parser::StreamParser;
+use pavlov::sim::params::SimParams;
+use pavlov::sim::robot::SimRobot;
+use pavlov::skeleton::PoseTracker;
+use tokio::io::AsyncWriteExt;
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+use tokio_util::sync::CancellationToken;
+
+use crate::actuation::{self, Actuation, ActuationStats};
+use crate::command::{self, CommandRoutes, ControlRequest};
+use crate::feed::TickFeed;
+use crate::gating;
+use crate::learning::{self, Learning};
+use crate::link::{LinkError, LinkReader, LinkWriter, handshake, transport, writer};
+use crate::ticker::{self, SharedTickStats};
+use pavlov::agent::GatingStage;
+
+/// Where the robot is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum RobotTarget {
+    /// The simulated Create, in process.
+    Simulated,
+    /// A serial device (a real Create, or `pavlov sim --pty`).
+    Serial(String),
+}
+
+/// Errors starting the server.
+#[derive(Debug, thiserror::Error)]
+pub enum ServerError {
+    /// The robot link failed.
+    #[error(transparent)]
+    Link(#[from] LinkError),
+    /// Learning could not be set up from the configuration.
+    #[error("learning: {0}")]
+    Learning(String),
+}
+
+/// A running server.
+pub struct Server {
+    /// Every tick's record.
+    pub feed: TickFeed,
+    /// Inject commands here.
+    pub commands: mpsc::Sender<ControlRequest>,
+    /// Tick lateness and skips.
+    pub tick_stats: SharedTickStats,
+    /// Tick-to-command latency and write errors.
+    pub writer_stats: writer::SharedWriterStats,
+    /// Actuation's counters.
+    pub actuation_stats: watch::Receiver<ActuationStats>,
+    /// Publish skeleton poses here (the skeleton ingest actor, or a test).
+    pub pose: watch::Sender<PoseTracker>,
+    /// The time the first tick was due.
+    pub started: Instant,
+    /// The configuration in force at start-up.
+    pub config: Config,
+    /// Names of the observation vector's dimensions, in record order.
+    pub obs_names: Vec<String>,
+    cancel: CancellationToken,
+    sim_cancel: CancellationToken,
+    actors: Vec<JoinHandle<()>>,
+    writer: JoinHandle<()>,
+    sim: Option<JoinHandle<SimRobot>>,
+    // A server dropped without `shutdown` still stops its actors (actuation then stops the wheels).
+    _cancel_on_drop: tokio_util::sync::DropGuard,
+}
+
+/// What is left after a shut-down.
+pub struct ShutdownReport {
+    /// The simulated robot, when the server ran one: its state after the shut-down sequence.
+    pub sim_robot: Option<SimRobot>,
+}
+
+impl Server {
+    /// Opens the robot link, sends the start-up sequence and starts every actor.
+    pub async fn start(config: Config, target: RobotTarget) -> Result<Server, ServerError> {
+        let model = config.robot.model;
+        let sim_cancel = CancellationToken::new();
+        let (reader, writer, sim) = match &target {
+            RobotTarget::Simulated => {
+                let robot = SimRobot::new(model, SimParams::for_model(model), config.sim.seed);
+                let l = transport::spawn_sim(robot, sim_cancel.clone());
+                (l.reader, l.writer, Some(l.robot))
+            }
+            RobotTarget::Serial(path) => {
+                let (r, w) = transport::open_serial(path, model)?;
+                (r, w, None)
+            }
+        };
+        Self::start_on_link(config, reader, writer, sim, sim_cancel).await
+    }
+
+    /// Starts the server on an already open link (`sim`: the simulator task behind it, if any).
+    pub async fn start_on_link(
+        config: Config,
+        reader: LinkReader,
+        mut link_writer: LinkWriter,
+        sim: Option<JoinHandle<SimRobot>>,
+        sim_cancel: CancellationToken,
+    ) -> Result<Server, ServerError> {
+        let model = config.robot.model;
+        let stream = config.robot.stream_ids();
+        let period = Duration::from_millis(config.tick.period_ms);
+        let cancel = CancellationToken::new();
+        let startup = handshake::startup_bytes(model, config.robot.oi_mode, &stream)
+            .map_err(LinkError::from)?;
+        link_writer
+            .write_all(&startup)
+            .await
+            .map_err(LinkError::Io)?;
+        link_writer.flush().await.map_err(LinkError::Io)?;
+        tracing::info!(%model, ?stream, "robot link up: start-up sequence sent");
+        let parser = StreamParser::new(&stream).map_err(LinkError::from)?;
+
+        let learning = Learning::new(&config).map_err(|e| ServerError::Learning(e.to_string()))?;
+        let obs_names = learning.obs_names();
+        let gating = GatingStage::new(
+            config.control.mode,
+            config.control.default_policy.clone(),
+            config.control.response.clone(),
+        );
+        let actuation = Actuation::new(model, config.safety.clone());
+
+        let (tick_tx, tick_rx) = watch::channel(None);
+        let (obs_tx, obs_rx) = mpsc::channel(4);
+        let (pred_tx, pred_rx) = mpsc::channel(4);
+        let (dec_tx, dec_rx) = mpsc::channel(4);
+        let (write_tx, write_rx) = mpsc::channel(16);
+        let (cmd_tx, cmd_rx) = mpsc::channel(64);
+        let (gating_cmd_tx, gating_cmd_rx) = mpsc::channel(16);
+        let (learning_cmd_tx, learning_cmd_rx) = mpsc::channel(16);
+        let (estop_tx, estop_rx) = watch::channel(false);
+        let (act_stats_tx, act_stats_rx) = watch::channel(ActuationStats::default());
+        let (pose_tx, pose_rx) =
+            watch::channel(PoseTracker::new(crate::skeleton_ingest::MAX_JOINT_AGE_MS));
+        let feed = TickFeed::new();
+        let tick_stats = SharedTickStats::default();
+        let writer_stats = writer::SharedWriterStats::default();
+
+        let shutdown = handshake::shutdown_bytes(model).map_err(LinkError::from)?;
+        let writer = tokio::spawn(writer::run(
+            link_writer,
+            write_rx,
+            shutdown,
+            writer_stats.clone(),
+        ));
+        let started = Instant::now() + period;
+        let actors = vec![
+            tokio::spawn(ticker::run(
+                started,
+                period,
+                tick_tx,
+                tick_stats.clone(),
+                cancel.clone(),
+            )),
+            tokio::spawn(crate::sensor_ingest::run(
+                reader,
+                parser,
+                period,
+                tick_rx.clone(),
+                obs_tx,
+                cancel.clone(),
+            )),
+            tokio::spawn(learning::run(
+                learning,
+                started,
+                obs_rx,
+                pose_rx,
+                learning_cmd_rx,
+                pred_tx,
+                cancel.clone(),
+            )),
+            tokio::spawn(gating::run(
+                gating,
+                pred_rx,
+                gating_cmd_rx,
+                dec_tx,
+                cancel.clone(),
+            )),
+            tokio::spawn(actuation::run(
+                actuation,
+                dec_rx,
+                tick_rx,
+                estop_rx,
+                write_tx,
+                feed.clone(),
+                act_stats_tx,
+                cancel.clone(),
+            )),
+            tokio::spawn(command::route(
+                cmd_rx,
+                CommandRoutes {
+                    gating: gating_cmd_tx,
+                    learning: learning_cmd_tx,
+                    estop: estop_tx,
+                    recorder: None,
+                },
+                cancel.clone(),
+            )),
+            tokio::spawn(log_health(
+                (tick_stats.clone(), writer_stats.clone()),
+                cancel.clone(),
+            )),
+        ];
+        Ok(Server {
+            feed,
+            commands: cmd_tx,
+            tick_stats,
+            writer_stats,
+            actuation_stats: act_stats_rx,
+            pose: pose_tx,
+            started,
+            config,
+            obs_names,
+            _cancel_on_drop: cancel.clone().drop_guard(),
+            cancel,
+            sim_cancel,
+            actors,
+            writer,
+            sim,
+        })
+    }
+
+    /// A token that, when cancelled, stops the server's actors (the caller still awaits [`Server::shutdown`]).
+    pub fn cancel_token(&self) -> CancellationToken {
+        self.cancel.clone()
+    }
+
+    /// Stops every actor, sends the shut-down sequence to the robot and waits for it to be written.
+    pub async fn shutdown(self) -> ShutdownReport {
+        self.cancel.cancel();
+        for a in self.actors {
+            if let Err(e) = a.await {
+                tracing::error!("an actor panicked: {e}");
+            }
+        }
+        if let Err(e) = self.writer.await {
+            tracing::error!("the link writer panicked: {e}");
+        }
+        let sim_robot = match self.sim {
+            Some(handle) => {
+                // The writer closed the link after the shut-down sequence; the simulator stops at end-of-file.
+                let cancel = self.sim_cancel.clone();
+                let guard = tokio::spawn(async move {
+                    tokio::time::sleep(Duration::from_secs(1)).await;
+                    cancel.cancel();
+                });
+                let robot = handle.await.ok();
+                guard.abort();
+                robot
+            }
+            None => None,
+        };
+        ShutdownReport { sim_robot }
+    }
+}
+
+/// Logs tick health once a minute until `cancel` fires.
+pub async fn log_health(
+    server_stats: (SharedTickStats, writer::SharedWriterStats),
+    cancel: CancellationToken,
+) {
+    let (ticks, writes) = server_stats;
+    let mut every = tokio::time::interval_at(
+        Instant::now() + Duration::from_secs(60),
+        Duration::from_secs(60),
+    );
+    loop {
+        tokio::select! {
+            _ = cancel.cancelled() => break,
+            _ = every.tick() => {
+                let (lat, fired, skipped) = match ticks.lock() {
+                    Ok(s) => (s.lateness.summary(), s.fired, s.skipped),
+                    Err(_) => continue,
+                };
+                let cmd = match writes.lock() {
+                    Ok(s) => s.tick_to_command.summary(),
+                    Err(_) => continue,
+                };
+                tracing::info!(
+                    fired, skipped,
+                    lateness_p50_us = lat.p50_us, lateness_p99_us = lat.p99_us, lateness_max_us = lat.max_us,
+                    tick_to_command_p50_us = cmd.p50_us, tick_to_command_p99_us = cmd.p99_us, tick_to_command_max_us = cmd.max_us,
+                    "tick health"
+                );
+            }
+        }
+    }
+}
+
+/// Shared pointer alias used by subscribers.
+pub type Record = Arc<pavlov::record::TickRecord>;

@@ -1,0 +1,280 @@
+//! Who may connect to the websocket and who may send commands, decided in the handshake.
+//!
+//! - **Origin.** Browsers let any page open a websocket to any host (loopback included), so the `Origin`
+//!   header is checked against an allowlist: the loopback origins on the server's port, the bound address's
+//!   own origin, the configured `allowed_origins`, and `http://<Host>` when the `Host` header is a literal
+//!   IP address (a page loaded from this server by IP; a DNS name there could be a rebinding attack, so it
+//!   must be listed). A request without `Origin` is not from a browser page and passes (tests, scripts).
+//! - **Token.** When a token is configured, a client presents it in the handshake, either as a
+//!   subprotocol entry `token.<token>` (next to `pavlov.v1`) or as the `token` query parameter. A wrong
+//!   token is refused outright; no token gives a watch-only connection when `watch_without_token` is set,
+//!   and is refused otherwise. Without a configured token (loopback only) every client may command.
+
+use std::net::{IpAddr, SocketAddr};
+
+use pavlov::config::DashboardConfig;
+
+use super::protocol::TOKEN_PROTOCOL_PREFIX;
+
+/// What a connection may do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Access {
+    /// Receive ticks and send commands.
+    Command,
+    /// Receive ticks only; commands get an `unauthorized` error.
+    Watch,
+}
+
+/// Why a handshake was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Denied {
+    /// `Origin` not on the allowlist (HTTP 403).
+    #[error("origin `{0}` is not allowed; add it to [dashboard] allowed_origins")]
+    Origin(String),
+    /// A token was presented and it is wrong (HTTP 401).
+    #[error("wrong token")]
+    WrongToken,
+    /// No token, and watching without one is off (HTTP 401).
+    #[error("a token is required: pass ?token=… or the subprotocol token.<token>")]
+    TokenRequired,
+}
+
+/// The rules, fixed when the endpoint starts.
+#[derive(Debug, Clone)]
+pub struct AccessPolicy {
+    token: Option<String>,
+    watch_without_token: bool,
+    origins: Vec<String>,
+}
+
+fn origin_of(host: &str, port: u16) -> String {
+    format!("http://{host}:{port}")
+}
+
+fn normalise_origin(origin: &str) -> String {
+    origin.trim().trim_end_matches('/').to_ascii_lowercase()
+}
+
+impl AccessPolicy {
+    /// The policy for an endpoint bound to `local`.
+    pub fn new(config: &DashboardConfig, local: SocketAddr) -> Self {
+        let port = local.port();
+        let mut origins = vec![
+            origin_of("127.0.0.1", port),
+            origin_of("localhost", port),
+            origin_of("[::1]", port),
+        ];
+        if !local.ip().is_unspecified() {
+            let host = match local.ip() {
+                IpAddr::V4(ip) => ip.to_string(),
+                IpAddr::V6(ip) => format!("[{ip}]"),
+            };
+            origins.push(origin_of(&host, port));
+        }
+        origins.extend(config.allowed_origins.iter().map(|o| normalise_origin(o)));
+        AccessPolicy {
+            token: config.token.clone().filter(|t| !t.is_empty()),
+            watch_without_token: config.watch_without_token,
+            origins,
+        }
+    }
+
+    /// Whether commands need a token.
+    pub fn token_required(&self) -> bool {
+        self.token.is_some()
+    }
+
+    /// Checks the `Origin` header (`None` = absent) against the allowlist; `host` is the `Host` header.
+    pub fn check_origin(&self, origin: Option<&str>, host: Option<&str>) -> Result<(), Denied> {
+        let Some(origin) = origin else {
+            return Ok(());
+        };
+        let o = normalise_origin(origin);
+        if self.origins.contains(&o) {
+            return Ok(());
+        }
+        if let Some(host) = host
+            && host_is_ip_literal(host)
+            && o == format!("http://{}", host.to_ascii_lowercase())
+        {
+            return Ok(());
+        }
+        Err(Denied::Origin(origin.to_string()))
+    }
+
+    /// Decides access from the token presented in the handshake, if any.
+    pub fn check_token(&self, presented: Option<&str>) -> Result<Access, Denied> {
+        let Some(expected) = &self.token else {
+            return Ok(Access::Command);
+        };
+        match presented {
+            Some(p) if constant_time_eq(p.as_bytes(), expected.as_bytes()) => Ok(Access::Command),
+            Some(_) => Err(Denied::WrongToken),
+            None if self.watch_without_token => Ok(Access::Watch),
+            None => Err(Denied::TokenRequired),
+        }
+    }
+}
+
+/// The token a client presented: the `token.<t>` subprotocol entry wins over the `token` query parameter.
+pub fn presented_token<'a>(
+    query_token: Option<&'a str>,
+    protocols: impl IntoIterator<Item = &'a str>,
+) -> Option<&'a str> {
+    protocols
+        .into_iter()
+        .flat_map(|h| h.split(','))
+        .map(str::trim)
+        .find_map(|p| p.strip_prefix(TOKEN_PROTOCOL_PREFIX))
+        .or(query_token)
+}
+
+fn host_is_ip_literal(host: &str) -> bool {
+    if let Ok(addr) = host.parse::<SocketAddr>() {
+        return !addr.ip().is_unspecified();
+    }
+    let bare = host.trim_start_matches('[').trim_end_matches(']');
+    bare.parse::<IpAddr>().is_ok_and(|ip| !ip.is_unspecified())
+}
+
+/// Compares without stopping at the first difference, so timing does not reveal how much of a guess is right.
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    let mut diff = a.len() ^ b.len();
+    for (i, &x) in a.iter().enumerate() {
+        let y = b.get(i % b.len().max(1)).copied().unwrap_or(0);
+        diff |= usize::from(x ^ y);
+    }
+    diff == 0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn policy(token: Option<&str>, watch: bool, extra: &[&str], bind: &str) -> AccessPolicy {
+        let cfg = DashboardConfig {
+            token: token.map(String::from),
+            watch_without_token: watch,
+            allowed_origins: extra.iter().map(|s| s.to_string()).collect(),
+            ..DashboardConfig::default()
+        };
+        AccessPolicy::new(&cfg, bind.parse().unwrap())
+    }
+
+    #[test]
+    fn loopback_origins_on_the_servers_port_pass() {
+        let p = policy(None, true, &[], "127.0.0.1:8080");
+        for o in [
+            "http://127.0.0.1:8080",
+            "http://localhost:8080",
+            "http://LOCALHOST:8080/",
+            "http://[::1]:8080",
+        ] {
+            assert_eq!(p.check_origin(Some(o), None), Ok(()), "{o}");
+        }
+        assert_eq!(p.check_origin(None, None), Ok(()));
+    }
+
+    #[test]
+    fn foreign_origins_and_other_ports_are_refused() {
+        let p = policy(None, true, &[], "127.0.0.1:8080");
+        for o in [
+            "http://evil.example",
+            "http://127.0.0.1:9999",
+            "https://127.0.0.1:8080",
+            "null",
+            "file://",
+        ] {
+            assert_eq!(
+                p.check_origin(Some(o), Some("127.0.0.1:8080")),
+                Err(Denied::Origin(o.into())),
+                "{o}"
+            );
+        }
+    }
+
+    #[test]
+    fn configured_origins_pass() {
+        let p = policy(None, true, &["https://lab.example.org/"], "127.0.0.1:8080");
+        assert_eq!(
+            p.check_origin(Some("https://lab.example.org"), None),
+            Ok(())
+        );
+    }
+
+    #[test]
+    fn a_page_loaded_by_ip_literal_passes_but_a_dns_name_must_be_listed() {
+        let p = policy(Some("t"), true, &[], "0.0.0.0:8080");
+        assert_eq!(
+            p.check_origin(Some("http://192.168.1.5:8080"), Some("192.168.1.5:8080")),
+            Ok(())
+        );
+        assert_eq!(
+            p.check_origin(Some("http://[fe80::1]:8080"), Some("[fe80::1]:8080")),
+            Ok(())
+        );
+        // DNS rebinding: the attacker's name resolves to us; Host and Origin agree but it is a name.
+        assert!(
+            p.check_origin(Some("http://rebind.evil:8080"), Some("rebind.evil:8080"))
+                .is_err()
+        );
+        assert!(
+            p.check_origin(Some("http://0.0.0.0:8080"), Some("0.0.0.0:8080"))
+                .is_err()
+        );
+    }
+
+    #[test]
+    fn the_bound_address_is_its_own_origin() {
+        let p = policy(Some("t"), true, &[], "10.0.0.7:9000");
+        assert_eq!(p.check_origin(Some("http://10.0.0.7:9000"), None), Ok(()));
+    }
+
+    #[test]
+    fn without_a_configured_token_everyone_commands() {
+        let p = policy(None, false, &[], "127.0.0.1:1");
+        assert!(!p.token_required());
+        assert_eq!(p.check_token(None), Ok(Access::Command));
+        assert_eq!(p.check_token(Some("anything")), Ok(Access::Command));
+    }
+
+    #[test]
+    fn with_a_token_only_its_holder_commands() {
+        let p = policy(Some("s3cret"), true, &[], "127.0.0.1:1");
+        assert_eq!(p.check_token(Some("s3cret")), Ok(Access::Command));
+        assert_eq!(p.check_token(Some("s3cre")), Err(Denied::WrongToken));
+        assert_eq!(p.check_token(Some("s3cret!")), Err(Denied::WrongToken));
+        assert_eq!(p.check_token(Some("")), Err(Denied::WrongToken));
+        assert_eq!(p.check_token(None), Ok(Access::Watch));
+        let strict = policy(Some("s3cret"), false, &[], "127.0.0.1:1");
+        assert_eq!(strict.check_token(None), Err(Denied::TokenRequired));
+    }
+
+    #[test]
+    fn an_empty_configured_token_means_none() {
+        assert!(!policy(Some(""), true, &[], "127.0.0.1:1").token_required());
+    }
+
+    #[test]
+    fn the_token_comes_from_the_subprotocol_or_the_query() {
+        assert_eq!(
+            presented_token(Some("q"), ["pavlov.v1, token.abc"]),
+            Some("abc")
+        );
+        assert_eq!(
+            presented_token(Some("q"), ["pavlov.v1", "token.xyz"]),
+            Some("xyz")
+        );
+        assert_eq!(presented_token(Some("q"), ["pavlov.v1"]), Some("q"));
+        assert_eq!(presented_token(None, Vec::<&str>::new()), None);
+    }
+
+    #[test]
+    fn constant_time_eq_is_equality() {
+        assert!(constant_time_eq(b"abc", b"abc"));
+        assert!(!constant_time_eq(b"abc", b"abd"));
+        assert!(!constant_time_eq(b"abc", b"ab"));
+        assert!(!constant_time_eq(b"", b"a"));
+        assert!(constant_time_eq(b"", b""));
+    }
+}

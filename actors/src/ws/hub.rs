@@ -1,0 +1,228 @@
+//! The hub: turns each tick record into its JSON message once, keeps the run counters, and fans the
+//! messages out to every websocket client over a lossy broadcast.
+//!
+//! Serialising once per tick (not once per client) keeps the cost of 50 clients near that of one: a client
+//! gets a cheap clone of the same bytes. The hub reads the tick feed's broadcast, so it never slows the
+//! tick either; if it ever lagged, the records it missed are counted and logged.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+
+use axum::extract::ws::Utf8Bytes;
+use pavlov::metrics::RunMetrics;
+use pavlov::record::TickRecord;
+use tokio::sync::{broadcast, watch};
+use tokio_util::sync::CancellationToken;
+
+use super::protocol::{Health, STATUS_EVERY_TICKS, StatusMessage, TickMessage};
+use crate::actuation::ActuationStats;
+use crate::link::writer::SharedWriterStats;
+use crate::ticker::SharedTickStats;
+
+/// Capacity of the hub's broadcast to the clients' forwarders, in messages (about 4 s of ticks).
+pub const HUB_CAPACITY: usize = 256;
+
+/// One message for the clients.
+#[derive(Debug, Clone)]
+pub enum Outgoing {
+    /// A `tick` message (subject to the client's rate).
+    Tick {
+        /// The tick's sequence number.
+        seq: u64,
+        /// The JSON text.
+        text: Utf8Bytes,
+    },
+    /// A `status` message (every client gets every one).
+    Status(Utf8Bytes),
+}
+
+/// Where the hub reads health figures.
+#[derive(Clone)]
+pub struct HealthSources {
+    /// The ticker's lateness histogram and counters.
+    pub ticks: SharedTickStats,
+    /// The link writer's latency histogram and errors.
+    pub writer: SharedWriterStats,
+    /// Actuation's counters.
+    pub actuation: watch::Receiver<ActuationStats>,
+}
+
+impl HealthSources {
+    /// The current figures.
+    pub fn health(&self) -> Health {
+        let mut h = Health::default();
+        if let Ok(t) = self.ticks.lock() {
+            let lat = t.lateness.summary();
+            h.lateness_p50_us = lat.p50_us;
+            h.lateness_p99_us = lat.p99_us;
+            h.lateness_max_us = lat.max_us;
+            h.ticks_fired = t.fired;
+            h.ticks_skipped = t.skipped;
+        }
+        if let Ok(w) = self.writer.lock() {
+            h.tick_to_command_p99_us = w.tick_to_command.summary().p99_us;
+            h.write_errors = w.errors;
+        }
+        h.actuation = *self.actuation.borrow();
+        h
+    }
+}
+
+/// Counters the hub shares with the endpoint.
+#[derive(Debug, Default)]
+pub struct HubCounters {
+    /// Websocket clients connected now.
+    pub clients: AtomicUsize,
+    /// Tick records the hub itself missed (it lagged behind the feed).
+    pub records_missed: AtomicU64,
+}
+
+/// The hub's output side: clients subscribe here.
+#[derive(Clone)]
+pub struct HubHandle {
+    tx: broadcast::Sender<Outgoing>,
+}
+
+impl HubHandle {
+    /// A new subscription, starting with the next message.
+    pub fn subscribe(&self) -> broadcast::Receiver<Outgoing> {
+        self.tx.subscribe()
+    }
+}
+
+/// The hub's state: the run counters over every record seen.
+pub struct Hub {
+    metrics: RunMetrics,
+    tx: broadcast::Sender<Outgoing>,
+}
+
+impl Hub {
+    /// A hub for a run ticking every `period_ms`, and the handle clients subscribe with.
+    pub fn new(period_ms: f64) -> (Hub, HubHandle) {
+        let (tx, _) = broadcast::channel(HUB_CAPACITY);
+        (
+            Hub {
+                metrics: RunMetrics::new(period_ms),
+                tx: tx.clone(),
+            },
+            HubHandle { tx },
+        )
+    }
+
+    /// Handles one record: updates the counters and broadcasts its messages.
+    pub fn on_record(
+        &mut self,
+        record: &TickRecord,
+        health: impl FnOnce() -> Health,
+        clients: usize,
+    ) {
+        self.metrics.observe(record);
+        let text = Utf8Bytes::from(TickMessage::new(record).to_json());
+        // An error only means no client is connected.
+        let _ = self.tx.send(Outgoing::Tick {
+            seq: record.seq,
+            text,
+        });
+        if record.seq % STATUS_EVERY_TICKS == 0 {
+            let health = health();
+            let counters = self.metrics.summary();
+            let status = StatusMessage::new(record.seq, &health, &counters, clients).to_json();
+            let _ = self.tx.send(Outgoing::Status(Utf8Bytes::from(status)));
+        }
+    }
+
+    /// The run counters so far.
+    pub fn metrics(&self) -> &RunMetrics {
+        &self.metrics
+    }
+}
+
+/// Runs the hub until `cancel` fires or the feed closes.
+pub async fn run(
+    mut hub: Hub,
+    mut feed: broadcast::Receiver<Arc<TickRecord>>,
+    sources: HealthSources,
+    counters: Arc<HubCounters>,
+    cancel: CancellationToken,
+) {
+    loop {
+        let next = tokio::select! {
+            _ = cancel.cancelled() => break,
+            next = feed.recv() => next,
+        };
+        match next {
+            Ok(record) => {
+                let clients = counters.clients.load(Ordering::Relaxed);
+                hub.on_record(&record, || sources.health(), clients);
+            }
+            Err(broadcast::error::RecvError::Lagged(n)) => {
+                counters.records_missed.fetch_add(n, Ordering::Relaxed);
+                tracing::warn!(missed = n, "the dashboard hub fell behind the tick feed");
+            }
+            Err(broadcast::error::RecvError::Closed) => break,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pavlov::control::{Action, Mode};
+    use pavlov::record::{LinkSummary, SensorSummary};
+
+    fn record(seq: u64) -> TickRecord {
+        TickRecord {
+            seq,
+            t_ms: seq as f64 * 20.0,
+            mode: Mode::Reactive,
+            obs_age_ticks: Some(0),
+            sensors: SensorSummary {
+                overcurrent_left: seq % 2 == 0,
+                ..Default::default()
+            },
+            obs: vec![0.0; 3],
+            elbow: None,
+            stimulus: false,
+            predictions: Vec::new(),
+            gate: false,
+            default_action: Action::STOP,
+            command: Action::STOP,
+            safety_stop: None,
+            estop: false,
+            lateness_us: 0,
+            link: LinkSummary::default(),
+        }
+    }
+
+    #[test]
+    fn every_record_becomes_a_tick_and_every_tenth_a_status_with_counters() {
+        let (mut hub, handle) = Hub::new(20.0);
+        let mut rx = handle.subscribe();
+        for seq in 0..21 {
+            hub.on_record(&record(seq), Health::default, 3);
+        }
+        let mut ticks = Vec::new();
+        let mut statuses = Vec::new();
+        while let Ok(m) = rx.try_recv() {
+            match m {
+                Outgoing::Tick { seq, text } => {
+                    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+                    assert_eq!(v["seq"], seq);
+                    ticks.push(seq);
+                }
+                Outgoing::Status(text) => {
+                    statuses.push(serde_json::from_str::<serde_json::Value>(&text).unwrap())
+                }
+            }
+        }
+        assert_eq!(ticks, (0..21).collect::<Vec<_>>());
+        assert_eq!(statuses.len(), 3);
+        let last = &statuses[2];
+        assert_eq!(last["type"], "status");
+        assert_eq!(last["seq"], 20);
+        assert_eq!(last["clients"], 3);
+        assert_eq!(last["counters"]["ticks"], 21);
+        assert_eq!(last["counters"]["overcurrent_observations"], 11);
+        assert_eq!(hub.metrics().ticks, 21);
+    }
+}

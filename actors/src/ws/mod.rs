@@ -1,0 +1,216 @@
+//! The dashboard endpoint: one HTTP port that serves the browser dashboard (`/`), a health check
+//! (`/healthz`) and the websocket (`/ws`) that streams every tick and takes commands.
+//!
+//! - [`protocol`]: the JSON messages (see `web/PROTOCOL.md`) and the parsing of client commands;
+//! - [`hub`]: serialises each tick once and fans it out, and keeps the run counters;
+//! - [`client`]: each client's bounded, drop-oldest queue and its tick-rate decimation;
+//! - [`session`]: one connection's reader, writer and forwarder;
+//! - [`auth`]: the handshake's Origin and token checks;
+//! - [`http`]: routes, static files and the handshake.
+//!
+//! Nothing here can delay the tick: the hub reads the tick feed's lossy broadcast, every client reads the
+//! hub's lossy broadcast into its own bounded queue, and only the client's own writer waits on its socket.
+
+pub mod auth;
+pub mod client;
+pub mod http;
+pub mod hub;
+pub mod protocol;
+pub mod session;
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use axum::serve::ListenerExt;
+use tokio::task::JoinHandle;
+use tokio_util::sync::CancellationToken;
+
+use crate::server::Server;
+use auth::AccessPolicy;
+use hub::{HealthSources, Hub, HubCounters};
+use protocol::Signals;
+use session::SessionCounters;
+
+/// Kernel send buffer of each client socket. Kept small so that a slow client's backlog sits in its
+/// drop-oldest queue (where it is bounded and counted) rather than in the kernel.
+const CLIENT_SEND_BUFFER: usize = 64 * 1024;
+
+/// Errors starting the endpoint.
+#[derive(Debug, thiserror::Error)]
+pub enum DashboardError {
+    /// The listen address could not be bound.
+    #[error("cannot listen on {addr} for the dashboard: {source}")]
+    Bind {
+        /// The address from `[dashboard] bind` / `--bind`.
+        addr: String,
+        /// Why.
+        source: std::io::Error,
+    },
+}
+
+/// Counters of the endpoint, for tests, benchmarks and logs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct DashboardStats {
+    /// Clients connected now.
+    pub clients: usize,
+    /// Websocket connections accepted so far.
+    pub connections: u64,
+    /// Handshakes refused (origin, token, too many clients).
+    pub rejected: u64,
+    /// Telemetry messages dropped for slow clients (all clients).
+    pub telemetry_dropped: u64,
+    /// Commands forwarded to the server.
+    pub commands: u64,
+    /// Error replies sent.
+    pub errors: u64,
+    /// Tick records the hub missed.
+    pub records_missed: u64,
+}
+
+/// The running endpoint.
+pub struct Dashboard {
+    addr: SocketAddr,
+    state: Arc<http::AppState>,
+    cancel: CancellationToken,
+    http: JoinHandle<()>,
+    hub: JoinHandle<()>,
+}
+
+fn redacted_config(config: &pavlov::config::Config) -> serde_json::Value {
+    let mut config = config.clone();
+    if config.dashboard.token.is_some() {
+        config.dashboard.token = Some("<redacted>".into());
+    }
+    serde_json::to_value(&config).unwrap_or(serde_json::Value::Null)
+}
+
+impl Dashboard {
+    /// Binds `[dashboard] bind` and starts serving the dashboard of `server`; uPlot is served from
+    /// `web_dir/node_modules/uplot/dist`.
+    pub async fn start(server: &Server, web_dir: PathBuf) -> Result<Dashboard, DashboardError> {
+        let cfg = &server.config.dashboard;
+        let listener = tokio::net::TcpListener::bind(&cfg.bind)
+            .await
+            .map_err(|source| DashboardError::Bind {
+                addr: cfg.bind.clone(),
+                source,
+            })?;
+        let addr = listener
+            .local_addr()
+            .map_err(|source| DashboardError::Bind {
+                addr: cfg.bind.clone(),
+                source,
+            })?;
+        if !http::uplot_installed(&web_dir) {
+            tracing::error!(
+                "the dashboard's chart library is missing ({}): {}",
+                web_dir.join(http::UPLOT_DIST).display(),
+                http::INSTALL_HINT
+            );
+        }
+        let cancel = CancellationToken::new();
+        let period_ms = server.config.tick.period_ms;
+        let (hub, hub_handle) = Hub::new(period_ms as f64);
+        let hub_counters = Arc::new(HubCounters::default());
+        let state = Arc::new(http::AppState {
+            policy: AccessPolicy::new(cfg, addr),
+            hub: hub_handle,
+            commands: server.commands.clone(),
+            tick_period_ms: period_ms,
+            signals: Signals {
+                obs: server.obs_names.clone(),
+                predictions: server
+                    .config
+                    .predictions
+                    .iter()
+                    .map(|p| p.name.clone())
+                    .collect(),
+                gate_prediction: server.config.control.gate_prediction.clone(),
+            },
+            config: redacted_config(&server.config),
+            max_message_bytes: cfg.max_message_bytes,
+            client_queue: cfg.client_queue,
+            max_clients: cfg.max_clients,
+            web_dir,
+            hub_counters: hub_counters.clone(),
+            session_counters: Arc::new(SessionCounters::default()),
+            connections: AtomicU64::new(0),
+            rejected: AtomicU64::new(0),
+            cancel: cancel.clone(),
+        });
+        let hub = tokio::spawn(hub::run(
+            hub,
+            server.feed.subscribe(),
+            HealthSources {
+                ticks: server.tick_stats.clone(),
+                writer: server.writer_stats.clone(),
+                actuation: server.actuation_stats.clone(),
+            },
+            hub_counters,
+            cancel.clone(),
+        ));
+        let listener = listener.tap_io(|tcp| {
+            let _ = tcp.set_nodelay(true);
+            let _ = socket2::SockRef::from(&*tcp).set_send_buffer_size(CLIENT_SEND_BUFFER);
+        });
+        let app = http::router(state.clone());
+        let shutdown = cancel.clone();
+        let http = tokio::spawn(async move {
+            let serve =
+                axum::serve(listener, app).with_graceful_shutdown(shutdown.cancelled_owned());
+            if let Err(e) = serve.await {
+                tracing::error!("the dashboard endpoint failed: {e}");
+            }
+        });
+        tracing::info!(%addr, token = state.policy.token_required(), "dashboard endpoint listening");
+        Ok(Dashboard {
+            addr,
+            state,
+            cancel,
+            http,
+            hub,
+        })
+    }
+
+    /// The address actually bound (useful with port 0).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The page's URL.
+    pub fn url(&self) -> String {
+        let host = if self.addr.ip().is_unspecified() {
+            "127.0.0.1".to_string()
+        } else {
+            match self.addr {
+                SocketAddr::V4(a) => a.ip().to_string(),
+                SocketAddr::V6(a) => format!("[{}]", a.ip()),
+            }
+        };
+        format!("http://{host}:{}/", self.addr.port())
+    }
+
+    /// The endpoint's counters now.
+    pub fn stats(&self) -> DashboardStats {
+        let s = &self.state;
+        DashboardStats {
+            clients: s.hub_counters.clients.load(Ordering::Relaxed),
+            connections: s.connections.load(Ordering::Relaxed),
+            rejected: s.rejected.load(Ordering::Relaxed),
+            telemetry_dropped: s.session_counters.telemetry_dropped.load(Ordering::Relaxed),
+            commands: s.session_counters.commands.load(Ordering::Relaxed),
+            errors: s.session_counters.errors.load(Ordering::Relaxed),
+            records_missed: s.hub_counters.records_missed.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Closes every connection (code 1001) and stops listening.
+    pub async fn shutdown(self) {
+        self.cancel.cancel();
+        let _ = tokio::time::timeout(Duration::from_secs(3), self.http).await;
+        let _ = self.hub.await;
+    }
+}

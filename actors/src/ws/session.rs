@@ -1,0 +1,271 @@
+//! One websocket connection: a forwarder (hub → the client's queue, at the client's rate), a writer (queue →
+//! socket) and a reader (socket → parsed commands → the server's command router → ack or error).
+//!
+//! The forwarder never waits on the socket: when the client falls behind, its queue drops the oldest
+//! telemetry. The writer gives up on a client whose socket accepts nothing for [`WRITE_STALL`]. Bad
+//! messages get an error reply and the connection stays open; only an over-size message (which the
+//! websocket layer cannot resynchronise after) closes it, with code 1009.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, close_code};
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{Value, json};
+use tokio::sync::{broadcast, mpsc};
+use tokio_util::sync::CancellationToken;
+
+use super::auth::Access;
+use super::client::{Decimator, OutQueue};
+use super::hub::{HubHandle, Outgoing};
+use super::protocol::{
+    ClientCommand, ClientRequest, SessionCommand, ack_json, error_json, parse_request,
+};
+use crate::command::ControlRequest;
+
+/// A client whose socket accepts nothing for this long is disconnected.
+pub const WRITE_STALL: Duration = Duration::from_secs(10);
+/// How long a command may wait for room in the router's inbox.
+const ROUTER_SEND_TIMEOUT: Duration = Duration::from_secs(1);
+/// How long a command may take to be applied before the client is told it timed out.
+const COMMAND_TIMEOUT: Duration = Duration::from_secs(3);
+/// How long a closing connection may take to flush its last replies.
+const CLOSE_GRACE: Duration = Duration::from_secs(1);
+
+/// Endpoint-wide counters the sessions update.
+#[derive(Debug, Default)]
+pub struct SessionCounters {
+    /// Telemetry messages dropped for slow clients, all clients together.
+    pub telemetry_dropped: AtomicU64,
+    /// Commands forwarded to the server.
+    pub commands: AtomicU64,
+    /// Error replies sent.
+    pub errors: AtomicU64,
+}
+
+/// Everything a session needs.
+pub struct Session {
+    /// Where the telemetry comes from.
+    pub hub: HubHandle,
+    /// The server's command inbox.
+    pub commands: mpsc::Sender<ControlRequest>,
+    /// What this client may do.
+    pub access: Access,
+    /// The `hello` text.
+    pub hello: String,
+    /// Telemetry queued before the oldest is dropped.
+    pub queue: usize,
+    /// The tick rate, Hz.
+    pub tick_hz: f64,
+    /// Shared counters.
+    pub counters: Arc<SessionCounters>,
+    /// Fires when the endpoint shuts down.
+    pub cancel: CancellationToken,
+}
+
+enum Out {
+    Text(Utf8Bytes),
+    Close(u16, &'static str),
+}
+
+impl Session {
+    /// Serves one connection until either side ends it.
+    pub async fn run(self, socket: WebSocket) {
+        let (sink, stream) = socket.split();
+        let queue = Arc::new(OutQueue::new(self.queue));
+        let stride = Arc::new(AtomicU64::new(1));
+        let _ = queue.push_control(Out::Text(self.hello.clone().into()));
+        let forwarder = tokio::spawn(forward(
+            self.hub.subscribe(),
+            queue.clone(),
+            stride.clone(),
+            self.counters.clone(),
+        ));
+        let writer = write(sink, queue.clone());
+        tokio::pin!(writer);
+        tokio::select! {
+            _ = &mut writer => {}
+            _ = self.read(stream, &queue, &stride) => {
+                queue.close();
+                let _ = tokio::time::timeout(CLOSE_GRACE, &mut writer).await;
+            }
+            _ = self.cancel.cancelled() => {
+                let _ = queue.push_control(Out::Close(close_code::AWAY, "server shutting down"));
+                queue.close();
+                let _ = tokio::time::timeout(CLOSE_GRACE, &mut writer).await;
+            }
+        }
+        forwarder.abort();
+    }
+
+    async fn read(
+        &self,
+        mut stream: futures_util::stream::SplitStream<WebSocket>,
+        queue: &OutQueue<Out>,
+        stride: &AtomicU64,
+    ) {
+        while let Some(msg) = stream.next().await {
+            let reply = match msg {
+                Ok(Message::Text(text)) => self.handle(&text, stride).await,
+                Ok(Message::Binary(_)) => {
+                    let e = super::protocol::ProtocolError::Binary;
+                    self.error(&None, e.code(), &e.to_string())
+                }
+                Ok(Message::Ping(_) | Message::Pong(_)) => continue,
+                Ok(Message::Close(_)) => return,
+                Err(e) => {
+                    if is_capacity_error(&e) {
+                        tracing::info!("websocket client sent an over-size message: {e}");
+                        let _ = queue.push_control(Out::Close(close_code::SIZE, "message too big"));
+                    } else {
+                        tracing::debug!("websocket read error: {e}");
+                    }
+                    return;
+                }
+            };
+            if queue.push_control(Out::Text(reply.into())).is_err() {
+                tracing::warn!("websocket client does not read its replies; disconnecting it");
+                return;
+            }
+        }
+    }
+
+    fn error(&self, id: &Option<Value>, code: &str, message: &str) -> String {
+        self.counters.errors.fetch_add(1, Ordering::Relaxed);
+        error_json(id, code, message)
+    }
+
+    async fn handle(&self, text: &str, stride: &AtomicU64) -> String {
+        let ClientRequest { id, cmd, command } = match parse_request(text) {
+            Ok(r) => r,
+            Err(rej) => return self.error(&rej.id, rej.error.code(), &rej.error.to_string()),
+        };
+        match command {
+            ClientCommand::Session(SessionCommand::SetRate { hz }) => {
+                let every = Decimator::stride_for(hz, self.tick_hz);
+                stride.store(every, Ordering::Relaxed);
+                ack_json(
+                    &id,
+                    &cmd,
+                    &json!({"rate_hz": self.tick_hz / every as f64, "every": every}),
+                )
+            }
+            ClientCommand::Session(SessionCommand::Ping) => ack_json(&id, &cmd, &json!({})),
+            ClientCommand::Control(_) if self.access == Access::Watch => self.error(
+                &id,
+                "unauthorized",
+                "this connection may only watch: reconnect with the token to send commands",
+            ),
+            ClientCommand::Control(command) => {
+                self.counters.commands.fetch_add(1, Ordering::Relaxed);
+                tracing::info!(cmd = %cmd, "command from a websocket client");
+                let (request, reply) = ControlRequest::new(command);
+                match tokio::time::timeout(ROUTER_SEND_TIMEOUT, self.commands.send(request)).await {
+                    Ok(Ok(())) => {}
+                    Ok(Err(_)) => {
+                        return self.error(&id, "unavailable", "the server is shutting down");
+                    }
+                    Err(_) => {
+                        return self.error(
+                            &id,
+                            "busy",
+                            "the server's command queue is full; try again",
+                        );
+                    }
+                }
+                match tokio::time::timeout(COMMAND_TIMEOUT, reply).await {
+                    Ok(Ok(Ok(result))) => ack_json(&id, &cmd, &result),
+                    Ok(Ok(Err(message))) => self.error(&id, "rejected", &message),
+                    Ok(Err(_)) => {
+                        self.error(&id, "unavailable", "the server stopped before answering")
+                    }
+                    Err(_) => self.error(&id, "timeout", "the command was not answered in time"),
+                }
+            }
+        }
+    }
+}
+
+fn is_capacity_error(e: &axum::Error) -> bool {
+    let mut source: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(s) = source {
+        let text = s.to_string();
+        if text.contains("Space limit exceeded")
+            || text.contains("too long")
+            || text.contains("too big")
+        {
+            return true;
+        }
+        source = s.source();
+    }
+    false
+}
+
+async fn forward(
+    mut rx: broadcast::Receiver<Outgoing>,
+    queue: Arc<OutQueue<Out>>,
+    stride: Arc<AtomicU64>,
+    counters: Arc<SessionCounters>,
+) {
+    let mut decimator = Decimator::all();
+    loop {
+        let dropped = match rx.recv().await {
+            Ok(Outgoing::Tick { seq, text }) => {
+                let every = stride.load(Ordering::Relaxed);
+                if every != decimator.every() {
+                    decimator.set_every(every);
+                }
+                if !decimator.pass(seq) {
+                    continue;
+                }
+                queue.push_telemetry(Out::Text(text))
+            }
+            Ok(Outgoing::Status(text)) => queue.push_telemetry(Out::Text(text)),
+            Err(broadcast::error::RecvError::Lagged(n)) => {
+                queue.count_dropped(n);
+                n
+            }
+            Err(broadcast::error::RecvError::Closed) => break,
+        };
+        if dropped > 0 {
+            counters
+                .telemetry_dropped
+                .fetch_add(dropped, Ordering::Relaxed);
+        }
+    }
+}
+
+async fn write(
+    mut sink: futures_util::stream::SplitSink<WebSocket, Message>,
+    queue: Arc<OutQueue<Out>>,
+) {
+    while let Some(out) = queue.pop().await {
+        let (msg, last) = match out {
+            Out::Text(text) => (Message::Text(text), false),
+            Out::Close(code, reason) => (
+                Message::Close(Some(CloseFrame {
+                    code,
+                    reason: Utf8Bytes::from_static(reason),
+                })),
+                true,
+            ),
+        };
+        match tokio::time::timeout(WRITE_STALL, sink.send(msg)).await {
+            Ok(Ok(())) if !last => {}
+            Ok(Ok(())) => return,
+            Ok(Err(e)) => {
+                tracing::debug!("websocket write failed: {e}");
+                return;
+            }
+            Err(_) => {
+                tracing::warn!(
+                    "a websocket client accepted nothing for {} s; disconnecting it",
+                    WRITE_STALL.as_secs()
+                );
+                return;
+            }
+        }
+    }
+    let _ = sink.send(Message::Close(None)).await;
+}

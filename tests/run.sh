@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# The one test command (README "Test"): installs what the tests need, then runs the format check, clippy
+# with -D warnings, and every test of the workspace (unit tests next to the code, end-to-end tests in tests/).
+#
+# It installs Debian's chromium (the dashboard's browser test drives it with playwright-core) when it is
+# missing, and the dashboard's npm packages from web/package-lock.json. Nothing downloads a browser of its own.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n==> %s\n' "$*"; }
+
+if ! command -v chromium >/dev/null 2>&1 && [ ! -x /usr/bin/chromium ]; then
+  step "installing Debian's chromium for the browser test"
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >/dev/null
+fi
+
+if [ -f web/package-lock.json ]; then
+  step "installing the dashboard's npm packages (npm ci)"
+  npm ci --prefix web --no-audit --no-fund --loglevel=error
+fi
+
+step "cargo fmt --check"
+cargo fmt --all -- --check
+
+step "cargo clippy --all-targets -- -D warnings"
+cargo clippy --workspace --all-targets -- -D warnings
+
+step "cargo test (unit and end-to-end)"
+cargo test --workspace --all-targets
