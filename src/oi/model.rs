@@ -70,7 +70,9 @@ impl std::str::FromStr for Model {
         match s {
             "create1" => Ok(Model::Create1),
             "create2" => Ok(Model::Create2),
-            other => Err(format!("unknown model `{other}` (expected create1 or create2)")),
+            other => Err(format!(
+                "unknown model `{other}` (expected create1 or create2)"
+            )),
         }
     }
 }
