@@ -231,7 +231,21 @@ async fn sim_pty(model: Model, seed: u64) -> Result<()> {
     tracing::info!(path = %pty.path, %model, seed, "simulated Create listening on a pseudo-terminal");
     shutdown_signal().await;
     cancel.cancel();
-    let _ = pty.robot.await;
+    let robot = pty.robot.await.context("the simulator task failed")?;
+    // The robot's final state, one JSON line on stdout, so scripts and tests can check how it was left.
+    let world = robot.world();
+    let c = robot.counters();
+    println!(
+        "{}",
+        serde_json::json!({
+            "oi_mode": robot.oi_mode().code(),
+            "wheel_speed_mm_s": [world.wheel_speed_mm_s(0), world.wheel_speed_mm_s(1)],
+            "odometer_m": world.odometer_m(),
+            "commands": c.commands,
+            "frames_sent": c.frames_sent,
+            "elapsed_s": robot.elapsed_steps() as f64 * 0.015,
+        })
+    );
     Ok(())
 }
 
