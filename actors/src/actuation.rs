@@ -216,3 +216,49 @@ pub async fn run(
     // Stop now; the writer adds pause + Passive when its queue closes.
     actuation.write(Action::STOP, None, &writer);
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tokio::time::Instant;
+
+    fn tick(seq: u64) -> Tick {
+        let now = Instant::now();
+        Tick {
+            seq,
+            deadline: now,
+            fired: now,
+        }
+    }
+
+    #[tokio::test]
+    async fn a_stalled_pipeline_stops_the_wheels_once_after_three_ticks() {
+        let (tx, mut rx) = mpsc::channel(16);
+        let mut a = Actuation::new(Model::Create1, SafetyConfig::default());
+        a.write(Action::new(100, 100), None, &tx);
+        a.last_decision_seq = Some(10);
+        assert_eq!(rx.recv().await.unwrap().bytes, vec![145, 0, 100, 0, 100]);
+        assert!(
+            !a.on_tick(&tick(13), &tx),
+            "3 ticks without a decision is still in time"
+        );
+        assert!(rx.try_recv().is_err());
+        assert!(a.on_tick(&tick(14), &tx));
+        assert_eq!(rx.try_recv().unwrap().bytes, vec![145, 0, 0, 0, 0]);
+        assert!(a.on_tick(&tick(15), &tx));
+        assert!(
+            rx.try_recv().is_err(),
+            "the stop is written once, not flooded"
+        );
+        assert_eq!(a.stats().pipeline_stalls, 1);
+    }
+
+    #[tokio::test]
+    async fn no_decision_at_all_also_counts_as_stalled() {
+        let (tx, mut rx) = mpsc::channel(16);
+        let mut a = Actuation::new(Model::Create2, SafetyConfig::default());
+        assert!(!a.on_tick(&tick(2), &tx));
+        assert!(a.on_tick(&tick(3), &tx));
+        assert_eq!(rx.try_recv().unwrap().bytes, vec![145, 0, 0, 0, 0]);
+    }
+}
