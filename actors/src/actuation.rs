@@ -175,17 +175,32 @@ impl Decision {
     }
 }
 
+/// The channels actuation reads and writes.
+pub struct ActuationChannels {
+    /// Gating's decisions.
+    pub decisions: mpsc::Receiver<Decision>,
+    /// The ticker, for the stalled-pipeline watchdog.
+    pub ticks: watch::Receiver<Option<Tick>>,
+    /// The e-stop latch.
+    pub estop: watch::Receiver<bool>,
+    /// The link writer's queue.
+    pub writer: mpsc::Sender<WriteRequest>,
+    /// Where tick records go.
+    pub feed: TickFeed,
+    /// Actuation's counters, published after each decision.
+    pub stats: watch::Sender<ActuationStats>,
+}
+
 /// Runs until `cancel` fires or the decision channel closes; the writer then sends the shut-down sequence.
-pub async fn run(
-    mut actuation: Actuation,
-    mut decisions: mpsc::Receiver<Decision>,
-    mut ticks: watch::Receiver<Option<Tick>>,
-    mut estop: watch::Receiver<bool>,
-    writer: mpsc::Sender<WriteRequest>,
-    feed: TickFeed,
-    stats: watch::Sender<ActuationStats>,
-    cancel: CancellationToken,
-) {
+pub async fn run(mut actuation: Actuation, channels: ActuationChannels, cancel: CancellationToken) {
+    let ActuationChannels {
+        mut decisions,
+        mut ticks,
+        mut estop,
+        writer,
+        feed,
+        stats,
+    } = channels;
     loop {
         tokio::select! {
             biased;

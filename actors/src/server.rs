@@ -133,8 +133,8 @@ impl Server {
         let obs_names = learning.obs_names();
         let gating = GatingStage::new(
             config.control.mode,
-            config.control.default_policy.clone(),
-            config.control.response.clone(),
+            config.control.default_policy,
+            config.control.response,
         );
         let actuation = Actuation::new(model, config.safety.clone());
 
@@ -196,12 +196,14 @@ impl Server {
             )),
             tokio::spawn(actuation::run(
                 actuation,
-                dec_rx,
-                tick_rx,
-                estop_rx,
-                write_tx,
-                feed.clone(),
-                act_stats_tx,
+                actuation::ActuationChannels {
+                    decisions: dec_rx,
+                    ticks: tick_rx,
+                    estop: estop_rx,
+                    writer: write_tx,
+                    feed: feed.clone(),
+                    stats: act_stats_tx,
+                },
                 cancel.clone(),
             )),
             tokio::spawn(command::route(

@@ -284,7 +284,7 @@ mod tests {
         for t in 0..50 * 400 {
             let phase = t % 50;
             let mut v = snapshot(phase >= 40);
-            v.set(id::VOLTAGE, 16_000 - 100 * phase as i32);
+            v.set(id::VOLTAGE, 16_000 - 100 * phase);
             let out = s.act(LearnInput {
                 values: Some(&v),
                 elbow: None,

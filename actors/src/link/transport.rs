@@ -118,9 +118,8 @@ where
                 // A UART transmits whether or not anyone listens: when the host is not reading and the
                 // buffer is full, the bytes are lost instead of stalling the robot's clock.
                 if !out.is_empty() {
-                    match tx.write(&out).now_or_never() {
-                        Some(Err(e)) => tracing::debug!("simulator link write: {e}"),
-                        Some(Ok(_)) | None => {}
+                    if let Some(Err(e)) = tx.write(&out).now_or_never() {
+                        tracing::debug!("simulator link write: {e}");
                     }
                 }
             }
