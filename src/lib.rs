@@ -26,3 +26,4 @@ pub mod record;
 pub mod rng;
 pub mod sim;
 pub mod skeleton;
+pub mod stats;
