@@ -164,6 +164,7 @@ mod tests {
             estop: false,
             lateness_us: 0,
             link: LinkSummary::default(),
+            inputs: None,
         }
     }
 

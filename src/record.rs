@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::control::{Action, Mode};
+use crate::oi::SensorValues;
 
 /// The robot-side readings the dashboard, the metrics and the experiments need on every tick, in the
 /// OI's own units. `None` where the snapshot did not carry the packet.
@@ -85,6 +86,16 @@ pub struct LinkSummary {
     pub skipped_bytes: u64,
 }
 
+/// The learning stage's exact inputs on a tick, so that a recording can be replayed bit for bit (the
+/// scaled `obs` vector is `f32` and would not reproduce the tile boundaries exactly).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct TickInputs {
+    /// The raw sensor snapshot learning saw (`None` before the first frame).
+    pub values: Option<SensorValues>,
+    /// Whether an operator's injected request forced the stimulus on.
+    pub forced_stimulus: bool,
+}
+
 /// Everything that happened on one tick.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TickRecord {
@@ -120,4 +131,7 @@ pub struct TickRecord {
     pub lateness_us: u32,
     /// The robot link.
     pub link: LinkSummary,
+    /// The learning stage's exact inputs, for replay (absent in older recordings).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inputs: Option<TickInputs>,
 }

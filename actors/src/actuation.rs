@@ -149,6 +149,10 @@ impl Decision {
     ) -> TickRecord {
         let p = self.prediction;
         let obs = p.observation;
+        let inputs = pavlov::record::TickInputs {
+            values: obs.values,
+            forced_stimulus: p.forced_stimulus,
+        };
         TickRecord {
             seq: obs.tick.seq,
             t_ms: p.t_ms,
@@ -171,6 +175,7 @@ impl Decision {
                 bad_frames: obs.parser.bad_frames,
                 skipped_bytes: obs.parser.skipped_bytes,
             },
+            inputs: Some(inputs),
         }
     }
 }

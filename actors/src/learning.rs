@@ -27,6 +27,8 @@ pub struct Prediction {
     pub sensors: SensorSummary,
     /// Stimulus, predictions and the gate's inputs.
     pub learned: LearnOutput,
+    /// Whether an injected human request forced the stimulus on (recorded for replay).
+    pub forced_stimulus: bool,
 }
 
 /// Learning's state.
@@ -119,16 +121,18 @@ pub async fn run(
                 let since = obs.tick.deadline.saturating_duration_since(started);
                 let now_ms = since.as_millis() as u64;
                 let elbow = learning.elbows.as_mut().map(|t| t.step(&pose.borrow(), now_ms));
+                let forced_stimulus = seq < learning.request_until;
                 let learned = learning.stage.act(LearnInput {
                     values: obs.values.as_ref(),
                     elbow,
-                    forced_stimulus: seq < learning.request_until,
+                    forced_stimulus,
                 });
                 let p = Prediction {
                     sensors: summary::summarize(obs.values.as_ref(), obs.distance_mm, obs.angle_deg),
                     t_ms: since.as_secs_f64() * 1000.0,
                     observation: obs,
                     learned,
+                    forced_stimulus,
                 };
                 if out.try_send(p).is_err() {
                     tracing::debug!("gating is behind; a prediction was dropped");

@@ -655,6 +655,7 @@ mod tests {
                 bad_frames: 1,
                 skipped_bytes: 3,
             },
+            inputs: None,
         };
         let v: Value = serde_json::from_str(&TickMessage::new(&record).to_json()).unwrap();
         assert_eq!(v["type"], "tick");
