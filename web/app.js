@@ -1,0 +1,427 @@
+// The pavlov dashboard: connects to /ws (PROTOCOL.md), draws live strip charts with uPlot, shows the
+// run counters and tick health, and sends commands (mode, e-stop, teleop, request, learning, recording).
+
+import {
+  Backoff, GapCounter, Window, connectionTarget, fmt, fmtDuration, parseParam, teleopWheels, tokenFromHash,
+} from './lib.js';
+
+const WINDOW_SECONDS = 30;
+const TELEOP_REPEAT_MS = 200;
+const CHART_HEIGHT = 160;
+const COLORS = ['#2563eb', '#d97706', '#059669', '#7c3aed', '#db2777', '#0891b2'];
+
+const $ = (id) => document.getElementById(id);
+
+const state = {
+  ws: null,
+  hello: null,
+  canCommand: false,
+  connected: false,
+  nextId: 1,
+  pending: new Map(),
+  ticks: 0,
+  last: null,
+  gaps: new GapCounter(),
+  stride: 1,
+  charts: [],
+  dirty: false,
+  mode: null,
+  estop: false,
+  held: new Set(),
+  teleopTimer: null,
+  backoff: new Backoff(),
+};
+// Exposed for the end-to-end test and for poking around in the console.
+window.pavlov = state;
+
+// ---------------------------------------------------------------- log
+
+function log(text, kind = 'info') {
+  const li = document.createElement('li');
+  li.className = kind;
+  const time = new Date().toLocaleTimeString('en-GB', { hour12: false });
+  li.innerHTML = '<time></time><span></span>';
+  li.firstChild.textContent = time;
+  li.lastChild.textContent = text;
+  const list = $('log');
+  list.prepend(li);
+  while (list.children.length > 60) list.lastChild.remove();
+}
+
+// ---------------------------------------------------------------- connection
+
+function setConn(s, text) {
+  $('conn').dataset.state = s;
+  $('conn-state').textContent = text;
+}
+
+function connect() {
+  const token = tokenFromHash(window.location.hash);
+  const { url, protocols } = connectionTarget(window.location, token);
+  setConn('connecting', 'connecting…');
+  let ws;
+  try {
+    ws = new WebSocket(url, protocols);
+  } catch (e) {
+    log(`cannot open the websocket: ${e.message}`, 'error');
+    scheduleReconnect();
+    return;
+  }
+  state.ws = ws;
+  ws.onopen = () => {
+    state.connected = true;
+    state.backoff.reset();
+  };
+  ws.onmessage = (ev) => {
+    let msg;
+    try {
+      msg = JSON.parse(ev.data);
+    } catch (e) {
+      log(`unreadable message from the server: ${e.message}`, 'error');
+      return;
+    }
+    onMessage(msg);
+  };
+  ws.onclose = (ev) => {
+    state.connected = false;
+    state.ws = null;
+    failPending('the connection closed');
+    if (ev.code !== 1000 && ev.code !== 1005) log(`connection closed (${ev.code}${ev.reason ? `: ${ev.reason}` : ''})`, 'warn');
+    scheduleReconnect();
+  };
+}
+
+function scheduleReconnect() {
+  const delay = state.backoff.next();
+  let left = Math.ceil(delay / 1000);
+  setConn('down', `disconnected — retrying in ${left} s`);
+  const timer = setInterval(() => {
+    left -= 1;
+    if (left > 0) setConn('down', `disconnected — retrying in ${left} s`);
+  }, 1000);
+  setTimeout(() => {
+    clearInterval(timer);
+    connect();
+  }, delay);
+}
+
+function send(cmd, args = {}) {
+  if (!state.ws || state.ws.readyState !== WebSocket.OPEN) {
+    log(`not connected: ${cmd} not sent`, 'error');
+    return null;
+  }
+  const id = state.nextId++;
+  state.pending.set(id, cmd);
+  state.ws.send(JSON.stringify({ cmd, id, ...args }));
+  return id;
+}
+
+function failPending(why) {
+  for (const cmd of state.pending.values()) log(`${cmd}: no answer (${why})`, 'warn');
+  state.pending.clear();
+}
+
+// ---------------------------------------------------------------- messages
+
+function onMessage(msg) {
+  switch (msg.type) {
+    case 'hello': return onHello(msg);
+    case 'tick': return onTick(msg);
+    case 'status': return onStatus(msg);
+    case 'ack': return onAck(msg);
+    case 'error': return onError(msg);
+    default: return undefined;
+  }
+}
+
+function onHello(h) {
+  state.hello = h;
+  state.canCommand = h.can_command;
+  state.gaps = new GapCounter();
+  state.stride = 1;
+  const cfg = h.config || {};
+  const model = cfg.robot ? cfg.robot.model : '';
+  $('robot-name').textContent = `${h.server} · ${model ? `${model} · ` : ''}${h.tick_period_ms} ms ticks`;
+  $('learn-target').textContent = h.signals.gate_prediction ? `prediction “${h.signals.gate_prediction}”` : '';
+  $('watch-banner').hidden = h.can_command;
+  document.body.classList.toggle('watch-only', !h.can_command);
+  setConn('live', h.can_command ? `live · ${h.rate_hz} Hz` : `live · ${h.rate_hz} Hz · watch-only`);
+  buildCharts(h.signals.predictions);
+  log(`connected to ${h.server} (protocol ${h.protocol})`);
+}
+
+function onTick(t) {
+  state.ticks += 1;
+  state.gaps.see(t.seq, state.stride);
+  state.last = t;
+  pushCharts(t);
+  if (state.mode !== t.mode) {
+    state.mode = t.mode;
+    for (const b of document.querySelectorAll('.mode')) {
+      const on = b.dataset.mode === t.mode;
+      b.classList.toggle('active', on);
+      b.setAttribute('aria-checked', String(on));
+    }
+    document.body.classList.toggle('manual', t.mode === 'manual');
+    $('teleop-hint').textContent = t.mode === 'manual' ? 'driving enabled' : 'switch to Manual to drive';
+  }
+  if (state.estop !== t.estop) {
+    state.estop = t.estop;
+    $('estop-banner').hidden = !t.estop;
+    document.body.classList.toggle('estopped', t.estop);
+  }
+}
+
+function renderNow() {
+  const t = state.last;
+  if (!t) return;
+  $('seq').textContent = fmt(t.seq);
+  $('runtime').textContent = fmtDuration(t.t);
+  $('now-mode').textContent = t.mode;
+  $('now-gate').textContent = t.gate ? 'response ϱ' : 'default π';
+  $('now-gate').className = t.gate ? 'on' : '';
+  $('now-stimulus').textContent = t.stimulus ? 'ON' : 'off';
+  $('now-stimulus').className = t.stimulus ? 'alarm' : '';
+  $('now-command').textContent = `${t.command.left} / ${t.command.right} mm/s`;
+  $('now-safety').textContent = t.safety_stop ? t.safety_stop.replace(/_/g, ' ') : 'none';
+  $('now-safety').className = t.safety_stop ? 'alarm' : '';
+  $('tick-count').textContent = fmt(state.ticks);
+  $('h-frames').textContent = `${fmt(t.link.good_frames)} / ${fmt(t.link.bad_frames)}`;
+  $('h-link').textContent = t.link.up ? `up · ${fmt(t.link.skipped_bytes)} B skipped` : 'DOWN';
+  $('h-link').className = t.link.up ? '' : 'alarm';
+}
+
+function onStatus(s) {
+  const h = s.health;
+  const c = s.counters;
+  $('c-overcurrent').textContent = fmt(c.overcurrent_observations);
+  $('c-stalls').textContent = fmt(c.stall_events);
+  $('c-stalled').textContent = fmt(c.time_stalled_s, 1, 's');
+  $('c-distance').textContent = fmt(c.distance_m, 2, 'm');
+  $('c-energy').textContent = fmt(c.energy_j, 0, 'J');
+  $('c-efficiency').textContent = fmt(c.efficiency_m_per_kj, 2, 'm/kJ');
+  $('h-lateness').textContent = `${fmt(h.lateness_p50_us)} / ${fmt(h.lateness_p99_us)} µs`;
+  $('h-lateness-max').textContent = fmt(h.lateness_max_us, 0, 'µs');
+  $('h-skipped').textContent = `${fmt(h.ticks_skipped)} of ${fmt(h.ticks_fired + h.ticks_skipped)}`;
+  $('h-skipped').className = h.ticks_skipped > 0 ? 'warn' : '';
+  $('h-t2c').textContent = fmt(h.tick_to_command_p99_us, 0, 'µs');
+  $('h-missed').textContent = `${fmt(state.gaps.missing)} / ${fmt(s.clients)}`;
+}
+
+function onAck(a) {
+  state.pending.delete(a.id);
+  if (a.cmd === 'start_recording') $('rec-state').textContent = 'on';
+  if (a.cmd === 'stop_recording') $('rec-state').textContent = 'off';
+  if (a.cmd === 'teleop') return;
+  const detail = a.result && Object.keys(a.result).length ? ` ${JSON.stringify(a.result)}` : '';
+  log(`✓ ${a.cmd}${detail}`, 'ok');
+}
+
+function onError(e) {
+  const cmd = state.pending.get(e.id);
+  state.pending.delete(e.id);
+  log(`✗ ${cmd ? `${cmd}: ` : ''}${e.message}`, 'error');
+}
+
+// ---------------------------------------------------------------- charts
+
+function axis(label, extra = {}) {
+  return {
+    label, labelSize: 16, size: 52, stroke: '#5b6474', font: '11px system-ui, sans-serif',
+    labelFont: '11px system-ui, sans-serif', grid: { stroke: '#eef1f5', width: 1 }, ticks: { stroke: '#d9dee7' }, ...extra,
+  };
+}
+
+function makeChart(el, series, yOpts = {}, axisOpts = {}) {
+  const rect = el.getBoundingClientRect();
+  const opts = {
+    width: Math.max(300, Math.floor(rect.width)),
+    height: CHART_HEIGHT,
+    cursor: { drag: { x: false, y: false } },
+    legend: { live: false },
+    scales: { x: { time: false }, y: yOpts },
+    axes: [axis('', { size: 28, values: (u, v) => v.map((s) => `${s}s`) }), axis(axisOpts.label || '', axisOpts)],
+    series: [{ label: 't' }, ...series],
+  };
+  const capacity = Math.round((WINDOW_SECONDS * 1000) / ((state.hello && state.hello.tick_period_ms) || 20));
+  const win = new Window(series.length, capacity);
+  const u = new window.uPlot(opts, win.data(), el);
+  return { u, win, el };
+}
+
+const EVENT_LANES = ['over-current R', 'over-current L', 'e-stop', 'gate', 'stimulus'];
+
+function buildCharts(predictionNames) {
+  for (const c of state.charts) c.u.destroy();
+  state.charts = [];
+  if (typeof window.uPlot !== 'function') return;
+  const predSeries = [];
+  predictionNames.forEach((name, i) => {
+    const color = COLORS[i % COLORS.length];
+    predSeries.push({ label: name, stroke: color, width: 2 });
+    predSeries.push({ label: `θ ${name}`, stroke: color, width: 1, dash: [6, 4] });
+  });
+  const lane = (i, color) => ({
+    label: EVENT_LANES[i], stroke: color, width: 1.5, fill: `${color}40`, fillTo: () => i, paths: window.uPlot.paths.stepped({ align: 1 }),
+  });
+  state.charts = [
+    { kind: 'pred', ...makeChart($('chart-pred'), predSeries, { range: (u, lo, hi) => [Math.min(0, lo ?? 0), Math.max(1, hi ?? 1)] }) },
+    {
+      kind: 'events',
+      ...makeChart($('chart-events'), [lane(0, '#ea580c'), lane(1, '#f59e0b'), lane(2, '#111827'), lane(3, '#2563eb'), lane(4, '#dc2626')],
+        { range: [-0.2, EVENT_LANES.length] },
+        { size: 96, splits: () => EVENT_LANES.map((_, i) => i + 0.4), values: () => EVENT_LANES, grid: { show: false } }),
+    },
+    { kind: 'current', ...makeChart($('chart-current'), [{ label: 'battery current', stroke: '#0891b2', width: 1.5, fill: '#0891b21a' }], {}, { label: 'mA' }) },
+    {
+      kind: 'wheels',
+      ...makeChart($('chart-wheels'), [
+        { label: 'left', stroke: '#2563eb', width: 2 },
+        { label: 'right', stroke: '#d97706', width: 2 },
+        { label: 'π left', stroke: '#93c5fd', width: 1, dash: [5, 4] },
+        { label: 'π right', stroke: '#fcd34d', width: 1, dash: [5, 4] },
+      ], { range: (u, lo, hi) => [Math.min(-100, lo ?? 0), Math.max(100, hi ?? 0)] }, { label: 'mm/s' }),
+    },
+  ];
+}
+
+function pushCharts(t) {
+  if (state.charts.length === 0) return;
+  const flag = (lane, on) => lane + (on ? 0.8 : 0);
+  for (const c of state.charts) {
+    switch (c.kind) {
+      case 'pred':
+        c.win.push(t.t, t.predictions.flatMap((p) => [p.value, p.threshold]));
+        break;
+      case 'events':
+        c.win.push(t.t, [
+          flag(0, t.sensors.overcurrent_right), flag(1, t.sensors.overcurrent_left),
+          flag(2, t.estop), flag(3, t.gate), flag(4, t.stimulus),
+        ]);
+        break;
+      case 'current':
+        c.win.push(t.t, [t.sensors.battery_current_ma]);
+        break;
+      case 'wheels':
+        c.win.push(t.t, [t.command.left, t.command.right, t.default.left, t.default.right]);
+        break;
+      default:
+    }
+  }
+  state.dirty = true;
+}
+
+function frame() {
+  if (state.dirty) {
+    state.dirty = false;
+    for (const c of state.charts) c.u.setData(c.win.data());
+    renderNow();
+  }
+  requestAnimationFrame(frame);
+}
+
+function resizeCharts() {
+  for (const c of state.charts) {
+    const r = c.el.getBoundingClientRect();
+    c.u.setSize({ width: Math.max(300, Math.floor(r.width)), height: CHART_HEIGHT });
+  }
+}
+
+// ---------------------------------------------------------------- controls
+
+function teleopUpdate() {
+  if (state.held.size === 0) {
+    clearInterval(state.teleopTimer);
+    state.teleopTimer = null;
+    if (state.mode === 'manual') send('teleop', { left_mm_s: 0, right_mm_s: 0 });
+    return;
+  }
+  if (state.mode !== 'manual') {
+    log('teleop needs Manual mode', 'warn');
+    state.held.clear();
+    return;
+  }
+  const speed = Number($('speed').value);
+  const tick = () => send('teleop', teleopWheels(state.held, speed));
+  tick();
+  if (!state.teleopTimer) state.teleopTimer = setInterval(tick, TELEOP_REPEAT_MS);
+}
+
+function hold(dir, on) {
+  if (dir === 'stop') {
+    state.held.clear();
+    teleopUpdate();
+    return;
+  }
+  const had = state.held.has(dir);
+  if (on && !had) state.held.add(dir);
+  else if (!on && had) state.held.delete(dir);
+  else return;
+  if (state.teleopTimer) {
+    clearInterval(state.teleopTimer);
+    state.teleopTimer = null;
+  }
+  teleopUpdate();
+}
+
+const KEYS = { ArrowUp: 'up', ArrowDown: 'down', ArrowLeft: 'left', ArrowRight: 'right' };
+
+function wireControls() {
+  $('estop').addEventListener('click', () => send('estop'));
+  $('release').addEventListener('click', () => send('release'));
+  $('request').addEventListener('click', () => send('human_request', { duration_ms: 500 }));
+  for (const b of document.querySelectorAll('.mode')) {
+    b.addEventListener('click', () => send('set_mode', { mode: b.dataset.mode }));
+  }
+  for (const k of document.querySelectorAll('.key')) {
+    const dir = k.dataset.dir;
+    k.addEventListener('pointerdown', (e) => { e.preventDefault(); hold(dir, true); });
+    for (const ev of ['pointerup', 'pointerleave', 'pointercancel']) k.addEventListener(ev, () => hold(dir, false));
+  }
+  document.addEventListener('keydown', (e) => {
+    if (e.target instanceof HTMLInputElement) return;
+    if (e.key === 'Escape') { send('estop'); e.preventDefault(); return; }
+    const dir = KEYS[e.key];
+    if (dir) { e.preventDefault(); if (!e.repeat) hold(dir, true); }
+  });
+  document.addEventListener('keyup', (e) => {
+    const dir = KEYS[e.key];
+    if (dir) hold(dir, false);
+  });
+  window.addEventListener('blur', () => { if (state.held.size) { state.held.clear(); teleopUpdate(); } });
+  $('speed').addEventListener('input', () => { $('speed-value').textContent = `${$('speed').value} mm/s`; });
+  $('params').addEventListener('submit', (e) => {
+    e.preventDefault();
+    const fields = [
+      ['alpha', parseParam($('p-alpha').value, 'α', 0, 1)],
+      ['lambda', parseParam($('p-lambda').value, 'λ', 0, 1)],
+      ['threshold', parseParam($('p-threshold').value, 'θ', -1e6, 1e6)],
+    ];
+    const bad = fields.find(([, r]) => r.error);
+    if (bad) { log(bad[1].error, 'error'); return; }
+    const args = Object.fromEntries(fields.filter(([, r]) => r.value !== undefined).map(([k, r]) => [k, r.value]));
+    if (Object.keys(args).length === 0) { log('enter α, λ or θ first', 'warn'); return; }
+    send('set_params', args);
+  });
+  $('reset-weights').addEventListener('click', () => {
+    if (window.confirm('Reset every prediction’s weights to their initial values?')) send('reset_weights');
+  });
+  $('save-weights').addEventListener('click', () => send('save_weights'));
+  $('rec-start').addEventListener('click', () => send('start_recording'));
+  $('rec-stop').addEventListener('click', () => send('stop_recording'));
+  let resizeTimer = null;
+  window.addEventListener('resize', () => { clearTimeout(resizeTimer); resizeTimer = setTimeout(resizeCharts, 100); });
+}
+
+// ---------------------------------------------------------------- start
+
+if (typeof window.uPlot !== 'function') {
+  const b = $('vendor-banner');
+  b.hidden = false;
+  b.textContent = 'Charts unavailable: the server could not serve the uPlot library (web/node_modules is missing). '
+    + 'Run `npm ci --prefix web` in the repository and restart the server.';
+  for (const el of document.querySelectorAll('.chart')) el.classList.add('unavailable');
+}
+wireControls();
+connect();
+requestAnimationFrame(frame);

@@ -1,0 +1,143 @@
+// Pure helpers of the dashboard (no DOM, no network), shared by app.js and the Node unit tests.
+
+/** The websocket subprotocol of PROTOCOL.md. */
+export const SUBPROTOCOL = 'pavlov.v1';
+
+/** Characters allowed in a Sec-WebSocket-Protocol value (RFC 7230 token). */
+const TOKEN_CHARS = /^[!#$%&'*+\-.^_`|~0-9A-Za-z]+$/;
+
+/** The access token from a URL fragment like `#token=abc` (fragments never reach the server's logs). */
+export function tokenFromHash(hash) {
+  const params = new URLSearchParams(String(hash || '').replace(/^#/, ''));
+  const t = params.get('token');
+  return t ? t : null;
+}
+
+/**
+ * Where and how to open the websocket for a page at `location`: the token goes in the subprotocol list
+ * when it is made of token characters, and in the query string otherwise.
+ */
+export function connectionTarget(location, token) {
+  const scheme = location.protocol === 'https:' ? 'wss:' : 'ws:';
+  let url = `${scheme}//${location.host}/ws`;
+  const protocols = [SUBPROTOCOL];
+  if (token) {
+    if (TOKEN_CHARS.test(token)) protocols.push(`token.${token}`);
+    else url += `?token=${encodeURIComponent(token)}`;
+  }
+  return { url, protocols };
+}
+
+/** Reconnect delays: 0.5 s doubling to 8 s; `reset()` after a successful connection. */
+export class Backoff {
+  constructor(firstMs = 500, maxMs = 8000) {
+    this.firstMs = firstMs;
+    this.maxMs = maxMs;
+    this.nextMs = firstMs;
+  }
+  next() {
+    const d = this.nextMs;
+    this.nextMs = Math.min(this.maxMs, this.nextMs * 2);
+    return d;
+  }
+  reset() {
+    this.nextMs = this.firstMs;
+  }
+}
+
+/**
+ * A sliding window of columns for a uPlot chart: column 0 is x (time, s), the others are series.
+ * Appending is amortised O(1); the window keeps the newest `capacity` rows.
+ */
+export class Window {
+  constructor(series, capacity) {
+    this.capacity = capacity;
+    this.columns = Array.from({ length: series + 1 }, () => []);
+  }
+  push(x, values) {
+    this.columns[0].push(x);
+    for (let i = 1; i < this.columns.length; i++) {
+      const v = values[i - 1];
+      this.columns[i].push(v === undefined || v === null || Number.isNaN(v) ? null : v);
+    }
+    // Trim in batches so that the copy happens once every `slack` rows, not on every row.
+    const slack = Math.max(1, Math.floor(this.capacity / 10));
+    if (this.columns[0].length > this.capacity + slack) {
+      const excess = this.columns[0].length - this.capacity;
+      for (const c of this.columns) c.splice(0, excess);
+    }
+  }
+  /** The columns as uPlot wants them (only the newest `capacity` rows). */
+  data() {
+    const extra = this.columns[0].length - this.capacity;
+    if (extra <= 0) return this.columns;
+    return this.columns.map((c) => c.slice(extra));
+  }
+  get length() {
+    return Math.min(this.columns[0].length, this.capacity);
+  }
+  clear() {
+    for (const c of this.columns) c.length = 0;
+  }
+}
+
+/** Wheel speeds for the teleop keys held (`up`, `down`, `left`, `right`) at `speed` mm/s. */
+export function teleopWheels(held, speed) {
+  const fwd = (held.has('up') ? 1 : 0) - (held.has('down') ? 1 : 0);
+  const turn = (held.has('left') ? 1 : 0) - (held.has('right') ? 1 : 0);
+  let left;
+  let right;
+  if (fwd === 0) {
+    // Turn in place: left wheel back, right wheel forward turns left (counter-clockwise).
+    left = -turn * speed;
+    right = turn * speed;
+  } else {
+    const inner = Math.round(speed * 0.4);
+    left = fwd * (turn > 0 ? inner : speed);
+    right = fwd * (turn < 0 ? inner : speed);
+  }
+  const clamp = (v) => Math.max(-500, Math.min(500, Math.round(v))) || 0;
+  return { left_mm_s: clamp(left), right_mm_s: clamp(right) };
+}
+
+/** Counts ticks that never arrived, from the sequence numbers that did (`stride` = requested decimation). */
+export class GapCounter {
+  constructor() {
+    this.last = null;
+    this.missing = 0;
+  }
+  see(seq, stride = 1) {
+    if (this.last !== null && seq > this.last + stride) this.missing += seq - this.last - stride;
+    this.last = seq;
+  }
+}
+
+/** Formats a number for a counter, with a unit; `—` for missing values. */
+export function fmt(value, digits = 0, unit = '') {
+  if (value === null || value === undefined || Number.isNaN(value)) return '—';
+  const s = Number(value).toLocaleString('en-US', {
+    minimumFractionDigits: digits,
+    maximumFractionDigits: digits,
+  });
+  return unit ? `${s} ${unit}` : s;
+}
+
+/** Formats seconds as `m:ss` or `h:mm:ss`. */
+export function fmtDuration(seconds) {
+  if (seconds === null || seconds === undefined || Number.isNaN(seconds)) return '—';
+  const s = Math.floor(seconds);
+  const h = Math.floor(s / 3600);
+  const m = Math.floor((s % 3600) / 60);
+  const ss = String(s % 60).padStart(2, '0');
+  return h > 0 ? `${h}:${String(m).padStart(2, '0')}:${ss}` : `${m}:${ss}`;
+}
+
+/** Parses a learning-parameter field: a finite number, or `undefined` when empty, or an error message. */
+export function parseParam(text, name, lo, hi) {
+  const t = String(text ?? '').trim();
+  if (t === '') return { value: undefined };
+  const v = Number(t);
+  if (!Number.isFinite(v)) return { error: `${name} must be a number` };
+  if (v < lo || v > hi) return { error: `${name} must be between ${lo} and ${hi}` };
+  return { value: v };
+}

@@ -1,0 +1,101 @@
+// End-to-end check of the dashboard in headless Debian Chromium, driven by playwright-core.
+//
+//   node web/tests/dashboard.e2e.mjs <dashboard URL> <screenshot.png>
+//
+// Opens the page served by a running `pavlov serve`, checks that live ticks arrive and the charts
+// update, presses the E-STOP button, and checks in the tick stream that the server stopped the robot
+// (e-stop latched, wheel command 0/0, safety stop "e_stop"). Saves a screenshot, prints a JSON summary
+// on stdout, exits non-zero on any failure. Never downloads a browser: Chromium comes from apt
+// (`apt-get install chromium`); set CHROMIUM to use another binary.
+
+import { existsSync } from 'node:fs';
+import { chromium } from 'playwright-core';
+
+const [url, screenshot] = process.argv.slice(2);
+const executablePath = process.env.CHROMIUM || '/usr/bin/chromium';
+
+function fail(message) {
+  console.error(`dashboard e2e: FAIL: ${message}`);
+  process.exit(1);
+}
+
+if (!url || !screenshot) fail('usage: node dashboard.e2e.mjs <dashboard URL> <screenshot.png>');
+if (!existsSync(executablePath)) fail(`no Chromium at ${executablePath}: run \`apt-get install -y chromium\``);
+
+const ARGS = [
+  '--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+  '--disable-background-networking', '--disable-component-update', '--disable-sync',
+];
+
+async function until(what, predicate, timeoutMs) {
+  const end = Date.now() + timeoutMs;
+  while (Date.now() < end) {
+    if (predicate()) return;
+    await new Promise((r) => setTimeout(r, 50));
+  }
+  fail(`timed out after ${timeoutMs} ms waiting for ${what}`);
+}
+
+const browser = await chromium.launch({ executablePath, args: ARGS, headless: true });
+const summary = {};
+try {
+  const page = await browser.newPage({ viewport: { width: 1440, height: 1050 } });
+  const problems = [];
+  page.on('pageerror', (e) => problems.push(`page error: ${e.message}`));
+  page.on('console', (m) => { if (m.type() === 'error') problems.push(`console error: ${m.text()}`); });
+
+  const ticks = [];
+  const acks = [];
+  const sent = [];
+  const socketOpened = page.waitForEvent('websocket', { timeout: 15000 });
+  await page.goto(url, { waitUntil: 'load' });
+  const ws = await socketOpened;
+  ws.on('framesent', (f) => sent.push(String(f.payload)));
+  ws.on('framereceived', (f) => {
+    let m;
+    try { m = JSON.parse(String(f.payload)); } catch { return; }
+    if (m.type === 'tick') ticks.push({ seq: m.seq, estop: m.estop, command: m.command, safety: m.safety_stop });
+    if (m.type === 'ack' || m.type === 'error') acks.push(m);
+  });
+
+  // Live ticks arrive and every chart grows.
+  await page.waitForFunction(() => window.pavlov && window.pavlov.ticks >= 60, null, { timeout: 20000 });
+  const charts = await page.locator('.uplot').count();
+  if (charts !== 4) fail(`expected 4 charts, found ${charts}`);
+  const before = await page.evaluate(() => window.pavlov.charts.map((c) => c.u.data[0].length));
+  await page.waitForTimeout(600);
+  const after = await page.evaluate(() => window.pavlov.charts.map((c) => c.u.data[0].length));
+  if (!after.every((n, i) => n > before[i])) fail(`charts did not update: ${before} → ${after}`);
+  summary.chart_points = after;
+  await page.waitForFunction(() => document.getElementById('h-lateness').textContent.includes('µs'), null, { timeout: 5000 });
+  await page.waitForFunction(() => document.getElementById('conn').dataset.state === 'live', null, { timeout: 5000 });
+  if (ticks.length === 0) fail('no tick frames observed on the websocket');
+  summary.moving_before_estop = ticks.some((t) => t.command.left !== 0 || t.command.right !== 0);
+
+  // E-stop: the button sends the command, the server acks it and the tick stream shows the robot stopped.
+  const pressedAt = ticks.length;
+  await page.click('#estop');
+  await until('the estop command frame', () => sent.some((p) => p.includes('"cmd":"estop"')), 3000);
+  await until('the estop ack', () => acks.some((a) => a.type === 'ack' && a.cmd === 'estop'), 5000);
+  const stopped = (t) => t.estop && t.command.left === 0 && t.command.right === 0 && t.safety === 'e_stop';
+  await until('25 ticks with the robot stopped by the e-stop', () => ticks.slice(pressedAt).filter(stopped).length >= 25, 5000);
+  const afterStop = ticks.slice(pressedAt);
+  const firstStopped = afterStop.findIndex(stopped);
+  const relapsed = afterStop.slice(firstStopped).some((t) => !stopped(t));
+  if (relapsed) fail('a tick after the e-stop was not stopped (the latch did not hold)');
+  await page.waitForSelector('#estop-banner:not([hidden])', { timeout: 3000 });
+  summary.ticks_until_stopped = firstStopped;
+
+  // Let the charts show a few seconds after the stop, then take the picture.
+  await page.waitForTimeout(1500);
+  await page.screenshot({ path: screenshot, fullPage: true });
+  summary.ticks_seen = ticks.length;
+  summary.page_ticks = await page.evaluate(() => window.pavlov.ticks);
+  if (problems.length) fail(problems.join('; '));
+  summary.ok = true;
+  console.log(JSON.stringify(summary));
+} catch (e) {
+  fail(e && e.stack ? e.stack : String(e));
+} finally {
+  await browser.close();
+}
