@@ -193,6 +193,71 @@ impl Default for DashboardConfig {
     }
 }
 
+/// `[skeleton]`: the body-skeleton stream (OSC over UDP) of the gesture-command experiment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SkeletonConfig {
+    /// Whether `pavlov serve` listens for skeletons; unset means "when the stimulus is `left_elbow`".
+    pub enabled: Option<bool>,
+    /// UDP address to listen on (OSCeleton's default target is 127.0.0.1:7110).
+    pub listen: String,
+    /// What the streamer sends (see [`SkeletonFormat`]).
+    pub format: SkeletonFormat,
+    /// Swap left and right joint labels (mirrored streamers).
+    pub swap_lr: bool,
+    /// A joint older than this counts as missing, ms.
+    pub max_joint_age_ms: u64,
+}
+
+/// The skeleton wire format and its coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SkeletonFormat {
+    /// OSCeleton `/joint ,sifff` in raw millimetres (`-xr`).
+    #[default]
+    OsceletonMm,
+    /// OSCeleton `/joint ,sifff` in its default normalized coordinates, transformed back to millimetres.
+    OsceletonNormalized,
+    /// KinectV2-OSC `/bodies/<id>/joints/<JointType> ,fffs` in metres.
+    KinectV2,
+}
+
+impl Default for SkeletonConfig {
+    fn default() -> Self {
+        SkeletonConfig {
+            enabled: None,
+            listen: "127.0.0.1:7110".into(),
+            format: SkeletonFormat::OsceletonMm,
+            swap_lr: false,
+            max_joint_age_ms: 100,
+        }
+    }
+}
+
+impl SkeletonConfig {
+    /// Whether the skeleton ingest runs under `stimulus`: `enabled` when set, else only for `left_elbow`.
+    pub fn is_enabled(&self, stimulus: &StimulusSpec) -> bool {
+        self.enabled
+            .unwrap_or(matches!(stimulus, StimulusSpec::LeftElbow { .. }))
+    }
+
+    fn validate(&self) -> Result<(), ConfigError> {
+        if self.listen.parse::<std::net::SocketAddr>().is_err() {
+            return Err(invalid(
+                "skeleton.listen",
+                format!("`{}` is not an address like 127.0.0.1:7110", self.listen),
+            ));
+        }
+        if !(1..=10_000).contains(&self.max_joint_age_ms) {
+            return Err(invalid(
+                "skeleton.max_joint_age_ms",
+                "must be between 1 and 10000",
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The whole configuration file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -216,6 +281,9 @@ pub struct Config {
     /// `[dashboard]`.
     #[serde(default)]
     pub dashboard: DashboardConfig,
+    /// `[skeleton]`.
+    #[serde(default)]
+    pub skeleton: SkeletonConfig,
 }
 
 impl Config {
@@ -266,6 +334,7 @@ impl Config {
                 }
             }
         }
+        self.skeleton.validate()?;
         let d = &self.dashboard;
         let bind: std::net::SocketAddr = d.bind.parse().map_err(|_| {
             invalid(
