@@ -14,6 +14,8 @@ pub mod histogram;
 pub mod human_sender;
 pub mod learning;
 pub mod link;
+pub mod recorder;
+pub mod recording;
 pub mod sensor_ingest;
 pub mod server;
 pub mod skeleton_ingest;
