@@ -91,6 +91,16 @@ pub struct ShutdownReport {
 impl Server {
     /// Opens the robot link, sends the start-up sequence and starts every actor.
     pub async fn start(config: Config, target: RobotTarget) -> Result<Server, ServerError> {
+        Self::start_with_recorder(config, target, None).await
+    }
+
+    /// Like [`Server::start`], with every tick record also queued to `recorder` (and the router's
+    /// start/stop-recording commands sent to it).
+    pub async fn start_with_recorder(
+        config: Config,
+        target: RobotTarget,
+        recorder: Option<crate::recorder::RecorderLink>,
+    ) -> Result<Server, ServerError> {
         let model = config.robot.model;
         let sim_cancel = CancellationToken::new();
         let (reader, writer, sim) = match &target {
@@ -104,16 +114,28 @@ impl Server {
                 (r, w, None)
             }
         };
-        Self::start_on_link(config, reader, writer, sim, sim_cancel).await
+        Self::start_on_link_with_recorder(config, reader, writer, sim, sim_cancel, recorder).await
     }
 
     /// Starts the server on an already open link (`sim`: the simulator task behind it, if any).
     pub async fn start_on_link(
         config: Config,
         reader: LinkReader,
+        link_writer: LinkWriter,
+        sim: Option<JoinHandle<SimRobot>>,
+        sim_cancel: CancellationToken,
+    ) -> Result<Server, ServerError> {
+        Self::start_on_link_with_recorder(config, reader, link_writer, sim, sim_cancel, None).await
+    }
+
+    /// [`Server::start_on_link`] with an optional recorder.
+    pub async fn start_on_link_with_recorder(
+        config: Config,
+        reader: LinkReader,
         mut link_writer: LinkWriter,
         sim: Option<JoinHandle<SimRobot>>,
         sim_cancel: CancellationToken,
+        recorder: Option<crate::recorder::RecorderLink>,
     ) -> Result<Server, ServerError> {
         let model = config.robot.model;
         let stream = config.robot.stream_ids();
@@ -150,7 +172,10 @@ impl Server {
         let (act_stats_tx, act_stats_rx) = watch::channel(ActuationStats::default());
         let (pose_tx, pose_rx) =
             watch::channel(PoseTracker::new(crate::skeleton_ingest::MAX_JOINT_AGE_MS));
-        let feed = TickFeed::new();
+        let (feed, recorder_commands) = match recorder {
+            Some(r) => (TickFeed::new().with_recorder(r.records), Some(r.commands)),
+            None => (TickFeed::new(), None),
+        };
         let tick_stats = SharedTickStats::default();
         let writer_stats = writer::SharedWriterStats::default();
 
@@ -212,7 +237,7 @@ impl Server {
                     gating: gating_cmd_tx,
                     learning: learning_cmd_tx,
                     estop: estop_tx,
-                    recorder: None,
+                    recorder: recorder_commands,
                 },
                 cancel.clone(),
             )),
