@@ -63,6 +63,9 @@ pub struct SendReport {
     pub frames: u64,
     /// Datagrams sent.
     pub datagrams: u64,
+    /// Datagrams the system refused to send (counted, not fatal: a streamer does not care whether anyone
+    /// listens).
+    pub send_errors: u64,
     /// Ground-truth commands the human made.
     pub commands: usize,
 }
@@ -144,6 +147,24 @@ fn encode(p: &OscPacket) -> Result<Vec<u8>, SenderError> {
     rosc::encoder::encode(p).map_err(|e| SenderError::Encode(e.to_string()))
 }
 
+async fn send(
+    socket: &UdpSocket,
+    to: SocketAddr,
+    p: &OscPacket,
+    report: &mut SendReport,
+) -> Result<(), SenderError> {
+    match socket.send_to(&encode(p)?, to).await {
+        Ok(_) => report.datagrams += 1,
+        Err(e) => {
+            if report.send_errors == 0 {
+                tracing::warn!("cannot send skeleton datagrams to {to}: {e}");
+            }
+            report.send_errors += 1;
+        }
+    }
+    Ok(())
+}
+
 /// Runs a [`SimHuman`] and sends its frames to `opts.to` until `opts.frames` are sent or `cancel` fires.
 pub async fn send_human(
     opts: SenderOptions,
@@ -155,14 +176,12 @@ pub async fn send_human(
         (std::net::Ipv6Addr::UNSPECIFIED, 0).into()
     };
     let socket = UdpSocket::bind(local).await?;
-    socket.connect(opts.to).await?;
     let mut human = SimHuman::new(HumanParams::default(), opts.seed);
     let user = human.params().user_id;
     let osceleton = opts.format != SkeletonFormat::KinectV2;
     let mut report = SendReport::default();
     if osceleton {
-        socket.send(&encode(&session_start(user))?).await?;
-        report.datagrams += 1;
+        send(&socket, opts.to, &session_start(user), &mut report).await?;
     }
     let start = Instant::now();
     while opts.frames.is_none_or(|n| report.frames < n) {
@@ -177,8 +196,7 @@ pub async fn send_human(
             break;
         }
         for p in frame_packets(&frame, opts.format) {
-            socket.send(&encode(&p)?).await?;
-            report.datagrams += 1;
+            send(&socket, opts.to, &p, &mut report).await?;
         }
         report.frames += 1;
         if !opts.realtime {
@@ -186,8 +204,7 @@ pub async fn send_human(
         }
     }
     if osceleton {
-        socket.send(&encode(&session_end(user))?).await?;
-        report.datagrams += 1;
+        send(&socket, opts.to, &session_end(user), &mut report).await?;
     }
     report.commands = human.commands().len();
     Ok(report)

@@ -8,11 +8,12 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use pavlov::config::Config;
+use pavlov::config::{Config, SkeletonFormat};
 use pavlov::control::Mode;
 use pavlov::oi::Model;
 use pavlov::sim::params::SimParams;
 use pavlov::sim::robot::SimRobot;
+use pavlov_actors::human_sender::{SenderOptions, send_human};
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::ws::Dashboard;
 use pavlov_actors::{bench, link::transport};
@@ -116,6 +117,28 @@ enum Command {
     },
     /// Benchmark: run the server on the simulator in real time and print tick lateness and
     /// tick-to-command latency percentiles.
+    /// Run the simulated human operator and stream its skeleton as OSC over UDP (what a depth sensor with
+    /// OSCeleton or KinectV2-OSC would send), e.g. to a `pavlov serve` running the interaction experiment.
+    Human {
+        /// Where to send (the server's [skeleton] listen address).
+        #[arg(long, default_value = "127.0.0.1:7110", value_name = "ADDR")]
+        to: std::net::SocketAddr,
+        /// Seed of the simulated human.
+        #[arg(long, default_value_t = 1, value_name = "N")]
+        seed: u64,
+        /// Wire format: osceleton_mm, osceleton_normalized or kinect_v2.
+        #[arg(long, default_value = "osceleton_mm", value_name = "FORMAT", value_parser = parse_skeleton_format)]
+        format: SkeletonFormat,
+        /// Pace frames at the sensor's 30 Hz on the wall clock (the default).
+        #[arg(long, conflicts_with = "fast")]
+        realtime: bool,
+        /// Send frames back to back instead of in real time.
+        #[arg(long)]
+        fast: bool,
+        /// Stop after this many frames (default: run until Ctrl-C).
+        #[arg(long, value_name = "N")]
+        frames: Option<u64>,
+    },
     Bench {
         #[command(flatten)]
         config: ConfigArgs,
@@ -215,6 +238,13 @@ async fn serve(args: ConfigArgs, robot: Option<String>, dashboard: DashboardArgs
     };
     println!("pavlov is driving {robot_name}; press Ctrl-C to stop");
     println!("dashboard: {}", dash.url());
+    if let Some(sk) = &server.skeleton {
+        println!(
+            "skeleton: listening for {} on udp://{}",
+            skeleton_format_name(server.config.skeleton.format),
+            sk.local_addr
+        );
+    }
     shutdown_signal().await;
     tracing::info!("shutting down: stopping the robot");
     dash.shutdown().await;
@@ -249,6 +279,61 @@ async fn sim_pty(model: Model, seed: u64) -> Result<()> {
     Ok(())
 }
 
+fn parse_skeleton_format(s: &str) -> Result<SkeletonFormat, String> {
+    match s {
+        "osceleton_mm" => Ok(SkeletonFormat::OsceletonMm),
+        "osceleton_normalized" => Ok(SkeletonFormat::OsceletonNormalized),
+        "kinect_v2" => Ok(SkeletonFormat::KinectV2),
+        other => Err(format!(
+            "unknown skeleton format `{other}` (expected osceleton_mm, osceleton_normalized or kinect_v2)"
+        )),
+    }
+}
+
+fn skeleton_format_name(f: SkeletonFormat) -> &'static str {
+    match f {
+        SkeletonFormat::OsceletonMm => "OSCeleton (mm)",
+        SkeletonFormat::OsceletonNormalized => "OSCeleton (normalized)",
+        SkeletonFormat::KinectV2 => "KinectV2-OSC",
+    }
+}
+
+async fn human(
+    to: std::net::SocketAddr,
+    seed: u64,
+    format: SkeletonFormat,
+    realtime: bool,
+    frames: Option<u64>,
+) -> Result<()> {
+    let cancel = CancellationToken::new();
+    let opts = SenderOptions {
+        to,
+        seed,
+        format,
+        realtime,
+        frames,
+    };
+    println!(
+        "simulated human (seed {seed}) sending {} to udp://{to}",
+        skeleton_format_name(format)
+    );
+    let on_signal = cancel.clone();
+    let watcher = tokio::spawn(async move {
+        shutdown_signal().await;
+        tracing::info!("stopping the simulated human");
+        on_signal.cancel();
+    });
+    // On Ctrl-C the sender stops after the current frame and sends /lost_user.
+    let report = send_human(opts, cancel).await;
+    watcher.abort();
+    let report = report.context("the simulated human could not send")?;
+    println!(
+        "sent {} frames in {} datagrams ({} send errors); {} commands (ground truth)",
+        report.frames, report.datagrams, report.send_errors, report.commands
+    );
+    Ok(())
+}
+
 fn main() -> Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
@@ -274,6 +359,14 @@ fn main() -> Result<()> {
                 model,
                 seed,
             } => sim_pty(model, seed).await,
+            Command::Human {
+                to,
+                seed,
+                format,
+                realtime: _,
+                fast,
+                frames,
+            } => human(to, seed, format, !fast, frames).await,
             Command::Bench { config, seconds } => {
                 let cfg = load_config(&config)?;
                 let report = bench::run_realtime(cfg, Duration::from_secs(seconds)).await?;

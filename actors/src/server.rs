@@ -71,6 +71,8 @@ pub struct Server {
     pub started: Instant,
     /// The configuration in force at start-up.
     pub config: Config,
+    /// The skeleton ingest, when `[skeleton]` is enabled and its socket opened.
+    pub skeleton: Option<crate::skeleton_ingest::SkeletonIngest>,
     /// Names of the observation vector's dimensions, in record order.
     pub obs_names: Vec<String>,
     cancel: CancellationToken,
@@ -170,8 +172,7 @@ impl Server {
         let (learning_cmd_tx, learning_cmd_rx) = mpsc::channel(16);
         let (estop_tx, estop_rx) = watch::channel(false);
         let (act_stats_tx, act_stats_rx) = watch::channel(ActuationStats::default());
-        let (pose_tx, pose_rx) =
-            watch::channel(PoseTracker::new(crate::skeleton_ingest::MAX_JOINT_AGE_MS));
+        let (pose_tx, pose_rx) = watch::channel(PoseTracker::new(config.skeleton.max_joint_age_ms));
         let (feed, recorder_commands) = match recorder {
             Some(r) => (TickFeed::new().with_recorder(r.records), Some(r.commands)),
             None => (TickFeed::new(), None),
@@ -187,7 +188,7 @@ impl Server {
             writer_stats.clone(),
         ));
         let started = Instant::now() + period;
-        let actors = vec![
+        let mut actors = vec![
             tokio::spawn(ticker::run(
                 started,
                 period,
@@ -246,6 +247,13 @@ impl Server {
                 cancel.clone(),
             )),
         ];
+        let skeleton =
+            crate::skeleton_ingest::start_for(&config, pose_tx.clone(), started, cancel.clone())
+                .await
+                .map(|(ingest, handle)| {
+                    actors.push(handle);
+                    ingest
+                });
         Ok(Server {
             feed,
             commands: cmd_tx,
@@ -256,6 +264,7 @@ impl Server {
             started,
             config,
             obs_names,
+            skeleton,
             _cancel_on_drop: cancel.clone().drop_guard(),
             cancel,
             sim_cancel,
