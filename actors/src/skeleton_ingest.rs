@@ -233,6 +233,11 @@ async fn run(
                     stats.counts.count(Malformed::Undecodable);
                     log.note(Malformed::Undecodable, from, &e.to_string(), &stats);
                 }
+                Ok((rest, _)) if !rest.is_empty() => {
+                    stats.counts.count(Malformed::Truncated);
+                    let detail = format!("{} bytes left over", rest.len());
+                    log.note(Malformed::Truncated, from, &detail, &stats);
+                }
                 Ok((_, packet)) => {
                     events.clear();
                     let bad = decoder.decode(&packet, &mut events, &mut stats.counts);
@@ -257,8 +262,8 @@ fn apply_events(
     pose: &watch::Sender<PoseTracker>,
 ) {
     pose.send_modify(|p| {
-        for &e in events {
-            match selector.apply(e, now_ms, p) {
+        for applied in selector.apply_all(events, now_ms, p) {
+            match applied {
                 Applied::OtherUser => stats.other_user_joints += 1,
                 Applied::Selected(user) => {
                     stats.selections += 1;

@@ -57,6 +57,8 @@ pub enum Malformed {
     Undecodable,
     /// The datagram filled the whole receive buffer, so it may have been cut off.
     Oversized,
+    /// Bytes left over after the packet: a bundle cut short (rosc stops at the first incomplete element).
+    Truncated,
     /// A known address with arguments of the wrong number or types.
     WrongTypes,
     /// An address this ingest does not know.
@@ -86,6 +88,8 @@ pub struct DecodeCounts {
     pub undecodable: u64,
     /// [`Malformed::Oversized`].
     pub oversized: u64,
+    /// [`Malformed::Truncated`].
+    pub truncated: u64,
     /// [`Malformed::WrongTypes`].
     pub wrong_types: u64,
     /// [`Malformed::UnknownAddress`].
@@ -104,6 +108,7 @@ impl DecodeCounts {
         let slot = match kind {
             Malformed::Undecodable => &mut self.undecodable,
             Malformed::Oversized => &mut self.oversized,
+            Malformed::Truncated => &mut self.truncated,
             Malformed::WrongTypes => &mut self.wrong_types,
             Malformed::UnknownAddress => &mut self.unknown_address,
             Malformed::OtherFormat => &mut self.other_format,
@@ -117,6 +122,7 @@ impl DecodeCounts {
     pub fn malformed(&self) -> u64 {
         self.undecodable
             + self.oversized
+            + self.truncated
             + self.wrong_types
             + self.unknown_address
             + self.other_format

@@ -9,8 +9,10 @@
 //! 3. `/lost_user` of the selected user drops the selection and clears the pose; `/new_skel` of the selected
 //!    user clears the pose (a new calibration); `/new_user` changes nothing.
 //!
-//! Joints of a user that has not sent an elbow yet are dropped until an elbow selects them (a frame's other
-//! joints may arrive first; they are used from the next frame on).
+//! Selection looks at a whole datagram first ([`UserSelector::apply_all`]): when a bundle holds an elbow of a
+//! user that may be selected, that user is selected before any of the bundle's events is applied, so the
+//! joints that precede the elbow in the same bundle are kept. With unbundled messages (KinectV2-OSC), joints
+//! that arrive before the first elbow are dropped and used from the next frame on.
 
 use pavlov::skeleton::{Joint, JointSample, PoseTracker};
 
@@ -59,6 +61,39 @@ impl UserSelector {
         self.current
     }
 
+    fn vacant(&self, now_ms: u64) -> bool {
+        self.current.is_none() || now_ms.saturating_sub(self.last_heard_ms) > self.silence_ms
+    }
+
+    /// Apply the events of one datagram received at `now_ms`: first select the user of the first elbow among
+    /// them when the selection is vacant, then apply each event. Returns what each step did.
+    pub fn apply_all(
+        &mut self,
+        events: &[SkeletonEvent],
+        now_ms: u64,
+        pose: &mut PoseTracker,
+    ) -> Vec<Applied> {
+        let mut done = Vec::with_capacity(events.len() + 1);
+        if self.vacant(now_ms) {
+            let first_elbow = events.iter().find_map(|e| match *e {
+                SkeletonEvent::Joint { user, joint, .. } if is_elbow(joint) => Some(user),
+                _ => None,
+            });
+            if let Some(user) = first_elbow.filter(|&u| self.current != Some(u)) {
+                self.select(user, now_ms, pose);
+                done.push(Applied::Selected(user));
+            }
+        }
+        done.extend(events.iter().map(|&e| self.apply(e, now_ms, pose)));
+        done
+    }
+
+    fn select(&mut self, user: UserId, now_ms: u64, pose: &mut PoseTracker) {
+        self.current = Some(user);
+        self.last_heard_ms = now_ms;
+        pose.clear();
+    }
+
     /// Apply one event received at `now_ms`, updating `pose`.
     pub fn apply(&mut self, event: SkeletonEvent, now_ms: u64, pose: &mut PoseTracker) -> Applied {
         match event {
@@ -78,13 +113,8 @@ impl UserSelector {
                     pose.update(joint, sample);
                     return Applied::JointUsed;
                 }
-                let vacant = self.current.is_none()
-                    || now_ms.saturating_sub(self.last_heard_ms) > self.silence_ms;
-                let is_elbow = matches!(joint, Joint::LeftElbow | Joint::RightElbow);
-                if vacant && is_elbow {
-                    self.current = Some(user);
-                    self.last_heard_ms = now_ms;
-                    pose.clear();
+                if self.vacant(now_ms) && is_elbow(joint) {
+                    self.select(user, now_ms, pose);
                     pose.update(joint, sample);
                     Applied::Selected(user)
                 } else {
@@ -106,6 +136,10 @@ impl UserSelector {
             | SkeletonEvent::NewUser(_) => Applied::Nothing,
         }
     }
+}
+
+fn is_elbow(joint: Joint) -> bool {
+    matches!(joint, Joint::LeftElbow | Joint::RightElbow)
 }
 
 #[cfg(test)]
@@ -149,6 +183,33 @@ mod tests {
         );
         assert_eq!(pose.sample(Joint::Head).map(|j| j.at_ms), Some(10));
         assert_eq!(s.current(), Some(3));
+    }
+
+    #[test]
+    fn a_bundle_with_an_elbow_selects_its_user_before_its_first_joint() {
+        let mut s = UserSelector::new(1000);
+        let mut pose = PoseTracker::new(100);
+        let frame = [
+            joint(2, Joint::LeftShoulder, 1.0),
+            joint(9, Joint::Head, 1.0),
+            joint(2, Joint::LeftElbow, 2.0),
+        ];
+        let done = s.apply_all(&frame, 0, &mut pose);
+        assert_eq!(
+            done,
+            vec![
+                Applied::Selected(2),
+                Applied::JointUsed,
+                Applied::OtherUser,
+                Applied::JointUsed
+            ]
+        );
+        assert!(pose.sample(Joint::LeftShoulder).is_some());
+        assert!(pose.sample(Joint::Head).is_none());
+        // The same user's next bundle does not select (or clear) again.
+        let done = s.apply_all(&frame, 10, &mut pose);
+        assert_eq!(done.len(), 3);
+        assert_eq!(pose.sample(Joint::LeftShoulder).map(|j| j.at_ms), Some(10));
     }
 
     #[test]

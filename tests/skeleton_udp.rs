@@ -1,0 +1,470 @@
+//! The skeleton ingest over real UDP: a real Kinect v2 recording (Kinectron, MIT licence, read from
+//! `shared/data/skeleton/`) sent as KinectV2-OSC and as OSCeleton packets gives the elbow angles computed directly
+//! from the file; malformed, truncated and oversized datagrams are counted by kind and the actor keeps working;
+//! joints that stop arriving make the elbow invalid after the age limit; and a `pavlov human` process feeds the
+//! ingest valid elbow angles.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use pavlov::config::SkeletonFormat;
+use pavlov::skeleton::{
+    ElbowAngle, ElbowFeatureTracker, InvalidReason, Joint, PoseTracker, Side, elbow_angle_deg,
+};
+use pavlov_actors::skeleton_ingest::{
+    IngestSettings, IngestStats, RECEIVE_BUFFER_BYTES, SkeletonIngest, spawn,
+};
+use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
+use tokio::net::UdpSocket;
+use tokio::sync::watch;
+use tokio::time::Instant;
+use tokio_util::sync::CancellationToken;
+
+/// Kinect v2 `JointType` names in the SDK's order (the recording's joints are in this order).
+const KINECT_V2_JOINTS: [&str; 25] = [
+    "SpineBase",
+    "SpineMid",
+    "Neck",
+    "Head",
+    "ShoulderLeft",
+    "ElbowLeft",
+    "WristLeft",
+    "HandLeft",
+    "ShoulderRight",
+    "ElbowRight",
+    "WristRight",
+    "HandRight",
+    "HipLeft",
+    "KneeLeft",
+    "AnkleLeft",
+    "FootLeft",
+    "HipRight",
+    "KneeRight",
+    "AnkleRight",
+    "FootRight",
+    "SpineShoulder",
+    "HandTipLeft",
+    "ThumbLeft",
+    "HandTipRight",
+    "ThumbRight",
+];
+
+struct Ingest {
+    info: SkeletonIngest,
+    pose: watch::Receiver<PoseTracker>,
+    started: Instant,
+    cancel: CancellationToken,
+}
+
+impl Ingest {
+    async fn start(format: SkeletonFormat, max_age_ms: u64, buffer_bytes: usize) -> Ingest {
+        let (tx, rx) = watch::channel(PoseTracker::new(max_age_ms));
+        let started = Instant::now();
+        let cancel = CancellationToken::new();
+        let settings = IngestSettings {
+            listen: "127.0.0.1:0".parse().unwrap(),
+            format,
+            swap_lr: false,
+            silence_ms: 1000,
+            buffer_bytes,
+        };
+        let (info, _handle) = spawn(settings, tx, started, cancel.clone()).await.unwrap();
+        Ingest {
+            info,
+            pose: rx,
+            started,
+            cancel,
+        }
+    }
+
+    fn now_ms(&self) -> u64 {
+        Instant::now().duration_since(self.started).as_millis() as u64
+    }
+
+    fn stats(&self) -> IngestStats {
+        *self.info.stats.borrow()
+    }
+
+    /// Waits until the actor has taken in `n` datagrams in all.
+    async fn wait_for_datagrams(&mut self, n: u64) -> IngestStats {
+        let deadline = Instant::now() + Duration::from_secs(5);
+        loop {
+            let s = self.stats();
+            if s.counts.datagrams >= n {
+                return s;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            assert!(
+                !left.is_zero(),
+                "only {} of {n} datagrams arrived",
+                s.counts.datagrams
+            );
+            let _ = tokio::time::timeout(left, self.info.stats.changed()).await;
+        }
+    }
+}
+
+struct Sender {
+    socket: UdpSocket,
+    to: SocketAddr,
+    sent: u64,
+}
+
+impl Sender {
+    async fn new(to: SocketAddr) -> Sender {
+        Sender {
+            socket: UdpSocket::bind("127.0.0.1:0").await.unwrap(),
+            to,
+            sent: 0,
+        }
+    }
+
+    async fn bytes(&mut self, b: &[u8]) {
+        self.socket.send_to(b, self.to).await.unwrap();
+        self.sent += 1;
+    }
+
+    async fn packet(&mut self, p: &OscPacket) {
+        self.bytes(&rosc::encoder::encode(p).unwrap()).await;
+    }
+}
+
+fn msg(addr: &str, args: Vec<OscType>) -> OscPacket {
+    OscPacket::Message(OscMessage {
+        addr: addr.into(),
+        args,
+    })
+}
+
+fn bundle(content: Vec<OscPacket>) -> OscPacket {
+    OscPacket::Bundle(OscBundle {
+        timetag: OscTime {
+            seconds: 0,
+            fractional: 1,
+        },
+        content,
+    })
+}
+
+fn osc_joint(name: &str, user: i32, p: [f64; 3]) -> OscPacket {
+    msg(
+        "/joint",
+        vec![
+            OscType::String(name.into()),
+            OscType::Int(user),
+            OscType::Float(p[0] as f32),
+            OscType::Float(p[1] as f32),
+            OscType::Float(p[2] as f32),
+        ],
+    )
+}
+
+/// One recorded body: its tracking id and 25 camera-space positions in metres.
+struct Body {
+    id: String,
+    joints: Vec<[f64; 3]>,
+}
+
+fn recording() -> Vec<Body> {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data/skeleton/kinectron_recorded_skeleton.json");
+    let text = std::fs::read_to_string(&path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json.as_array()
+        .unwrap()
+        .iter()
+        .map(|b| Body {
+            id: b["trackingId"].as_str().unwrap().to_string(),
+            joints: b["joints"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|j| ["cameraX", "cameraY", "cameraZ"].map(|k| j[k].as_f64().unwrap()))
+                .collect(),
+        })
+        .collect()
+}
+
+/// The left elbow angle straight from the file (shoulder, elbow, hand, as the pose uses).
+fn file_left_angle(b: &Body) -> Option<f64> {
+    elbow_angle_deg(b.joints[4], b.joints[5], b.joints[7])
+}
+
+/// Sends every recorded frame in `format` and compares the pose's left elbow with the file's.
+async fn replay(format: SkeletonFormat) -> (usize, f64, f64) {
+    let bodies = recording();
+    assert_eq!(bodies.len(), 286);
+    let mut ingest = Ingest::start(format, 60_000, RECEIVE_BUFFER_BYTES).await;
+    let mut tx = Sender::new(ingest.info.local_addr).await;
+    let (mut n, mut sum, mut max) = (0usize, 0.0f64, 0.0f64);
+    for (k, b) in bodies.iter().enumerate() {
+        match format {
+            SkeletonFormat::KinectV2 => {
+                // Unbundled, one message per joint, as KinectV2-OSC sends; every 10th frame bundled.
+                let msgs: Vec<OscPacket> = b
+                    .joints
+                    .iter()
+                    .zip(KINECT_V2_JOINTS)
+                    .map(|(p, name)| {
+                        msg(
+                            &format!("/bodies/{}/joints/{name}", b.id),
+                            vec![
+                                OscType::Float(p[0] as f32),
+                                OscType::Float(p[1] as f32),
+                                OscType::Float(p[2] as f32),
+                                OscType::String("Tracked".into()),
+                            ],
+                        )
+                    })
+                    .collect();
+                if k % 10 == 0 {
+                    tx.packet(&bundle(msgs)).await;
+                } else {
+                    for m in &msgs {
+                        tx.packet(m).await;
+                    }
+                }
+            }
+            _ => {
+                // One bundle per frame in raw millimetres (x 1000), like OSCeleton -xr.
+                let joints = b
+                    .joints
+                    .iter()
+                    .zip(KINECT_V2_JOINTS)
+                    .filter_map(|(p, name)| {
+                        let j = Joint::from_kinect_v2(name)?;
+                        Some(osc_joint(
+                            j.osceleton_name(),
+                            1,
+                            [p[0] * 1000.0, p[1] * 1000.0, p[2] * 1000.0],
+                        ))
+                    })
+                    .collect();
+                tx.packet(&bundle(joints)).await;
+            }
+        }
+        ingest.wait_for_datagrams(tx.sent).await;
+        let now = ingest.now_ms();
+        let got = ingest.pose.borrow().elbow_angle(Side::Left, now);
+        let want = file_left_angle(b).unwrap();
+        let ElbowAngle::Valid(got) = got else {
+            panic!("frame {k}: {got:?}")
+        };
+        assert_eq!(got < 90.0, want < 90.0, "frame {k}: {got} vs {want}");
+        let err = (got - want).abs();
+        assert!(err < 1e-3, "frame {k}: {got} vs {want}");
+        n += 1;
+        sum += err;
+        max = max.max(err);
+    }
+    let s = ingest.stats();
+    assert_eq!(s.counts.malformed(), 0, "{s:?}");
+    assert_eq!(s.selections, 1);
+    ingest.cancel.cancel();
+    (n, sum / n as f64, max)
+}
+
+#[tokio::test]
+async fn kinectron_recording_as_kinect_v2_osc_gives_the_files_elbow_angles() {
+    let (n, mean, max) = replay(SkeletonFormat::KinectV2).await;
+    eprintln!("kinect_v2: {n} frames, |angle error| mean {mean:.2e} deg, max {max:.2e} deg");
+    assert_eq!(n, 286);
+}
+
+#[tokio::test]
+async fn kinectron_recording_as_osceleton_mm_gives_the_files_elbow_angles() {
+    let (n, mean, max) = replay(SkeletonFormat::OsceletonMm).await;
+    eprintln!("osceleton_mm: {n} frames, |angle error| mean {mean:.2e} deg, max {max:.2e} deg");
+    assert_eq!(n, 286);
+}
+
+/// A left arm at a right angle, in mm, for user `user`.
+fn right_angle_arm(user: i32) -> OscPacket {
+    bundle(vec![
+        osc_joint("l_shoulder", user, [-190.0, 600.0, 2500.0]),
+        osc_joint("l_elbow", user, [-190.0, 300.0, 2500.0]),
+        osc_joint("l_hand", user, [-190.0, 300.0, 2200.0]),
+    ])
+}
+
+#[tokio::test]
+async fn malformed_truncated_and_oversized_datagrams_are_counted_and_the_actor_keeps_working() {
+    let mut ingest = Ingest::start(SkeletonFormat::OsceletonMm, 60_000, RECEIVE_BUFFER_BYTES).await;
+    let mut tx = Sender::new(ingest.info.local_addr).await;
+    // Garbage bytes.
+    tx.bytes(b"\xff\x00garbage that is not OSC").await;
+    // A truncated bundle.
+    let whole = rosc::encoder::encode(&right_angle_arm(1)).unwrap();
+    tx.bytes(&whole[..whole.len() / 2 + 1]).await;
+    // A 70 KB datagram cannot even be sent over UDP/IPv4 (largest payload 65,507 bytes) ...
+    let huge = vec![0x41u8; 70_000];
+    assert!(tx.socket.send_to(&huge, tx.to).await.is_err());
+    // ... so the largest possible one goes instead: received whole, and not OSC.
+    tx.bytes(&huge[..65_507]).await;
+    // Wrong type tags, an unknown address, an address without a leading slash, NaN coordinates, and a
+    // message in the other (KinectV2-OSC) format.
+    tx.packet(&msg(
+        "/joint",
+        vec![
+            OscType::String("l_elbow".into()),
+            OscType::String("1".into()),
+            OscType::Float(1.0),
+            OscType::Float(1.0),
+            OscType::Float(1.0),
+        ],
+    ))
+    .await;
+    tx.packet(&msg("/not/a/skeleton", vec![OscType::Int(3)]))
+        .await;
+    let mut no_slash = rosc::encoder::encode(&msg("/Left_Elbow", vec![])).unwrap();
+    no_slash[0] = b'L';
+    tx.bytes(&no_slash).await;
+    tx.packet(&osc_joint("l_elbow", 1, [f64::NAN, 0.0, 0.0]))
+        .await;
+    tx.packet(&msg(
+        "/bodies/1/joints/ElbowLeft",
+        vec![
+            OscType::Float(0.1),
+            OscType::Float(0.2),
+            OscType::Float(0.3),
+            OscType::String("Tracked".into()),
+        ],
+    ))
+    .await;
+    let s = ingest.wait_for_datagrams(tx.sent).await;
+    assert_eq!(s.counts.undecodable, 3, "{s:?}");
+    assert_eq!(s.counts.truncated, 1, "{s:?}");
+    assert_eq!(s.counts.wrong_types, 1, "{s:?}");
+    assert_eq!(s.counts.unknown_address, 1, "{s:?}");
+    assert_eq!(s.counts.non_finite, 1, "{s:?}");
+    assert_eq!(s.counts.other_format, 1, "{s:?}");
+    assert_eq!(s.counts.oversized, 0, "{s:?}");
+    assert_eq!(s.counts.malformed(), 8);
+    assert!(ingest.pose.borrow().sample(Joint::LeftElbow).is_none());
+
+    // After all that, a valid frame still updates the pose.
+    tx.packet(&right_angle_arm(1)).await;
+    let s = ingest.wait_for_datagrams(tx.sent).await;
+    assert_eq!(s.current_user, Some(1));
+    let a = ingest
+        .pose
+        .borrow()
+        .elbow_angle(Side::Left, ingest.now_ms());
+    assert!((a.value().unwrap() - 90.0).abs() < 1e-3, "{a:?}");
+    // Another user's arm does not replace the selected user's.
+    tx.packet(&bundle(vec![osc_joint("l_elbow", 2, [0.0, 0.0, 1.0])]))
+        .await;
+    let s = ingest.wait_for_datagrams(tx.sent).await;
+    assert_eq!(s.other_user_joints, 1);
+    assert_eq!(
+        ingest
+            .pose
+            .borrow()
+            .sample(Joint::LeftElbow)
+            .unwrap()
+            .pos_mm,
+        [-190.0, 300.0, 2500.0]
+    );
+    ingest.cancel.cancel();
+}
+
+#[tokio::test]
+async fn a_datagram_that_fills_the_receive_buffer_is_counted_as_oversized() {
+    let mut ingest = Ingest::start(SkeletonFormat::OsceletonMm, 60_000, 512).await;
+    let mut tx = Sender::new(ingest.info.local_addr).await;
+    let names = ["l_shoulder", "l_elbow", "l_hand", "head", "neck", "torso"];
+    let big = bundle(
+        (0..40)
+            .map(|k| osc_joint(names[k % names.len()], 1, [1.0, 2.0, 3.0]))
+            .collect(),
+    );
+    assert!(rosc::encoder::encode(&big).unwrap().len() > 512);
+    tx.packet(&big).await;
+    tx.packet(&right_angle_arm(1)).await;
+    let s = ingest.wait_for_datagrams(tx.sent).await;
+    assert_eq!(s.counts.oversized, 1, "{s:?}");
+    assert_eq!(
+        s.counts.joints, 3,
+        "only the small valid frame decodes: {s:?}"
+    );
+    assert!(
+        ingest
+            .pose
+            .borrow()
+            .elbow_angle(Side::Left, ingest.now_ms())
+            .is_valid()
+    );
+    ingest.cancel.cancel();
+}
+
+#[tokio::test]
+async fn joints_that_stop_arriving_make_the_elbow_invalid_after_the_age_limit() {
+    let mut ingest = Ingest::start(SkeletonFormat::OsceletonMm, 100, RECEIVE_BUFFER_BYTES).await;
+    let mut tx = Sender::new(ingest.info.local_addr).await;
+    let mut features = ElbowFeatureTracker::new();
+    tx.packet(&right_angle_arm(1)).await;
+    ingest.wait_for_datagrams(tx.sent).await;
+    let received = ingest.pose.borrow().sample(Joint::LeftElbow).unwrap().at_ms;
+    // Stamped on the ingest's clock: ms since `started`, at most a few ms before now.
+    let now = ingest.now_ms();
+    assert!(received <= now && now - received < 50, "{received} {now}");
+    let fresh = features.step(&ingest.pose.borrow(), now);
+    assert!(fresh.left.is_some() && !fresh.command);
+    tokio::time::sleep(Duration::from_millis(130)).await;
+    let now = ingest.now_ms();
+    assert!(now - received > 100);
+    let stale = features.step(&ingest.pose.borrow(), now);
+    assert_eq!(stale.left, None);
+    assert_eq!(
+        ingest.pose.borrow().elbow_angle(Side::Left, now),
+        ElbowAngle::Invalid(InvalidReason::Stale(Joint::LeftShoulder))
+    );
+    ingest.cancel.cancel();
+}
+
+#[tokio::test]
+async fn a_pavlov_human_process_feeds_the_ingest_valid_elbow_angles() {
+    let mut ingest = Ingest::start(SkeletonFormat::OsceletonMm, 100, RECEIVE_BUFFER_BYTES).await;
+    let mut child = tokio::process::Command::new(env!("CARGO_BIN_EXE_pavlov"))
+        .args([
+            "human",
+            "--to",
+            &ingest.info.local_addr.to_string(),
+            "--seed",
+            "3",
+            "--frames",
+            "60",
+        ])
+        .stdout(std::process::Stdio::null())
+        .kill_on_drop(true)
+        .spawn()
+        .unwrap();
+    let mut angles = Vec::new();
+    let mut tick = tokio::time::interval(Duration::from_millis(20));
+    let status = loop {
+        tokio::select! {
+            s = child.wait() => break s.unwrap(),
+            _ = tick.tick() => {
+                if let Some(a) = ingest.pose.borrow().elbow_angle(Side::Left, ingest.now_ms()).value() {
+                    angles.push(a);
+                }
+            }
+        }
+    };
+    assert!(status.success());
+    // 60 frames at 30 Hz: about 2 s, sampled every 20 ms.
+    assert!(angles.len() > 40, "only {} valid angles", angles.len());
+    assert!(
+        angles.iter().all(|a| (20.0..=180.0).contains(a)),
+        "{angles:?}"
+    );
+    // /new_user + /new_skel + 60 frames + /lost_user; the lost user clears the pose.
+    let s = ingest.wait_for_datagrams(62).await;
+    assert_eq!(s.counts.malformed(), 0, "{s:?}");
+    assert_eq!(s.selections, 1);
+    assert_eq!(s.current_user, None);
+    assert!(ingest.pose.borrow().sample(Joint::LeftElbow).is_none());
+    ingest.cancel.cancel();
+}
