@@ -4,6 +4,8 @@
 //! joints that stop arriving make the elbow invalid after the age limit; and a `pavlov human` process feeds the
 //! ingest valid elbow angles.
 
+mod common;
+
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -467,4 +469,102 @@ async fn a_pavlov_human_process_feeds_the_ingest_valid_elbow_angles() {
     assert_eq!(s.current_user, None);
     assert!(ingest.pose.borrow().sample(Joint::LeftElbow).is_none());
     ingest.cancel.cancel();
+}
+
+fn interaction_config() -> pavlov::config::Config {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../config/interaction.toml"
+    ))
+    .unwrap();
+    pavlov::config::Config::from_toml(&text).unwrap()
+}
+
+#[tokio::test]
+async fn the_server_listens_for_skeletons_and_its_ticks_see_the_elbow() {
+    common::init_logging();
+    let mut cfg = interaction_config();
+    assert!(cfg.skeleton.is_enabled(&cfg.control.stimulus));
+    cfg.skeleton.listen = "127.0.0.1:0".into();
+    let server =
+        pavlov_actors::server::Server::start(cfg, pavlov_actors::server::RobotTarget::Simulated)
+            .await
+            .unwrap();
+    let to = server
+        .skeleton
+        .as_ref()
+        .expect("skeleton ingest")
+        .local_addr;
+    let mut feed = server.feed.subscribe();
+    let sender = tokio::spawn(pavlov_actors::human_sender::send_human(
+        pavlov_actors::human_sender::SenderOptions {
+            to,
+            seed: 5,
+            format: SkeletonFormat::OsceletonMm,
+            realtime: true,
+            frames: Some(45),
+        },
+        CancellationToken::new(),
+    ));
+    // 1.5 s of frames: 75 ticks.
+    let records = common::collect(&mut feed, 75).await;
+    let report = sender.await.unwrap().unwrap();
+    assert_eq!((report.frames, report.send_errors), (45, 0));
+    let valid = records
+        .iter()
+        .filter(|r| r.elbow.as_ref().is_some_and(|e| e.left.is_some()))
+        .count();
+    assert!(
+        valid > 50,
+        "only {valid} of 75 ticks had a left elbow angle"
+    );
+    server.shutdown().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn drive_pose_feeds_the_servers_ticks_under_virtual_time() {
+    common::init_logging();
+    let mut cfg = interaction_config();
+    cfg.skeleton.enabled = Some(false);
+    let server =
+        pavlov_actors::server::Server::start(cfg, pavlov_actors::server::RobotTarget::Simulated)
+            .await
+            .unwrap();
+    assert!(server.skeleton.is_none());
+    let mut feed = server.feed.subscribe();
+    let cancel = CancellationToken::new();
+    let human = pavlov::sim::human::SimHuman::new(Default::default(), 11);
+    let driver = tokio::spawn(pavlov_actors::human_sender::drive_pose(
+        human,
+        server.pose.clone(),
+        server.started,
+        cancel.clone(),
+    ));
+    // 60 s of virtual time: the operator commands a few times.
+    let records = common::collect(&mut feed, 3000).await;
+    cancel.cancel();
+    let human = driver.await.unwrap();
+    let valid = records
+        .iter()
+        .filter(|r| r.elbow.as_ref().is_some_and(|e| e.left.is_some()))
+        .count();
+    assert!(
+        valid > 2700,
+        "only {valid} of 3000 ticks had a left elbow angle"
+    );
+    let commands = human.commands().len();
+    let stimulus_onsets = records
+        .windows(2)
+        .filter(|w| w[1].stimulus && !w[0].stimulus)
+        .count();
+    eprintln!(
+        "drive_pose: {valid}/3000 ticks with a left angle, {commands} commands, {stimulus_onsets} stimulus onsets"
+    );
+    assert!(commands >= 2, "{commands} commands");
+    // Every ground-truth command shows up as a stimulus onset (jitter can split one into a few).
+    assert!(
+        stimulus_onsets >= commands && stimulus_onsets <= 3 * commands,
+        "{stimulus_onsets} onsets for {commands} commands"
+    );
+    server.shutdown().await;
 }
