@@ -465,7 +465,7 @@ async fn every_bad_message_gets_an_error_and_the_connection_stays_open() {
         command(&mut ws, json!({"cmd":"ping"}), 2000).await["type"],
         "ack"
     );
-    assert!(lab.dash.stats().errors >= cases.len() as u64 + 1);
+    assert!(lab.dash.stats().errors > cases.len() as u64);
     lab.stop().await;
 }
 

@@ -7,7 +7,7 @@ import {
 
 const WINDOW_SECONDS = 30;
 const TELEOP_REPEAT_MS = 200;
-const CHART_HEIGHT = 160;
+const CHART_HEIGHT = 175;
 const COLORS = ['#2563eb', '#d97706', '#059669', '#7c3aed', '#db2777', '#0891b2'];
 
 const $ = (id) => document.getElementById(id);
@@ -272,7 +272,8 @@ function buildCharts(predictionNames) {
         { range: [-0.2, EVENT_LANES.length] },
         { size: 96, splits: () => EVENT_LANES.map((_, i) => i + 0.4), values: () => EVENT_LANES, grid: { show: false } }),
     },
-    { kind: 'current', ...makeChart($('chart-current'), [{ label: 'battery current', stroke: '#0891b2', width: 1.5, fill: '#0891b21a' }], {}, { label: 'mA' }) },
+    { kind: 'current', ...makeChart($('chart-current'), [{ label: 'battery current', stroke: '#0891b2', width: 1.5, fill: '#0891b21a' }],
+      { range: (u, lo, hi) => [Math.min(-500, Math.floor(((lo ?? 0) * 1.1) / 100) * 100), Math.max(0, hi ?? 0)] }, { label: 'mA' }) },
     {
       kind: 'wheels',
       ...makeChart($('chart-wheels'), [

@@ -59,17 +59,25 @@ impl fmt::Display for BenchReport {
 /// Runs the server on the simulated robot for `duration` of real time.
 pub async fn run_realtime(config: Config, duration: Duration) -> Result<BenchReport, ServerError> {
     let server = Server::start(config, RobotTarget::Simulated).await?;
+    let report = measure(&server, duration).await;
+    server.shutdown().await;
+    Ok(report)
+}
+
+/// Measures a running server for `duration` of real time (the histograms cover the whole run so far).
+pub async fn measure(server: &Server, duration: Duration) -> BenchReport {
     let mut feed = server.feed.subscribe();
+    let records = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let count = records.clone();
     let counter = tokio::spawn(async move {
-        let mut n = 0u64;
         loop {
-            match feed.recv().await {
-                Ok(_) => n += 1,
-                Err(tokio::sync::broadcast::error::RecvError::Lagged(k)) => n += k,
+            let n = match feed.recv().await {
+                Ok(_) => 1,
+                Err(tokio::sync::broadcast::error::RecvError::Lagged(k)) => k,
                 Err(tokio::sync::broadcast::error::RecvError::Closed) => break,
-            }
+            };
+            count.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
         }
-        n
     });
     let start = std::time::Instant::now();
     tokio::time::sleep(duration).await;
@@ -82,14 +90,13 @@ pub async fn run_realtime(config: Config, duration: Duration) -> Result<BenchRep
         Ok(s) => s.tick_to_command.summary(),
         Err(_) => LatencySummary::default(),
     };
-    server.shutdown().await;
-    let records = counter.await.unwrap_or(0);
-    Ok(BenchReport {
+    counter.abort();
+    BenchReport {
         duration: elapsed,
         ticks,
         skipped,
         lateness,
         tick_to_command,
-        records,
-    })
+        records: records.load(std::sync::atomic::Ordering::Relaxed),
+    }
 }

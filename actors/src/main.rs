@@ -16,6 +16,7 @@ use pavlov::sim::robot::SimRobot;
 use pavlov_actors::human_sender::{SenderOptions, send_human};
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::ws::Dashboard;
+use pavlov_actors::ws::load::{Load, run_realtime_with_clients};
 use pavlov_actors::{bench, link::transport};
 use tokio_util::sync::CancellationToken;
 
@@ -145,6 +146,12 @@ enum Command {
         /// How long to run, in seconds of real time.
         #[arg(long, default_value_t = 60, value_name = "SECONDS")]
         seconds: u64,
+        /// Also run with this many websocket clients reading the dashboard stream, and compare.
+        #[arg(long, default_value_t = 0, value_name = "N")]
+        ws_clients: usize,
+        /// With --ws-clients: add one websocket client that never reads.
+        #[arg(long)]
+        stalled_client: bool,
     },
 }
 
@@ -367,10 +374,33 @@ fn main() -> Result<()> {
                 fast,
                 frames,
             } => human(to, seed, format, !fast, frames).await,
-            Command::Bench { config, seconds } => {
+            Command::Bench {
+                config,
+                seconds,
+                ws_clients,
+                stalled_client,
+            } => {
                 let cfg = load_config(&config)?;
-                let report = bench::run_realtime(cfg, Duration::from_secs(seconds)).await?;
+                let duration = Duration::from_secs(seconds);
+                let report = bench::run_realtime(cfg.clone(), duration).await?;
                 println!("{report}");
+                if ws_clients > 0 || stalled_client {
+                    let load = Load {
+                        clients: ws_clients,
+                        stalled: stalled_client,
+                    };
+                    let web_dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../web"));
+                    let loaded = run_realtime_with_clients(cfg, duration, web_dir, load).await?;
+                    println!(
+                        "with {ws_clients} websocket clients{}:",
+                        if stalled_client { " + 1 stalled" } else { "" }
+                    );
+                    println!("{loaded}");
+                    println!(
+                        "tick lateness p99: {} µs without clients, {} µs with them",
+                        report.lateness.p99_us, loaded.bench.lateness.p99_us
+                    );
+                }
                 Ok(())
             }
         }

@@ -6,7 +6,8 @@
 //! - [`client`]: each client's bounded, drop-oldest queue and its tick-rate decimation;
 //! - [`session`]: one connection's reader, writer and forwarder;
 //! - [`auth`]: the handshake's Origin and token checks;
-//! - [`http`]: routes, static files and the handshake.
+//! - [`http`]: routes, static files and the handshake;
+//! - [`load`]: the websocket load behind `pavlov bench --ws-clients`.
 //!
 //! Nothing here can delay the tick: the hub reads the tick feed's lossy broadcast, every client reads the
 //! hub's lossy broadcast into its own bounded queue, and only the client's own writer waits on its socket.
@@ -15,6 +16,7 @@ pub mod auth;
 pub mod client;
 pub mod http;
 pub mod hub;
+pub mod load;
 pub mod protocol;
 pub mod session;
 

@@ -1,0 +1,171 @@
+//! End-to-end test of the dashboard in a real browser: starts the `pavlov serve` binary on an ephemeral
+//! port, runs `web/tests/dashboard.e2e.mjs` (playwright-core driving headless Debian Chromium) against it
+//! — the page loads, the charts update with live ticks, the E-STOP button is pressed and the tick stream
+//! shows the robot stopped — and then checks from the server's side, with its own websocket client, that
+//! the e-stop is latched and the wheels are commanded to zero. The screenshot goes to
+//! `target/dashboard.png`.
+//!
+//! Needs Node, `npm ci --prefix web` and `apt-get install chromium` (the test command installs them; see
+//! `web/tests/run-browser-test.sh`). It fails, never skips, when any of them is missing.
+
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use futures_util::StreamExt;
+use serde_json::Value;
+use tokio_tungstenite::tungstenite::Message;
+
+fn repo() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+}
+
+fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo().join("target"))
+}
+
+/// The server process; stopped with SIGTERM (then SIGKILL) when dropped.
+struct Serve(Child);
+
+impl Drop for Serve {
+    fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .arg("-TERM")
+            .arg(self.0.id().to_string())
+            .status();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.0.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        eprintln!("warning: pavlov serve did not exit 10 s after SIGTERM; killing it");
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn preflight() {
+    let web = repo().join("web");
+    for pkg in ["playwright-core", "uplot"] {
+        assert!(
+            web.join("node_modules")
+                .join(pkg)
+                .join("package.json")
+                .is_file(),
+            "web/node_modules/{pkg} is missing: run `npm ci --prefix web` (or web/tests/run-browser-test.sh)"
+        );
+    }
+    let node = Command::new("node").arg("--version").output();
+    assert!(
+        node.is_ok_and(|o| o.status.success()),
+        "node is not installed (Node 18 or newer is needed for the browser test)"
+    );
+    let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
+    assert!(
+        std::path::Path::new(&chromium).is_file(),
+        "no Chromium at {chromium}: run `apt-get install -y chromium` (or web/tests/run-browser-test.sh)"
+    );
+}
+
+/// Starts `pavlov serve` on an ephemeral loopback port and returns it with the dashboard URL it printed.
+fn start_server() -> (Serve, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_pavlov"))
+        .args(["serve", "--bind", "127.0.0.1:0", "--web-dir"])
+        .arg(repo().join("web"))
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("cannot start the pavlov binary");
+    let stdout = child.stdout.take().expect("piped stdout");
+    let serve = Serve(child);
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if let Some(url) = line.strip_prefix("dashboard: ") {
+                let _ = tx.send(url.trim().to_string());
+            }
+        }
+    });
+    let url = rx
+        .recv_timeout(Duration::from_secs(30))
+        .expect("pavlov serve did not print its dashboard URL within 30 s");
+    (serve, url)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_dashboard_shows_live_ticks_and_its_estop_stops_the_robot() {
+    preflight();
+    let (_serve, url) = start_server();
+    let screenshot = target_dir().join("dashboard.png");
+    let _ = std::fs::remove_file(&screenshot);
+
+    let run = tokio::process::Command::new("node")
+        .arg(repo().join("web/tests/dashboard.e2e.mjs"))
+        .arg(&url)
+        .arg(&screenshot)
+        .current_dir(repo().join("web"))
+        .kill_on_drop(true)
+        .output();
+    let out = tokio::time::timeout(Duration::from_secs(120), run)
+        .await
+        .expect("the browser test took more than 120 s")
+        .expect("cannot run node");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "browser test failed:\n{stdout}\n{stderr}"
+    );
+    let summary: Value = stdout
+        .lines()
+        .rev()
+        .find_map(|l| serde_json::from_str(l).ok())
+        .unwrap_or_else(|| panic!("no JSON summary from the browser test:\n{stdout}"));
+    assert_eq!(summary["ok"], true, "{summary}");
+    assert_eq!(
+        summary["moving_before_estop"], true,
+        "the robot never moved before the e-stop: {summary}"
+    );
+    assert!(
+        summary["chart_points"]
+            .as_array()
+            .is_some_and(|a| a.iter().all(|n| n.as_u64() > Some(10)))
+    );
+
+    // The server's side: the e-stop the browser latched is still in force.
+    let ws_url = format!("{}ws", url.replacen("http://", "ws://", 1));
+    let (mut ws, _) = tokio_tungstenite::connect_async(ws_url.as_str())
+        .await
+        .expect("websocket");
+    let mut ticks = 0;
+    while ticks < 25 {
+        let msg = tokio::time::timeout(Duration::from_secs(5), ws.next())
+            .await
+            .expect("a message within 5 s")
+            .expect("open")
+            .expect("no error");
+        let Message::Text(text) = msg else { continue };
+        let v: Value = serde_json::from_str(&text).unwrap();
+        if v["type"] != "tick" {
+            continue;
+        }
+        assert_eq!(v["estop"], true, "{v}");
+        assert_eq!(v["command"], serde_json::json!({"left":0,"right":0}), "{v}");
+        assert_eq!(v["safety_stop"], "e_stop", "{v}");
+        ticks += 1;
+    }
+
+    let png = std::fs::metadata(&screenshot).expect("the screenshot was not saved");
+    assert!(
+        png.len() > 20_000,
+        "the screenshot is suspiciously small ({} bytes)",
+        png.len()
+    );
+}

@@ -1,0 +1,82 @@
+// Unit tests of the dashboard's pure helpers (web/lib.js): `npm test --prefix web`.
+import assert from 'node:assert/strict';
+import { test } from 'node:test';
+
+import {
+  Backoff, GapCounter, SUBPROTOCOL, Window, connectionTarget, fmt, fmtDuration, parseParam, teleopWheels, tokenFromHash,
+} from '../lib.js';
+
+test('the token comes from the URL fragment', () => {
+  assert.equal(tokenFromHash('#token=abc123'), 'abc123');
+  assert.equal(tokenFromHash('#x=1&token=a%2Fb'), 'a/b');
+  assert.equal(tokenFromHash(''), null);
+  assert.equal(tokenFromHash('#token='), null);
+});
+
+test('the websocket target follows the page and carries the token safely', () => {
+  const page = { protocol: 'http:', host: '127.0.0.1:8080' };
+  assert.deepEqual(connectionTarget(page, null), { url: 'ws://127.0.0.1:8080/ws', protocols: [SUBPROTOCOL] });
+  assert.deepEqual(connectionTarget(page, 'k3y-_.'), { url: 'ws://127.0.0.1:8080/ws', protocols: [SUBPROTOCOL, 'token.k3y-_.'] });
+  // Characters a subprotocol cannot carry go in the query string instead.
+  assert.deepEqual(connectionTarget(page, 'a b/c'), { url: 'ws://127.0.0.1:8080/ws?token=a%20b%2Fc', protocols: [SUBPROTOCOL] });
+  assert.equal(connectionTarget({ protocol: 'https:', host: 'lab:443' }, null).url, 'wss://lab:443/ws');
+});
+
+test('reconnect delays double up to the cap and reset', () => {
+  const b = new Backoff(500, 4000);
+  assert.deepEqual([b.next(), b.next(), b.next(), b.next(), b.next()], [500, 1000, 2000, 4000, 4000]);
+  b.reset();
+  assert.equal(b.next(), 500);
+});
+
+test('the chart window keeps the newest rows and maps bad numbers to gaps', () => {
+  const w = new Window(2, 100);
+  for (let i = 0; i < 1000; i++) w.push(i * 0.02, [i, i % 3 === 0 ? NaN : -i]);
+  const [x, a, b] = w.data();
+  assert.equal(x.length, 100);
+  assert.equal(w.length, 100);
+  assert.equal(a[0], 900);
+  assert.equal(a[99], 999);
+  assert.equal(b[99], 999 % 3 === 0 ? null : -999);
+  assert.ok(b.includes(null));
+  assert.ok(w.columns[0].length <= 110, 'trimmed in batches');
+  w.clear();
+  assert.equal(w.length, 0);
+});
+
+test('teleop keys become wheel speeds', () => {
+  const s = (...k) => new Set(k);
+  assert.deepEqual(teleopWheels(s(), 200), { left_mm_s: 0, right_mm_s: 0 });
+  assert.deepEqual(teleopWheels(s('up'), 200), { left_mm_s: 200, right_mm_s: 200 });
+  assert.deepEqual(teleopWheels(s('down'), 200), { left_mm_s: -200, right_mm_s: -200 });
+  assert.deepEqual(teleopWheels(s('left'), 150), { left_mm_s: -150, right_mm_s: 150 });
+  assert.deepEqual(teleopWheels(s('right'), 150), { left_mm_s: 150, right_mm_s: -150 });
+  assert.deepEqual(teleopWheels(s('up', 'left'), 200), { left_mm_s: 80, right_mm_s: 200 });
+  assert.deepEqual(teleopWheels(s('up', 'down'), 200), { left_mm_s: 0, right_mm_s: 0 });
+  assert.deepEqual(teleopWheels(s('up'), 9000), { left_mm_s: 500, right_mm_s: 500 });
+});
+
+test('gaps in the tick sequence are counted, allowing for the stride', () => {
+  const g = new GapCounter();
+  for (const seq of [1, 2, 3, 6, 7]) g.see(seq);
+  assert.equal(g.missing, 2);
+  const d = new GapCounter();
+  for (const seq of [0, 5, 10, 20]) d.see(seq, 5);
+  assert.equal(d.missing, 5);
+});
+
+test('formatting', () => {
+  assert.equal(fmt(1234.567, 1, 'm'), '1,234.6 m');
+  assert.equal(fmt(null), '—');
+  assert.equal(fmt(Number.NaN, 2), '—');
+  assert.equal(fmtDuration(65), '1:05');
+  assert.equal(fmtDuration(3725), '1:02:05');
+  assert.equal(fmtDuration(undefined), '—');
+});
+
+test('learning parameters are checked before they are sent', () => {
+  assert.deepEqual(parseParam('', 'α', 0, 1), { value: undefined });
+  assert.deepEqual(parseParam(' 0.1 ', 'α', 0, 1), { value: 0.1 });
+  assert.match(parseParam('abc', 'α', 0, 1).error, /number/);
+  assert.match(parseParam('2', 'λ', 0, 1).error, /between 0 and 1/);
+});
