@@ -302,3 +302,84 @@ pub async fn start_for(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pavlov::config::{Config, ConfigError};
+
+    const STALL: &str = include_str!("../../config/stall.toml");
+    const INTERACTION: &str = include_str!("../../config/interaction.toml");
+
+    fn with(base: &str, table: &str) -> Result<Config, ConfigError> {
+        Config::from_toml(&format!("{base}\n[skeleton]\n{table}\n"))
+    }
+
+    #[test]
+    fn enabled_by_default_only_for_the_elbow_stimulus() {
+        let stall = Config::from_toml(STALL).unwrap();
+        let inter = Config::from_toml(INTERACTION).unwrap();
+        assert!(!stall.skeleton.is_enabled(&stall.control.stimulus));
+        assert!(inter.skeleton.is_enabled(&inter.control.stimulus));
+        let forced = with(STALL, "enabled = true").unwrap();
+        assert!(forced.skeleton.is_enabled(&forced.control.stimulus));
+        let off = with(INTERACTION, "enabled = false").unwrap();
+        assert!(!off.skeleton.is_enabled(&off.control.stimulus));
+    }
+
+    #[test]
+    fn keys_parse_into_settings() {
+        let cfg = with(
+            INTERACTION,
+            "listen = \"127.0.0.1:9000\"\nformat = \"kinect_v2\"\nswap_lr = true\nmax_joint_age_ms = 150",
+        )
+        .unwrap();
+        let s = IngestSettings::from_config(&cfg.skeleton).unwrap();
+        assert_eq!(s.listen, "127.0.0.1:9000".parse().unwrap());
+        assert_eq!(s.format, SkeletonFormat::KinectV2);
+        assert!(s.swap_lr);
+        assert_eq!(s.buffer_bytes, RECEIVE_BUFFER_BYTES);
+        assert_eq!(cfg.skeleton.max_joint_age_ms, 150);
+        let normalized = with(INTERACTION, "format = \"osceleton_normalized\"").unwrap();
+        assert_eq!(
+            normalized.skeleton.format,
+            SkeletonFormat::OsceletonNormalized
+        );
+    }
+
+    #[test]
+    fn bad_values_name_their_key() {
+        for (table, key) in [
+            ("listen = \"localhost\"", "skeleton.listen"),
+            ("max_joint_age_ms = 0", "skeleton.max_joint_age_ms"),
+        ] {
+            match with(INTERACTION, table) {
+                Err(ConfigError::Invalid { key: k, .. }) => assert_eq!(k, key),
+                other => panic!("{table}: {other:?}"),
+            }
+        }
+        for (table, word) in [("format = \"nite\"", "nite"), ("swap = true", "swap")] {
+            let e = with(INTERACTION, table).unwrap_err().to_string();
+            assert!(e.contains(word), "{e}");
+        }
+    }
+
+    #[tokio::test]
+    async fn a_taken_port_is_an_error_naming_the_address() {
+        let first = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let addr = first.local_addr().unwrap();
+        let (tx, _rx) = no_pose();
+        let settings = IngestSettings {
+            listen: addr,
+            format: SkeletonFormat::OsceletonMm,
+            swap_lr: false,
+            silence_ms: DEFAULT_SILENCE_MS,
+            buffer_bytes: RECEIVE_BUFFER_BYTES,
+        };
+        match spawn(settings, tx, Instant::now(), CancellationToken::new()).await {
+            Err(e @ IngestError::Bind { .. }) => assert!(e.to_string().contains(&addr.to_string())),
+            Err(e) => panic!("{e}"),
+            Ok(_) => panic!("bound a taken port"),
+        }
+    }
+}
