@@ -154,6 +154,7 @@ function onTick(t) {
   state.ticks += 1;
   state.gaps.see(t.seq, state.stride);
   state.last = t;
+  state.dirty = true;
   pushCharts(t);
   if (state.mode !== t.mode) {
     state.mode = t.mode;
@@ -309,7 +310,6 @@ function pushCharts(t) {
       default:
     }
   }
-  state.dirty = true;
 }
 
 function frame() {

@@ -3,7 +3,7 @@
 //   node web/tests/dashboard.e2e.mjs <dashboard URL> <screenshot.png>
 //
 // Opens the page served by a running `pavlov serve`, checks that live ticks arrive and the charts
-// update, presses the E-STOP button, and checks in the tick stream that the server stopped the robot
+// update, switches to manual mode and drives with the arrow keys, presses the E-STOP button, and checks in the tick stream that the server stopped the robot
 // (e-stop latched, wheel command 0/0, safety stop "e_stop"). Saves a screenshot, prints a JSON summary
 // on stdout, exits non-zero on any failure. Never downloads a browser: Chromium comes from apt
 // (`apt-get install chromium`); set CHROMIUM to use another binary.
@@ -54,7 +54,7 @@ try {
   ws.on('framereceived', (f) => {
     let m;
     try { m = JSON.parse(String(f.payload)); } catch { return; }
-    if (m.type === 'tick') ticks.push({ seq: m.seq, estop: m.estop, command: m.command, safety: m.safety_stop });
+    if (m.type === 'tick') ticks.push({ seq: m.seq, mode: m.mode, estop: m.estop, command: m.command, safety: m.safety_stop });
     if (m.type === 'ack' || m.type === 'error') acks.push(m);
   });
 
@@ -71,6 +71,28 @@ try {
   await page.waitForFunction(() => document.getElementById('conn').dataset.state === 'live', null, { timeout: 5000 });
   if (ticks.length === 0) fail('no tick frames observed on the websocket');
   summary.moving_before_estop = ticks.some((t) => t.command.left !== 0 || t.command.right !== 0);
+
+  // The mode switch and teleop by arrow key: in manual mode, holding ↑ drives both wheels forward at the
+  // speed slider's 200 mm/s; letting go stops them.
+  const tickCount = () => ticks.length;
+  let from = tickCount();
+  await page.click('#mode-manual');
+  await until('ticks in manual mode', () => ticks.slice(from).some((t) => t.mode === 'manual'), 3000);
+  await page.waitForSelector('#mode-manual.active', { timeout: 3000 });
+  from = tickCount();
+  await page.keyboard.down('ArrowUp');
+  await until('the teleop command in the tick stream', () => ticks.slice(from).some((t) => t.command.left === 200 && t.command.right === 200), 3000);
+  await page.waitForTimeout(700); // longer than the 0.5 s teleop expiry: the page must keep refreshing it
+  const held = ticks.slice(-10);
+  if (!held.every((t) => t.command.left === 200 && t.command.right === 200)) fail(`teleop did not hold: ${JSON.stringify(held.map((t) => t.command))}`);
+  from = tickCount();
+  await page.keyboard.up('ArrowUp');
+  await until('the wheels stopped after the key was released', () => ticks.slice(from).some((t) => t.command.left === 0 && t.command.right === 0), 3000);
+  summary.teleop = 'ok';
+  from = tickCount();
+  await page.click('#mode-pavlovian');
+  await until('ticks in pavlovian mode', () => ticks.slice(from).some((t) => t.mode === 'pavlovian'), 3000);
+  await until('the default policy driving again', () => ticks.slice(from).some((t) => t.command.left !== 0 || t.command.right !== 0), 5000);
 
   // E-stop: the button sends the command, the server acks it and the tick stream shows the robot stopped.
   const pressedAt = ticks.length;
