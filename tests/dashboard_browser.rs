@@ -1,9 +1,9 @@
 //! End-to-end test of the dashboard in a real browser: starts the `pavlov serve` binary on an ephemeral
-//! port, runs `web/tests/dashboard.e2e.mjs` (playwright-core driving headless Debian Chromium) against it
-//! — the page loads, the charts update with live ticks, the mode switch and arrow-key teleop drive the
-//! wheels, the E-STOP button is pressed and the tick stream shows the robot stopped — and then checks from the server's side, with its own websocket client, that
-//! the e-stop is latched and the wheels are commanded to zero. The screenshot goes to
-//! `target/dashboard.png`.
+//! port, runs `web/tests/dashboard.e2e.mjs` (playwright-core driving headless Debian Chromium) against
+//! it — the page loads, the charts update with live ticks, the mode switch and arrow-key teleop drive
+//! the wheels, the E-STOP button is pressed and the tick stream shows the robot stopped — and then
+//! checks from the server's side, with its own websocket client, that the e-stop is latched and the
+//! wheels are commanded to zero. The screenshot goes to `target/dashboard.png`.
 //!
 //! Needs Node, `npm ci --prefix web` and `apt-get install chromium` (the test command installs them; see
 //! `web/tests/run-browser-test.sh`). It fails, never skips, when any of them is missing.
