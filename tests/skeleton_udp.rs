@@ -335,7 +335,17 @@ async fn malformed_truncated_and_oversized_datagrams_are_counted_and_the_actor_k
         ],
     ))
     .await;
+    // 3000 nested bundles (60 KB): decoded recursively this would overflow the stack and abort the server.
+    let mut deep = b"#bundle\0\0\0\0\0\0\0\0\x01".to_vec();
+    for _ in 0..3000 {
+        let mut outer = b"#bundle\0\0\0\0\0\0\0\0\x01".to_vec();
+        outer.extend_from_slice(&(deep.len() as u32).to_be_bytes());
+        outer.extend_from_slice(&deep);
+        deep = outer;
+    }
+    tx.bytes(&deep).await;
     let s = ingest.wait_for_datagrams(tx.sent).await;
+    assert_eq!(s.counts.too_deep, 1, "{s:?}");
     assert_eq!(s.counts.undecodable, 3, "{s:?}");
     assert_eq!(s.counts.truncated, 1, "{s:?}");
     assert_eq!(s.counts.wrong_types, 1, "{s:?}");
@@ -343,7 +353,7 @@ async fn malformed_truncated_and_oversized_datagrams_are_counted_and_the_actor_k
     assert_eq!(s.counts.non_finite, 1, "{s:?}");
     assert_eq!(s.counts.other_format, 1, "{s:?}");
     assert_eq!(s.counts.oversized, 0, "{s:?}");
-    assert_eq!(s.counts.malformed(), 8);
+    assert_eq!(s.counts.malformed(), 9);
     assert!(ingest.pose.borrow().sample(Joint::LeftElbow).is_none());
 
     // After all that, a valid frame still updates the pose.

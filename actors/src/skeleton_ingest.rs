@@ -227,6 +227,9 @@ async fn run(
                 "datagram filled the buffer",
                 &stats,
             );
+        } else if !decode::nesting_within(datagram, decode::MAX_BUNDLE_DEPTH) {
+            stats.counts.count(Malformed::TooDeep);
+            log.note(Malformed::TooDeep, from, "bundles nested too deep", &stats);
         } else {
             match rosc::decoder::decode_udp(datagram) {
                 Err(e) => {

@@ -25,6 +25,39 @@ use rosc::{OscMessage, OscPacket, OscType};
 /// Deepest bundle nesting that is decoded; deeper content is counted as malformed.
 pub const MAX_BUNDLE_DEPTH: usize = 8;
 
+/// Whether the raw datagram's bundles nest at most `max_depth` deep (the outermost bundle is at depth 0).
+///
+/// Check this *before* `rosc::decoder::decode_udp`: rosc decodes nested bundles recursively, and a 16 KB
+/// datagram of 800 nested empty bundles overflows a 2 MiB thread stack (rosc 0.11.4, debug build), which aborts
+/// the whole process. This walk only follows the element sizes and recurses at most `max_depth` levels;
+/// anything else wrong with the bytes is left for rosc to report.
+pub fn nesting_within(bytes: &[u8], max_depth: usize) -> bool {
+    nesting_from(bytes, 0, max_depth)
+}
+
+fn nesting_from(bytes: &[u8], depth: usize, max_depth: usize) -> bool {
+    const BUNDLE_TAG: &[u8] = b"#bundle\0";
+    if !bytes.starts_with(BUNDLE_TAG) {
+        return true;
+    }
+    if depth >= max_depth {
+        return false;
+    }
+    // Tag (8 bytes) and time tag (8 bytes), then (size, element) pairs.
+    let mut rest = bytes.get(16..).unwrap_or_default();
+    while let Some((size, after)) = rest.split_first_chunk::<4>() {
+        let size = usize::try_from(u32::from_be_bytes(*size)).unwrap_or(usize::MAX);
+        let Some(element) = after.get(..size) else {
+            return true;
+        };
+        if !nesting_from(element, depth + 1, max_depth) {
+            return false;
+        }
+        rest = after.get(size..).unwrap_or_default();
+    }
+    true
+}
+
 /// A tracked person, as the streamer identifies them (OSCeleton's small integer, Kinect v2's 64-bit id).
 pub type UserId = u64;
 

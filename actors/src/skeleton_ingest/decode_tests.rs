@@ -237,3 +237,57 @@ fn nested_bundles_decode_until_the_depth_limit() {
     let (events, counts, _) = run(d, &deeper);
     assert_eq!((events.len(), counts.too_deep), (1, 1), "{events:?}");
 }
+
+/// `depth` bundles, each holding the next, around one message.
+fn nested_bytes(depth: usize) -> Vec<u8> {
+    let mut p = osc_joint("head", 1, [1.0, 2.0, 3.0]);
+    for _ in 0..depth {
+        p = bundle(vec![p]);
+    }
+    rosc::encoder::encode(&p).unwrap()
+}
+
+#[test]
+fn nesting_check_agrees_with_the_decoders_depth_limit() {
+    assert!(nesting_within(&nested_bytes(0), MAX_BUNDLE_DEPTH));
+    assert!(nesting_within(
+        &nested_bytes(MAX_BUNDLE_DEPTH),
+        MAX_BUNDLE_DEPTH
+    ));
+    assert!(!nesting_within(
+        &nested_bytes(MAX_BUNDLE_DEPTH + 1),
+        MAX_BUNDLE_DEPTH
+    ));
+    // A deep element after a shallow one is found too.
+    let two = bundle(vec![
+        osc_joint("neck", 1, [1.0, 2.0, 3.0]),
+        rosc::decoder::decode_udp(&nested_bytes(MAX_BUNDLE_DEPTH))
+            .unwrap()
+            .1,
+    ]);
+    assert!(!nesting_within(
+        &rosc::encoder::encode(&two).unwrap(),
+        MAX_BUNDLE_DEPTH
+    ));
+}
+
+#[test]
+fn nesting_check_survives_the_datagram_that_overflows_rosc() {
+    // 3000 nested bundles in 60 KB: rosc's recursive decoder would overflow the stack on this.
+    let mut bytes = b"#bundle\0\0\0\0\0\0\0\0\x01".to_vec();
+    for _ in 0..3000 {
+        let mut outer = b"#bundle\0\0\0\0\0\0\0\0\x01".to_vec();
+        outer.extend_from_slice(&u32::try_from(bytes.len()).unwrap().to_be_bytes());
+        outer.extend_from_slice(&bytes);
+        bytes = outer;
+    }
+    assert!(bytes.len() < 65_507);
+    assert!(!nesting_within(&bytes, MAX_BUNDLE_DEPTH));
+    // Truncated or lying sizes are left to rosc, not rejected here.
+    assert!(nesting_within(&bytes[..40], MAX_BUNDLE_DEPTH));
+    assert!(nesting_within(
+        b"#bundle\0\0\0\0\0\0\0\0\x01\xff\xff\xff\xff",
+        MAX_BUNDLE_DEPTH
+    ));
+    assert!(nesting_within(b"garbage", MAX_BUNDLE_DEPTH));
+}
