@@ -109,7 +109,9 @@ pub struct TickRecord {
     pub obs_age_ticks: Option<u32>,
     /// Raw readings of interest.
     pub sensors: SensorSummary,
-    /// The scaled observation vector (names are announced once, in the run's header).
+    /// The scaled observation vector (names are announced once, in the run's header). NaN (a packet the
+    /// snapshot lacks) is written as JSON `null` and read back as NaN.
+    #[serde(with = "nan_as_null")]
     pub obs: Vec<f32>,
     /// Elbow angles (interaction experiment only).
     pub elbow: Option<ElbowSummary>,
@@ -134,4 +136,20 @@ pub struct TickRecord {
     /// The learning stage's exact inputs, for replay (absent in older recordings).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub inputs: Option<TickInputs>,
+}
+
+/// Serde for `Vec<f32>` with NaN as `null` both ways (JSON has no NaN; serde_json writes it as `null` but
+/// cannot read that back into a float).
+mod nan_as_null {
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &[f32], s: S) -> Result<S::Ok, S::Error> {
+        let opts: Vec<Option<f32>> = v.iter().map(|x| (!x.is_nan()).then_some(*x)).collect();
+        opts.serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f32>, D::Error> {
+        let opts = Vec::<Option<f32>>::deserialize(d)?;
+        Ok(opts.into_iter().map(|x| x.unwrap_or(f32::NAN)).collect())
+    }
 }

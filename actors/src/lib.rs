@@ -8,6 +8,7 @@
 pub mod actuation;
 pub mod bench;
 pub mod command;
+pub mod experiment;
 pub mod feed;
 pub mod gating;
 pub mod histogram;
@@ -16,6 +17,7 @@ pub mod learning;
 pub mod link;
 pub mod recorder;
 pub mod recording;
+pub mod replay;
 pub mod sensor_ingest;
 pub mod server;
 pub mod skeleton_ingest;

@@ -103,7 +103,15 @@ enum Command {
         robot: Option<String>,
         #[command(flatten)]
         dashboard: DashboardArgs,
+        /// Record every tick into DIR/ticks.jsonl (JSON Lines, replayable with `pavlov replay DIR`). Without
+        /// it, recording starts and stops on the dashboard's commands, under ./recordings.
+        #[arg(long, value_name = "DIR")]
+        record: Option<PathBuf>,
     },
+    /// Reproduce the paper's experiments on the simulated Create (e.g. `pavlov experiment stall --seed 1`).
+    Experiment(pavlov_actors::experiment::cli::ExperimentArgs),
+    /// Run a recording back through the learning and gating stages and check that it reproduces exactly.
+    Replay(pavlov_actors::experiment::cli::ReplayArgs),
     /// Run the simulated Create on its own, on a pseudo-terminal that any OI client can open.
     Sim {
         /// Create the PTY and print its path (the only transport for now; required).
@@ -221,7 +229,12 @@ async fn shutdown_signal() {
     }
 }
 
-async fn serve(args: ConfigArgs, robot: Option<String>, dashboard: DashboardArgs) -> Result<()> {
+async fn serve(
+    args: ConfigArgs,
+    robot: Option<String>,
+    dashboard: DashboardArgs,
+    record: Option<PathBuf>,
+) -> Result<()> {
     let mut cfg = load_config(&args)?;
     dashboard.apply(&mut cfg)?;
     let target = match robot {
@@ -233,7 +246,22 @@ async fn serve(args: ConfigArgs, robot: Option<String>, dashboard: DashboardArgs
         RobotTarget::Serial(p) => format!("the {} on {p}", cfg.robot.model),
     };
     tracing::info!(?target, mode = ?cfg.control.mode, "starting pavlov");
-    let server = Server::start(cfg, target)
+    let recorder = pavlov_actors::recorder::Recorder::spawn(
+        pavlov_actors::recording::RecordingHeader::new(&cfg, "pavlov serve"),
+        record.clone(),
+        record
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("recordings")),
+        pavlov_actors::recorder::DEFAULT_CAPACITY,
+    )
+    .context("cannot start the recorder")?;
+    if let Some(dir) = &record {
+        println!(
+            "recording every tick into {}",
+            dir.join("ticks.jsonl").display()
+        );
+    }
+    let server = Server::start_with_recorder(cfg, target, Some(recorder.link.clone()))
         .await
         .context("cannot start the server")?;
     let dash = match Dashboard::start(&server, dashboard.web_dir()).await {
@@ -256,6 +284,15 @@ async fn serve(args: ConfigArgs, robot: Option<String>, dashboard: DashboardArgs
     tracing::info!("shutting down: stopping the robot");
     dash.shutdown().await;
     server.shutdown().await;
+    // The recorder ends once the feed is gone; do not hang on it if something still holds the feed.
+    let report = tokio::time::timeout(
+        Duration::from_secs(2),
+        tokio::task::spawn_blocking(move || recorder.join()),
+    )
+    .await;
+    if let Ok(Ok(r)) = report {
+        tracing::info!(written = r.written, files = ?r.files, "recorder closed");
+    }
     Ok(())
 }
 
@@ -360,7 +397,10 @@ fn main() -> Result<()> {
                 config,
                 robot,
                 dashboard,
-            } => serve(config, robot, dashboard).await,
+                record,
+            } => serve(config, robot, dashboard, record).await,
+            Command::Experiment(args) => pavlov_actors::experiment::cli::experiment(args),
+            Command::Replay(args) => pavlov_actors::experiment::cli::replay(args),
             Command::Sim {
                 pty: _,
                 model,

@@ -1,0 +1,110 @@
+//! The command-line surface of `pavlov experiment …` and `pavlov replay …` (clap arguments and entry
+//! points), kept here so the binary only dispatches.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use pavlov::config::Config;
+
+use super::StallOptions;
+
+/// The stall experiment's configuration, built in.
+const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
+
+/// `pavlov experiment`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ExperimentArgs {
+    /// Which experiment.
+    #[command(subcommand)]
+    pub which: Experiment,
+}
+
+/// The experiments.
+#[derive(clap::Subcommand, Debug, Clone)]
+pub enum Experiment {
+    /// The paper's stall experiment: interleaved reactive / Pavlovian runs on the simulated Create, through
+    /// the real runtime under virtual time; writes summary.json, CSV tables, recordings and SVG figures.
+    Stall(StallArgs),
+}
+
+/// `pavlov experiment stall`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct StallArgs {
+    /// Runs per policy (the paper: 10).
+    #[arg(long, default_value_t = 10, value_name = "N")]
+    pub runs: usize,
+    /// Minutes per run (the paper: 6).
+    #[arg(long, default_value_t = 6.0, value_name = "MIN")]
+    pub minutes: f64,
+    /// The experiment's seed; each run's simulator seed is derived from it.
+    #[arg(long, default_value_t = 1, value_name = "S")]
+    pub seed: u64,
+    /// Results directory (default: results/stall-<seed>).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Configuration (TOML); default: the built-in config/stall.toml. Mode and seed are set per run.
+    #[arg(long, short = 'c', value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Do not write per-tick recordings of the runs.
+    #[arg(long)]
+    pub no_record: bool,
+    /// OS threads to run on (default: the number of CPUs, at most 2).
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+}
+
+/// `pavlov replay`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ReplayArgs {
+    /// A recording directory (with ticks.jsonl) or a .jsonl file.
+    #[arg(value_name = "DIR")]
+    pub path: PathBuf,
+}
+
+fn load_config(path: Option<&PathBuf>) -> Result<Config> {
+    let text = match path {
+        Some(p) => std::fs::read_to_string(p)
+            .with_context(|| format!("cannot read configuration {}", p.display()))?,
+        None => STALL_CONFIG.to_string(),
+    };
+    Config::from_toml(&text).context("invalid configuration")
+}
+
+/// Runs `pavlov experiment …`; prints the table on stdout.
+pub fn experiment(args: ExperimentArgs) -> Result<()> {
+    match args.which {
+        Experiment::Stall(a) => {
+            let config = load_config(a.config.as_ref())?;
+            let threads = a.threads.unwrap_or_else(|| {
+                std::thread::available_parallelism()
+                    .map_or(1, |n| n.get())
+                    .min(2)
+            });
+            let opts = StallOptions {
+                runs_per_policy: a.runs,
+                minutes: a.minutes,
+                seed: a.seed,
+                record: !a.no_record,
+                threads,
+                out: a
+                    .out
+                    .unwrap_or_else(|| PathBuf::from(format!("results/stall-{}", a.seed))),
+            };
+            let table = super::stall::run_and_report(&config, &opts, true)?;
+            print!("{table}");
+            Ok(())
+        }
+    }
+}
+
+/// Runs `pavlov replay …`; fails unless the replay is exact.
+pub fn replay(args: ReplayArgs) -> Result<()> {
+    let rec = crate::recording::load(&args.path)?;
+    if rec.torn_tail {
+        eprintln!("note: the recording's last line was incomplete and was skipped");
+    }
+    let report = crate::replay::replay(&rec)?;
+    println!("{}", crate::replay::describe(&report));
+    anyhow::ensure!(report.exact(), "the replay differs from the recording");
+    Ok(())
+}

@@ -1,0 +1,288 @@
+//! SVG figures drawn with plotters, analogues of the paper's Figures 1 and 2 plus the learning curve.
+//!
+//! - Figure 1: a 10 s excerpt after 2.5 min of learning that ends with the robot pushing against a wall,
+//!   for each policy: the prediction and its threshold, the over-current flag, the wheel command.
+//! - Figure 2: over-current observations and efficiency per policy, mean with standard-error bars.
+//! - Learning curve: over-current observations per window, mean ± SE over runs, per policy.
+
+use std::path::Path;
+
+use pavlov::control::Mode;
+use pavlov::record::TickRecord;
+use plotters::prelude::*;
+
+use super::analysis::Analysis;
+use super::{WINDOW_S, mode_name};
+
+type Io = std::io::Result<()>;
+
+fn err<E: std::fmt::Display>(e: E) -> std::io::Error {
+    std::io::Error::other(e.to_string())
+}
+
+const REACTIVE: RGBColor = RGBColor(200, 80, 40);
+const PAVLOVIAN: RGBColor = RGBColor(40, 100, 200);
+
+fn color(mode: Mode) -> RGBColor {
+    if mode == Mode::Pavlovian {
+        PAVLOVIAN
+    } else {
+        REACTIVE
+    }
+}
+
+/// The `len`-tick window of `records` that ends where the default policy's drive phase containing the first
+/// over-current observation ends (the robot pushing against a wall); the first `len` records if there is
+/// no over-current observation.
+pub fn push_window(records: &[TickRecord], len: usize) -> &[TickRecord] {
+    let oc = records
+        .iter()
+        .position(|r| r.sensors.overcurrent_left || r.sensors.overcurrent_right);
+    let end = match oc.and_then(|i| records.get(i).map(|r| (i, r.default_action))) {
+        Some((i, drive)) => records
+            .iter()
+            .skip(i)
+            .position(|r| r.default_action != drive)
+            .map_or(records.len(), |k| i + k),
+        None => len.min(records.len()),
+    };
+    let start = end.saturating_sub(len);
+    records.get(start..end).unwrap_or(&[])
+}
+
+/// Figure 1: signals of a push against a wall, one column per policy.
+pub fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
+    let root = SVGBackend::new(path, (1000, 700)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let root = root
+        .titled(
+            "Fig. 1 analogue: 10 s ending in a push against a wall, after 2.5 min of learning",
+            ("sans-serif", 18),
+        )
+        .map_err(err)?;
+    let cols = root.split_evenly((1, excerpts.len().max(1)));
+    for ((mode, recs), col) in excerpts.iter().zip(cols.iter()) {
+        let rows = col.split_evenly((3, 1));
+        let t0 = recs.first().map_or(0.0, |r| r.t_ms / 1000.0);
+        let t1 = recs.last().map_or(10.0, |r| r.t_ms / 1000.0).max(t0 + 0.02);
+        let t = |r: &TickRecord| r.t_ms / 1000.0 - t0;
+        let span = 0.0..(t1 - t0);
+        let c = color(*mode);
+        if let Some(area) = rows.first() {
+            let mut ch = ChartBuilder::on(area)
+                .caption(
+                    format!("{}: prediction and threshold", mode_name(*mode)),
+                    ("sans-serif", 14),
+                )
+                .margin(6)
+                .x_label_area_size(24)
+                .y_label_area_size(40)
+                .build_cartesian_2d(span.clone(), -0.1f64..1.2f64)
+                .map_err(err)?;
+            ch.configure_mesh().draw().map_err(err)?;
+            ch.draw_series(LineSeries::new(
+                recs.iter()
+                    .map(|r| (t(r), r.predictions.first().map_or(0.0, |p| p.value))),
+                c.stroke_width(2),
+            ))
+            .map_err(err)?
+            .label("prediction")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
+            ch.draw_series(LineSeries::new(
+                recs.iter()
+                    .map(|r| (t(r), r.predictions.first().map_or(0.0, |p| p.threshold))),
+                BLACK.stroke_width(1),
+            ))
+            .map_err(err)?
+            .label("threshold")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK));
+            ch.configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(err)?;
+        }
+        if let Some(area) = rows.get(1) {
+            let mut ch = ChartBuilder::on(area)
+                .caption("over-current flag (either wheel)", ("sans-serif", 14))
+                .margin(6)
+                .x_label_area_size(24)
+                .y_label_area_size(40)
+                .build_cartesian_2d(span.clone(), -0.1f64..1.1f64)
+                .map_err(err)?;
+            ch.configure_mesh().draw().map_err(err)?;
+            ch.draw_series(LineSeries::new(
+                recs.iter().map(|r| {
+                    let oc = r.sensors.overcurrent_left || r.sensors.overcurrent_right;
+                    (t(r), if oc { 1.0 } else { 0.0 })
+                }),
+                c.stroke_width(1),
+            ))
+            .map_err(err)?;
+        }
+        if let Some(area) = rows.get(2) {
+            let mut ch = ChartBuilder::on(area)
+                .caption(
+                    "wheel command, mm/s (mean of both wheels)",
+                    ("sans-serif", 14),
+                )
+                .margin(6)
+                .x_label_area_size(30)
+                .y_label_area_size(40)
+                .build_cartesian_2d(span.clone(), -550f64..550f64)
+                .map_err(err)?;
+            ch.configure_mesh().x_desc("time, s").draw().map_err(err)?;
+            ch.draw_series(LineSeries::new(
+                recs.iter().map(|r| {
+                    let m =
+                        (f64::from(r.command.left_mm_s) + f64::from(r.command.right_mm_s)) / 2.0;
+                    (t(r), m)
+                }),
+                c.stroke_width(2),
+            ))
+            .map_err(err)?;
+        }
+    }
+    root.present().map_err(err)
+}
+
+fn bar_panel(
+    area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    title: &str,
+    bars: [(f64, f64); 2],
+) -> Io {
+    let top = bars
+        .iter()
+        .map(|(m, se)| m + se)
+        .fold(0.0f64, f64::max)
+        .max(1e-9)
+        * 1.2;
+    let mut ch = ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 16))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(60)
+        .build_cartesian_2d(-0.5f64..1.5f64, 0f64..top)
+        .map_err(err)?;
+    ch.configure_mesh()
+        .disable_x_mesh()
+        .x_labels(3)
+        .x_label_formatter(&|x| match x.round() as i64 {
+            0 => "reactive".into(),
+            1 => "Pavlovian".into(),
+            _ => String::new(),
+        })
+        .draw()
+        .map_err(err)?;
+    for (i, ((mean, se), c)) in bars.iter().zip([REACTIVE, PAVLOVIAN]).enumerate() {
+        let x = i as f64;
+        ch.draw_series(std::iter::once(Rectangle::new(
+            [(x - 0.3, 0.0), (x + 0.3, *mean)],
+            c.mix(0.8).filled(),
+        )))
+        .map_err(err)?;
+        let (lo, hi) = (mean - se, mean + se);
+        ch.draw_series([
+            PathElement::new(vec![(x, lo), (x, hi)], BLACK.stroke_width(2)),
+            PathElement::new(vec![(x - 0.08, lo), (x + 0.08, lo)], BLACK.stroke_width(2)),
+            PathElement::new(vec![(x - 0.08, hi), (x + 0.08, hi)], BLACK.stroke_width(2)),
+        ])
+        .map_err(err)?;
+    }
+    Ok(())
+}
+
+/// Figure 2: over-current observations and efficiency, mean ± SE per policy.
+pub fn fig2_bars(path: &Path, a: &Analysis) -> Io {
+    let root = SVGBackend::new(path, (900, 420)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let panels = root.split_evenly((1, 2));
+    let find = |key: &str| a.comparisons.iter().find(|c| c.metric == key);
+    for (area, key) in panels
+        .iter()
+        .zip(["overcurrent_observations", "efficiency_m_per_kj"])
+    {
+        if let Some(c) = find(key) {
+            let change = c
+                .relative_change
+                .map_or(String::new(), |r| format!(" ({:+.0}%)", r * 100.0));
+            bar_panel(
+                area,
+                &format!("{} per run, {}{change}", c.label, c.unit),
+                [
+                    (c.reactive.mean, c.reactive.se),
+                    (c.pavlovian.mean, c.pavlovian.se),
+                ],
+            )?;
+        }
+    }
+    root.present().map_err(err)
+}
+
+/// The learning curve: over-current observations per window, mean ± SE per policy.
+pub fn learning_curve(path: &Path, a: &Analysis) -> Io {
+    let root = SVGBackend::new(path, (900, 450)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let n = a.learning_curve.len().max(1) as f64;
+    let top = a
+        .learning_curve
+        .iter()
+        .flat_map(|p| {
+            [
+                p.reactive.mean + p.reactive.se,
+                p.pavlovian.mean + p.pavlovian.se,
+            ]
+        })
+        .filter(|v| v.is_finite())
+        .fold(1.0f64, f64::max)
+        * 1.15;
+    let mut ch = ChartBuilder::on(&root)
+        .caption(
+            format!("Over-current observations per {WINDOW_S} s window (mean ± SE over runs)"),
+            ("sans-serif", 16),
+        )
+        .margin(10)
+        .x_label_area_size(36)
+        .y_label_area_size(50)
+        .build_cartesian_2d(0f64..n * WINDOW_S / 60.0, 0f64..top)
+        .map_err(err)?;
+    ch.configure_mesh()
+        .x_desc("window start, min")
+        .y_desc("over-current observations")
+        .draw()
+        .map_err(err)?;
+    for mode in [Mode::Reactive, Mode::Pavlovian] {
+        let c = color(mode);
+        let pts: Vec<(f64, f64, f64)> = a
+            .learning_curve
+            .iter()
+            .map(|p| {
+                let d = if mode == Mode::Pavlovian {
+                    p.pavlovian
+                } else {
+                    p.reactive
+                };
+                ((p.start_s + WINDOW_S / 2.0) / 60.0, d.mean, d.se)
+            })
+            .filter(|(_, m, _)| m.is_finite())
+            .collect();
+        ch.draw_series(LineSeries::new(
+            pts.iter().map(|(x, m, _)| (*x, *m)),
+            c.stroke_width(2),
+        ))
+        .map_err(err)?
+        .label(mode_name(mode))
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
+        ch.draw_series(
+            pts.iter()
+                .map(|(x, m, se)| PathElement::new(vec![(*x, m - se), (*x, m + se)], c)),
+        )
+        .map_err(err)?;
+    }
+    ch.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)
+}
