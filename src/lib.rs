@@ -18,6 +18,7 @@
 pub mod agent;
 pub mod config;
 pub mod control;
+pub mod interaction_metrics;
 pub mod learn;
 pub mod metrics;
 pub mod obs;
