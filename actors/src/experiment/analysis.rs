@@ -76,6 +76,8 @@ pub struct Analysis {
     pub learning_curve: Vec<CurvePoint>,
     /// The first window from which on the Pavlovian mean stays below the reactive mean (None: never).
     pub benefit_from_window: Option<usize>,
+    /// When the Pavlovian runs first stopped on the prediction alone, s (over the runs that did).
+    pub first_predictive_stop_s: Describe,
 }
 
 fn values(runs: &[RunResult], mode: Mode, key: &str) -> Vec<f64> {
@@ -127,9 +129,15 @@ pub fn analyse(runs: &[RunResult], window_s: f64) -> Analysis {
             .get(w..)
             .is_some_and(|rest| rest.iter().all(|p| p.pavlovian.mean < p.reactive.mean))
     });
+    let firsts: Vec<f64> = runs
+        .iter()
+        .filter(|r| r.mode == Mode::Pavlovian)
+        .filter_map(|r| r.first_predictive_stop_s)
+        .collect();
     Analysis {
         comparisons,
         learning_curve,
         benefit_from_window,
+        first_predictive_stop_s: describe(&firsts),
     }
 }

@@ -31,23 +31,33 @@ fn color(mode: Mode) -> RGBColor {
     }
 }
 
-/// The `len`-tick window of `records` that ends where the default policy's drive phase containing the first
-/// over-current observation ends (the robot pushing against a wall); the first `len` records if there is
-/// no over-current observation.
+/// The `len`-tick window of `records` that ends where a drive phase of the default policy (both wheels
+/// the same non-zero speed) with an over-current observation ends, i.e. with the robot pushing against a
+/// wall: the first such phase that ends at least `len` ticks into `records`. The first `len` records if
+/// there is none.
 pub fn push_window(records: &[TickRecord], len: usize) -> &[TickRecord] {
-    let oc = records
-        .iter()
-        .position(|r| r.sensors.overcurrent_left || r.sensors.overcurrent_right);
-    let end = match oc.and_then(|i| records.get(i).map(|r| (i, r.default_action))) {
-        Some((i, drive)) => records
+    let driving = |r: &TickRecord| {
+        let a = r.default_action;
+        a.left_mm_s == a.right_mm_s && a.left_mm_s != 0
+    };
+    let mut i = 0;
+    while let Some(r) = records.get(i) {
+        let phase = r.default_action;
+        let end = records
             .iter()
             .skip(i)
-            .position(|r| r.default_action != drive)
-            .map_or(records.len(), |k| i + k),
-        None => len.min(records.len()),
-    };
-    let start = end.saturating_sub(len);
-    records.get(start..end).unwrap_or(&[])
+            .position(|x| x.default_action != phase)
+            .map_or(records.len(), |k| i + k);
+        let pushed = records.get(i..end).is_some_and(|p| {
+            p.iter()
+                .any(|x| x.sensors.overcurrent_left || x.sensors.overcurrent_right)
+        });
+        if driving(r) && pushed && end >= len && end < records.len() {
+            return records.get(end - len..end).unwrap_or(&[]);
+        }
+        i = end.max(i + 1);
+    }
+    records.get(..len.min(records.len())).unwrap_or(&[])
 }
 
 /// Figure 1: signals of a push against a wall, one column per policy.
@@ -68,6 +78,12 @@ pub fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
         let t = |r: &TickRecord| r.t_ms / 1000.0 - t0;
         let span = 0.0..(t1 - t0);
         let c = color(*mode);
+        let values = recs
+            .iter()
+            .filter_map(|r| r.predictions.first().map(|p| p.value))
+            .filter(|v| v.is_finite());
+        let (v_lo, v_hi) = values.fold((-0.1f64, 1.1f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        let (v_lo, v_hi) = (v_lo - 0.05, v_hi + 0.05);
         if let Some(area) = rows.first() {
             let mut ch = ChartBuilder::on(area)
                 .caption(
@@ -77,7 +93,7 @@ pub fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
                 .margin(6)
                 .x_label_area_size(24)
                 .y_label_area_size(40)
-                .build_cartesian_2d(span.clone(), -0.1f64..1.2f64)
+                .build_cartesian_2d(span.clone(), v_lo..v_hi)
                 .map_err(err)?;
             ch.configure_mesh().draw().map_err(err)?;
             ch.draw_series(LineSeries::new(
@@ -122,25 +138,33 @@ pub fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
         }
         if let Some(area) = rows.get(2) {
             let mut ch = ChartBuilder::on(area)
-                .caption(
-                    "wheel command, mm/s (mean of both wheels)",
-                    ("sans-serif", 14),
-                )
+                .caption("wheel commands, mm/s", ("sans-serif", 14))
                 .margin(6)
                 .x_label_area_size(30)
                 .y_label_area_size(40)
-                .build_cartesian_2d(span.clone(), -550f64..550f64)
+                .build_cartesian_2d(span.clone(), -300f64..300f64)
                 .map_err(err)?;
             ch.configure_mesh().x_desc("time, s").draw().map_err(err)?;
             ch.draw_series(LineSeries::new(
-                recs.iter().map(|r| {
-                    let m =
-                        (f64::from(r.command.left_mm_s) + f64::from(r.command.right_mm_s)) / 2.0;
-                    (t(r), m)
-                }),
+                recs.iter().map(|r| (t(r), f64::from(r.command.left_mm_s))),
                 c.stroke_width(2),
             ))
-            .map_err(err)?;
+            .map_err(err)?
+            .label("left")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
+            let grey = RGBColor(90, 90, 90);
+            ch.draw_series(LineSeries::new(
+                recs.iter().map(|r| (t(r), f64::from(r.command.right_mm_s))),
+                grey.stroke_width(1),
+            ))
+            .map_err(err)?
+            .label("right")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], grey));
+            ch.configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(err)?;
         }
     }
     root.present().map_err(err)
@@ -247,7 +271,7 @@ pub fn learning_curve(path: &Path, a: &Analysis) -> Io {
         .build_cartesian_2d(0f64..n * WINDOW_S / 60.0, 0f64..top)
         .map_err(err)?;
     ch.configure_mesh()
-        .x_desc("window start, min")
+        .x_desc("time, min (window centres)")
         .y_desc("over-current observations")
         .draw()
         .map_err(err)?;

@@ -225,6 +225,14 @@ pub fn table(summary: &Summary) -> String {
             let _ = writeln!(s, "Pavlovian is not below reactive in every later window");
         }
     }
+    let f = &summary.analysis.first_predictive_stop_s;
+    let _ = writeln!(
+        s,
+        "first stop on the prediction alone (gate on, stimulus off): {} ± {} s into the run ({} Pavlovian runs)",
+        num(f.mean),
+        num(f.se),
+        f.n
+    );
     let _ = writeln!(
         s,
         "seeds (run: policy seed): {}",

@@ -76,6 +76,8 @@ pub struct RunResult {
     pub lagged: u64,
     /// Wall-clock time the run took, s.
     pub wall_s: f64,
+    /// When the response first engaged on the prediction alone (gate on, stimulus off), s.
+    pub first_predictive_stop_s: Option<f64>,
     /// The Figure 1 excerpt (not serialised into the summary).
     #[serde(skip)]
     pub excerpt: Vec<TickRecord>,
@@ -132,23 +134,31 @@ pub fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> {
     let report = recorder
         .map(Recorder::join)
         .unwrap_or_else(RecorderReport::default);
-    let (metrics, windows, excerpt, dropped, lagged) = outcome?;
+    let c = outcome?;
     Ok(RunResult {
         index: spec.index,
         mode: spec.mode,
         seed: spec.seed,
-        metrics,
-        windows,
+        metrics: c.metrics,
+        windows: c.windows,
         recording: report.files.first().cloned(),
         recorded: report.written,
-        recorder_dropped: dropped,
-        lagged,
+        recorder_dropped: c.dropped,
+        lagged: c.lagged,
         wall_s: wall.elapsed().as_secs_f64(),
-        excerpt,
+        first_predictive_stop_s: c.first_predictive_stop_s,
+        excerpt: c.excerpt,
     })
 }
 
-type Collected = (MetricsSummary, Vec<WindowCounts>, Vec<TickRecord>, u64, u64);
+struct Collected {
+    metrics: MetricsSummary,
+    windows: Vec<WindowCounts>,
+    excerpt: Vec<TickRecord>,
+    dropped: u64,
+    lagged: u64,
+    first_predictive_stop_s: Option<f64>,
+}
 
 async fn collect(
     config: Config,
@@ -165,6 +175,7 @@ async fn collect(
     let mut excerpt = Vec::new();
     let mut seen = 0u64;
     let mut lagged = 0u64;
+    let mut first_predictive_stop_s = None;
     let window_ticks = spec.window_ticks.max(1);
     while seen < spec.ticks {
         let record: Arc<TickRecord> = match rx.recv().await {
@@ -176,6 +187,9 @@ async fn collect(
             Err(RecvError::Closed) => return Err(RunError::FeedClosed(seen)),
         };
         seen += 1;
+        if first_predictive_stop_s.is_none() && record.gate && !record.stimulus {
+            first_predictive_stop_s = Some(record.t_ms / 1000.0);
+        }
         let before = metrics.summary();
         metrics.observe(&record);
         let w = usize::try_from(record.seq / window_ticks).unwrap_or(usize::MAX);
@@ -199,5 +213,12 @@ async fn collect(
     }
     let dropped = server.feed.recorder_dropped();
     server.shutdown().await;
-    Ok((metrics.summary(), windows, excerpt, dropped, lagged))
+    Ok(Collected {
+        metrics: metrics.summary(),
+        windows,
+        excerpt,
+        dropped,
+        lagged,
+        first_predictive_stop_s,
+    })
 }
