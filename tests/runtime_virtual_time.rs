@@ -63,7 +63,7 @@ async fn estop_stops_the_wheels_until_released() {
     cfg.control.mode = Mode::Reactive;
     let (_, server) = run_sim(cfg, 200).await;
     let mut rx = server.feed.subscribe();
-    let (req, reply) = ControlRequest::new(ControlCommand::Estop);
+    let (req, reply) = ControlRequest::new(ControlCommand::Estop {});
     server.commands.send(req).await.unwrap();
     assert!(reply.await.unwrap().is_ok());
     let after = collect(&mut rx, 100).await;
@@ -83,7 +83,7 @@ async fn estop_stops_the_wheels_until_released() {
             .iter()
             .all(|r| r.sensors.distance_mm == 0 && r.sensors.angle_deg == 0)
     );
-    let (req, reply) = ControlRequest::new(ControlCommand::Release);
+    let (req, reply) = ControlRequest::new(ControlCommand::Release {});
     server.commands.send(req).await.unwrap();
     assert!(reply.await.unwrap().is_ok());
     let released = collect(&mut rx, 20).await;
@@ -164,7 +164,7 @@ async fn commands_are_acknowledged_or_refused_with_a_reason() {
     })
     .await;
     assert!(bad.is_err(), "negative alpha accepted");
-    assert!(send(ControlCommand::ResetWeights).await.is_ok());
+    assert!(send(ControlCommand::ResetWeights {}).await.is_ok());
     let mut rx = server.feed.subscribe();
     let manual = collect(&mut rx, 5).await;
     assert!(manual.iter().all(|r| r.mode == Mode::Manual));

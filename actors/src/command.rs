@@ -11,6 +11,8 @@ use tokio::sync::{mpsc, oneshot, watch};
 
 /// A command to the running server.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+// Argument-less commands are empty struct variants (`Estop {}`), so that unknown fields are rejected for
+// them too: serde ignores extra fields on unit variants of an internally tagged enum.
 #[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
 pub enum ControlCommand {
     /// Switch between reactive, Pavlovian and manual control.
@@ -19,9 +21,9 @@ pub enum ControlCommand {
         mode: Mode,
     },
     /// Latch the emergency stop: the wheels stop and stay stopped until `release`.
-    Estop,
+    Estop {},
     /// Release a latched emergency stop.
-    Release,
+    Release {},
     /// Drive the wheels directly (manual mode only). Expires after `teleop_hold_ms` without a refresh.
     Teleop {
         /// Left wheel, mm/s.
@@ -51,7 +53,7 @@ pub enum ControlCommand {
         threshold: Option<f64>,
     },
     /// Reset every prediction's weights and traces to their initial values.
-    ResetWeights,
+    ResetWeights {},
     /// Save the weights to a checkpoint file.
     SaveWeights {
         /// Where; default: the server's checkpoint directory.
@@ -65,7 +67,7 @@ pub enum ControlCommand {
         dir: Option<String>,
     },
     /// Stop recording.
-    StopRecording,
+    StopRecording {},
 }
 
 fn default_request_ms() -> u64 {
@@ -140,13 +142,13 @@ pub async fn route(
             ControlCommand::SetMode { mode } => {
                 forward(&routes.gating, GatingCommand::Mode(mode, reply)).await
             }
-            ControlCommand::Estop => {
+            ControlCommand::Estop {} => {
                 routes.estop.send_replace(true);
                 let _ = routes.gating.send(GatingCommand::Estop(true)).await;
                 tracing::warn!("e-stop latched");
                 let _ = reply.send(Ok(serde_json::json!({"estop": true})));
             }
-            ControlCommand::Release => {
+            ControlCommand::Release {} => {
                 routes.estop.send_replace(false);
                 let _ = routes.gating.send(GatingCommand::Estop(false)).await;
                 tracing::info!("e-stop released");
@@ -170,11 +172,11 @@ pub async fn route(
             }
             c @ (ControlCommand::HumanRequest { .. }
             | ControlCommand::SetParams { .. }
-            | ControlCommand::ResetWeights
+            | ControlCommand::ResetWeights {}
             | ControlCommand::SaveWeights { .. }) => {
                 forward(&routes.learning, LearningCommand::Apply(c, reply)).await
             }
-            c @ (ControlCommand::StartRecording { .. } | ControlCommand::StopRecording) => {
+            c @ (ControlCommand::StartRecording { .. } | ControlCommand::StopRecording {}) => {
                 match &routes.recorder {
                     Some(tx) => {
                         if let Err(mpsc::error::SendError((_, reply))) = tx.send((c, reply)).await {

@@ -75,7 +75,7 @@ impl Learning {
                 .set_params(prediction.as_deref(), alpha, lambda, threshold)
                 .map(|name| serde_json::json!({ "prediction": name }))
                 .map_err(|e| e.to_string()),
-            ControlCommand::ResetWeights => {
+            ControlCommand::ResetWeights {} => {
                 self.stage.reset();
                 Ok(serde_json::json!({ "reset": true }))
             }

@@ -191,7 +191,7 @@ impl Writer {
                     .map(|p| serde_json::json!({ "recording": p.display().to_string() }))
                     .map_err(|e| format!("cannot record into {}: {e}", dir.display()))
             }
-            ControlCommand::StopRecording => match self.open.as_ref().map(|f| f.path.clone()) {
+            ControlCommand::StopRecording {} => match self.open.as_ref().map(|f| f.path.clone()) {
                 Some(p) => {
                     self.close();
                     Ok(serde_json::json!({ "stopped": p.display().to_string() }))
@@ -307,7 +307,7 @@ mod tests {
         records.blocking_send(record(2)).unwrap();
         let (tx, rx) = oneshot::channel();
         commands
-            .blocking_send((ControlCommand::StopRecording, tx))
+            .blocking_send((ControlCommand::StopRecording {}, tx))
             .unwrap();
         records.blocking_send(record(3)).unwrap();
         assert!(rx.blocking_recv().unwrap().is_ok());

@@ -492,7 +492,7 @@ mod tests {
         );
         let r = parse_request(r#"{"id":"a","cmd":"estop"}"#).unwrap();
         assert_eq!(r.id, Some(json!("a")));
-        assert_eq!(r.command, ClientCommand::Control(ControlCommand::Estop));
+        assert_eq!(r.command, ClientCommand::Control(ControlCommand::Estop {}));
         let r = parse_request(r#"{"cmd":"release","id":null}"#).unwrap();
         assert_eq!(r.id, None);
     }
