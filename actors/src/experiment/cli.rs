@@ -11,6 +11,9 @@ use super::StallOptions;
 /// The stall experiment's configuration, built in.
 const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
 
+/// The interaction experiment's configuration, built in.
+const INTERACTION_CONFIG: &str = include_str!("../../../config/interaction.toml");
+
 /// `pavlov experiment`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct ExperimentArgs {
@@ -25,6 +28,32 @@ pub enum Experiment {
     /// The paper's stall experiment: interleaved reactive / Pavlovian runs on the simulated Create, through
     /// the real runtime under virtual time; writes summary.json, CSV tables, recordings and SVG figures.
     Stall(StallArgs),
+    /// The paper's interaction experiment: a simulated operator commands a left spin with the left elbow;
+    /// reactive vs Pavlovian response timing, and current / rotation aligned on the command (Figs 3, 4).
+    Interaction(InteractionArgs),
+}
+
+/// `pavlov experiment interaction`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct InteractionArgs {
+    /// Runs per policy (the paper: 1).
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    pub runs: usize,
+    /// Minutes per run (the paper: under 10).
+    #[arg(long, default_value_t = 10.0, value_name = "MIN")]
+    pub minutes: f64,
+    /// The experiment's seed.
+    #[arg(long, default_value_t = 1, value_name = "S")]
+    pub seed: u64,
+    /// Results directory (default: results/interaction-<seed>).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Configuration (TOML); default: the built-in config/interaction.toml.
+    #[arg(long, short = 'c', value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Do not write per-tick recordings of the runs.
+    #[arg(long)]
+    pub no_record: bool,
 }
 
 /// `pavlov experiment stall`.
@@ -61,11 +90,11 @@ pub struct ReplayArgs {
     pub path: PathBuf,
 }
 
-fn load_config(path: Option<&PathBuf>) -> Result<Config> {
+fn load_config(path: Option<&PathBuf>, builtin: &str) -> Result<Config> {
     let text = match path {
         Some(p) => std::fs::read_to_string(p)
             .with_context(|| format!("cannot read configuration {}", p.display()))?,
-        None => STALL_CONFIG.to_string(),
+        None => builtin.to_string(),
     };
     Config::from_toml(&text).context("invalid configuration")
 }
@@ -74,12 +103,8 @@ fn load_config(path: Option<&PathBuf>) -> Result<Config> {
 pub fn experiment(args: ExperimentArgs) -> Result<()> {
     match args.which {
         Experiment::Stall(a) => {
-            let config = load_config(a.config.as_ref())?;
-            let threads = a.threads.unwrap_or_else(|| {
-                std::thread::available_parallelism()
-                    .map_or(1, |n| n.get())
-                    .min(2)
-            });
+            let config = load_config(a.config.as_ref(), STALL_CONFIG)?;
+            let threads = a.threads.unwrap_or_else(default_threads);
             let opts = StallOptions {
                 runs_per_policy: a.runs,
                 minutes: a.minutes,
@@ -94,7 +119,36 @@ pub fn experiment(args: ExperimentArgs) -> Result<()> {
             print!("{table}");
             Ok(())
         }
+        Experiment::Interaction(a) => {
+            let config = load_config(a.config.as_ref(), INTERACTION_CONFIG)?;
+            let opts = super::interaction_report::InteractionOptions {
+                runs_per_policy: a.runs,
+                minutes: a.minutes,
+                seed: a.seed,
+                record: !a.no_record,
+                threads: default_threads(),
+                out: a
+                    .out
+                    .unwrap_or_else(|| PathBuf::from(format!("results/interaction-{}", a.seed))),
+            };
+            eprintln!(
+                "running {} interaction runs of {} min…",
+                2 * opts.runs_per_policy,
+                opts.minutes
+            );
+            let summary = super::interaction_report::run_study(&config, &opts)?;
+            super::interaction_report::write_all(&opts.out, &summary)?;
+            print!("{}", super::interaction_report::table(&summary));
+            println!("results: {}", opts.out.display());
+            Ok(())
+        }
     }
+}
+
+fn default_threads() -> usize {
+    std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(2)
 }
 
 /// Runs `pavlov replay …`; fails unless the replay is exact.

@@ -10,6 +10,8 @@
 
 pub mod analysis;
 pub mod cli;
+pub mod interaction;
+pub mod interaction_report;
 pub mod plots;
 pub mod report;
 pub mod run;

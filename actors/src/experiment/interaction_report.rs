@@ -1,0 +1,454 @@
+//! `pavlov experiment interaction`: runs the interaction study, writes `summary.json`, CSV tables and the
+//! Figure 3 / Figure 4 analogues, and returns the terminal table.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use pavlov::config::Config;
+use pavlov::control::Mode;
+use pavlov::record::TickRecord;
+use pavlov::stats::{Describe, WelchTest};
+use plotters::prelude::*;
+use serde::Serialize;
+
+use super::interaction::{
+    self, AlignedPoint, InteractionRun, PolicyTiming, aligned, latency_test, timing,
+};
+use super::mode_name;
+use super::run::RunError;
+
+/// The study's settings.
+#[derive(Debug, Clone, Serialize)]
+pub struct InteractionOptions {
+    /// Runs per policy (the paper: 1).
+    pub runs_per_policy: usize,
+    /// Minutes per run (the paper: under 10).
+    pub minutes: f64,
+    /// The experiment's seed.
+    pub seed: u64,
+    /// Record every run.
+    pub record: bool,
+    /// OS threads.
+    pub threads: usize,
+    /// Results directory.
+    pub out: PathBuf,
+}
+
+/// Everything `summary.json` holds.
+#[derive(Debug, Clone, Serialize)]
+pub struct InteractionSummary {
+    /// The settings.
+    pub options: InteractionOptions,
+    /// How the seeds are derived.
+    pub seed_derivation: String,
+    /// Every run.
+    pub runs: Vec<InteractionRun>,
+    /// Per-policy response timing.
+    pub timing: Vec<PolicyTiming>,
+    /// Welch's test of the latencies, Pavlovian vs reactive.
+    pub latency_welch: Option<WelchTest>,
+    /// Aligned averages around the observed command onsets.
+    pub aligned: Vec<AlignedPoint>,
+    /// Wall time, s.
+    pub wall_s: f64,
+}
+
+/// Runs every run (alternating reactive / Pavlovian) on `threads` threads.
+pub fn run_study(base: &Config, o: &InteractionOptions) -> Result<InteractionSummary, RunError> {
+    let wall = std::time::Instant::now();
+    let period_s = base.tick.period_ms.max(1) as f64 / 1000.0;
+    let ticks = (o.minutes * 60.0 / period_s).round().max(1.0) as usize;
+    let specs: Vec<(usize, Mode)> = (0..2 * o.runs_per_policy)
+        .map(|i| {
+            let m = if i % 2 == 0 {
+                Mode::Reactive
+            } else {
+                Mode::Pavlovian
+            };
+            (i, m)
+        })
+        .collect();
+    let mut runs = Vec::with_capacity(specs.len());
+    for chunk in specs.chunks(o.threads.max(1)) {
+        let outcomes: Vec<Result<InteractionRun, RunError>> = std::thread::scope(|s| {
+            let handles: Vec<_> = chunk
+                .iter()
+                .map(|&(i, m)| {
+                    let dir = o
+                        .record
+                        .then(|| o.out.join("runs").join(format!("{i:02}-{}", mode_name(m))));
+                    s.spawn(move || {
+                        tracing::subscriber::with_default(
+                            tracing::subscriber::NoSubscriber::default(),
+                            || interaction::run(base, i, m, o.seed, ticks, dir),
+                        )
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join()
+                        .unwrap_or_else(|_| Err(RunError::Server("a run panicked".into())))
+                })
+                .collect()
+        });
+        for r in outcomes {
+            runs.push(r?);
+        }
+    }
+    Ok(InteractionSummary {
+        options: o.clone(),
+        seed_derivation: "run i (even = reactive, odd = Pavlovian): robot seed \
+                          Rng::new(seed).fork(i).next_u64(), operator seed Rng::new(seed).fork(i).fork(1).next_u64()"
+            .into(),
+        timing: vec![timing(&runs, Mode::Reactive), timing(&runs, Mode::Pavlovian)],
+        latency_welch: latency_test(&runs),
+        aligned: aligned(&runs),
+        runs,
+        wall_s: wall.elapsed().as_secs_f64(),
+    })
+}
+
+fn num(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.0}")
+    } else {
+        "–".into()
+    }
+}
+
+/// The terminal table.
+pub fn table(s: &InteractionSummary) -> String {
+    let o = &s.options;
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "Interaction experiment: seed {}, {} run(s) per policy × {} min; response onset relative to the operator's \
+         true command onset (negative = anticipated)",
+        o.seed, o.runs_per_policy, o.minutes
+    );
+    let _ = writeln!(
+        t,
+        "{:<10} {:>8} {:>20} {:>11} {:>7} {:>15} {:>18}",
+        "policy",
+        "commands",
+        "latency ms (±SE)",
+        "anticipated",
+        "missed",
+        "false starts/min",
+        "resp. outside s/min"
+    );
+    for p in &s.timing {
+        let _ = writeln!(
+            t,
+            "{:<10} {:>8} {:>20} {:>11} {:>7} {:>15.2} {:>18.2}",
+            p.policy,
+            p.commands,
+            format!("{} ± {}", num(p.latency_ms.mean), num(p.latency_ms.se)),
+            p.anticipated,
+            p.missed,
+            p.false_starts_per_minute + 0.0,
+            p.responding_outside_s_per_minute + 0.0
+        );
+    }
+    if let Some(w) = s.latency_welch {
+        let _ = writeln!(
+            t,
+            "latency, Pavlovian vs reactive: Welch t = {:.2}, df = {:.1}, p = {:.3}",
+            w.t, w.df, w.p
+        );
+    }
+    let _ = writeln!(
+        t,
+        "aligned on the observed onset (last {} per run): battery current mA, reactive / Pavlovian",
+        interaction::ALIGNED_COMMANDS
+    );
+    let mut line = String::new();
+    for p in s
+        .aligned
+        .iter()
+        .filter(|p| [-10, 0, 5, 10, 15, 25].contains(&p.offset))
+    {
+        let _ = write!(
+            line,
+            " {:+} ms: {}/{}{}",
+            p.offset * 20,
+            num(p.current_reactive.mean),
+            num(p.current_pavlovian.mean),
+            p.current_welch
+                .map_or("", |w| if w.p < 0.05 { "*" } else { "" })
+        );
+    }
+    let _ = writeln!(t, "{}  (* p < 0.05)", line.trim_start());
+    let _ = writeln!(
+        t,
+        "seeds: {}; {:.1} s wall",
+        s.runs
+            .iter()
+            .map(|r| format!(
+                "{}:{} robot {} operator {}",
+                r.index,
+                &mode_name(r.mode)[..1],
+                r.robot_seed,
+                r.human_seed
+            ))
+            .collect::<Vec<_>>()
+            .join(", "),
+        s.wall_s
+    );
+    t
+}
+
+fn d(x: &Describe) -> String {
+    format!("{},{}", x.mean, x.se)
+}
+
+/// Writes `summary.json`, `commands.csv`, `aligned.csv` and the figures.
+pub fn write_all(dir: &Path, s: &InteractionSummary) -> std::io::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let json = serde_json::to_string_pretty(s).map_err(std::io::Error::other)?;
+    std::fs::write(dir.join("summary.json"), json)?;
+    let mut c = String::from("run,policy,command,onset_ms,end_ms,outcome\n");
+    for r in &s.runs {
+        for (k, (w, out)) in r.commands.iter().zip(&r.metrics.outcomes).enumerate() {
+            let out = serde_json::to_string(out)
+                .unwrap_or_default()
+                .replace(',', ";");
+            let _ = writeln!(
+                c,
+                "{},{},{k},{},{},{out}",
+                r.index,
+                mode_name(r.mode),
+                w.onset_ms,
+                w.end_ms
+            );
+        }
+    }
+    std::fs::write(dir.join("commands.csv"), c)?;
+    let mut a = String::from(
+        "offset_ticks,offset_ms,current_reactive_mean,current_reactive_se,current_pavlovian_mean,current_pavlovian_se,\
+         current_p,angle_reactive_mean,angle_reactive_se,angle_pavlovian_mean,angle_pavlovian_se,angle_p\n",
+    );
+    for p in &s.aligned {
+        let _ = writeln!(
+            a,
+            "{},{},{},{},{},{},{},{}",
+            p.offset,
+            p.offset * 20,
+            d(&p.current_reactive),
+            d(&p.current_pavlovian),
+            p.current_welch.map_or(f64::NAN, |w| w.p),
+            d(&p.angle_reactive),
+            d(&p.angle_pavlovian),
+            p.angle_welch.map_or(f64::NAN, |w| w.p),
+        );
+    }
+    std::fs::write(dir.join("aligned.csv"), a)?;
+    fig3(&dir.join("fig3_timing.svg"), s)?;
+    fig4(&dir.join("fig4_aligned.svg"), s)?;
+    Ok(())
+}
+
+fn err<E: std::fmt::Display>(e: E) -> std::io::Error {
+    std::io::Error::other(e.to_string())
+}
+
+type Series = (String, RGBColor, Vec<(f64, f64)>);
+
+fn panel(
+    area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    title: &str,
+    x: std::ops::Range<f64>,
+    series: &[Series],
+    x_desc: &str,
+) -> std::io::Result<()> {
+    let ys = series.iter().flat_map(|s| s.2.iter().map(|p| p.1));
+    let (lo, hi) = ys
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+            (l.min(v), h.max(v))
+        });
+    let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
+    let pad = ((hi - lo) * 0.08).max(1e-6);
+    let mut ch = ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 14))
+        .margin(6)
+        .x_label_area_size(28)
+        .y_label_area_size(50)
+        .build_cartesian_2d(x, (lo - pad)..(hi + pad))
+        .map_err(err)?;
+    ch.configure_mesh().x_desc(x_desc).draw().map_err(err)?;
+    for (label, color, pts) in series {
+        let c = *color;
+        ch.draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))
+            .map_err(err)?
+            .label(label.as_str())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
+    }
+    ch.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    Ok(())
+}
+
+const RED: RGBColor = RGBColor(200, 80, 40);
+const BLUE: RGBColor = RGBColor(40, 100, 200);
+const GREY: RGBColor = RGBColor(90, 90, 90);
+
+/// Ten seconds after 2.5 min of each policy's first run, centred on an observed command onset.
+fn excerpt(r: &InteractionRun) -> &[Arc<TickRecord>] {
+    let from = 150 * 50;
+    let onset = r
+        .aligned_onsets
+        .iter()
+        .map(|&i| i as usize)
+        .find(|&i| i >= from + 250)
+        .unwrap_or(from + 250);
+    let start = onset.saturating_sub(250);
+    r.records
+        .get(start..(start + 500).min(r.records.len()))
+        .unwrap_or(&[])
+}
+
+fn fig3(path: &Path, s: &InteractionSummary) -> std::io::Result<()> {
+    let root = SVGBackend::new(path, (1000, 800)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let root = root
+        .titled(
+            "Fig. 3 analogue: timing of signals after 2.5 min (10 s around a command)",
+            ("sans-serif", 18),
+        )
+        .map_err(err)?;
+    let firsts: Vec<&InteractionRun> = [Mode::Reactive, Mode::Pavlovian]
+        .iter()
+        .filter_map(|m| s.runs.iter().find(|r| r.mode == *m))
+        .collect();
+    let cols = root.split_evenly((1, firsts.len().max(1)));
+    for (r, col) in firsts.iter().zip(cols.iter()) {
+        let recs = excerpt(r);
+        let t0 = recs.first().map_or(0.0, |x| x.t_ms);
+        let t = |x: &TickRecord| (x.t_ms - t0) / 1000.0;
+        let span = 0.0..10.0;
+        let c = if r.mode == Mode::Pavlovian { BLUE } else { RED };
+        let rows = col.split_evenly((4, 1));
+        let elbow: Vec<(f64, f64)> = recs
+            .iter()
+            .filter_map(|x| x.elbow.as_ref().and_then(|e| e.left).map(|a| (t(x), a)))
+            .collect();
+        let ninety: Vec<(f64, f64)> = vec![(0.0, 90.0), (10.0, 90.0)];
+        let pred: Vec<(f64, f64)> = recs
+            .iter()
+            .filter_map(|x| x.predictions.first().map(|p| (t(x), p.value)))
+            .collect();
+        let theta: Vec<(f64, f64)> = recs
+            .iter()
+            .filter_map(|x| x.predictions.first().map(|p| (t(x), p.threshold)))
+            .collect();
+        let stim: Vec<(f64, f64)> = recs
+            .iter()
+            .map(|x| (t(x), if x.stimulus { 1.0 } else { 0.0 }))
+            .collect();
+        let current: Vec<(f64, f64)> = recs
+            .iter()
+            .filter_map(|x| x.sensors.battery_current_ma.map(|i| (t(x), f64::from(i))))
+            .collect();
+        let right_cmd: Vec<(f64, f64)> = recs
+            .iter()
+            .map(|x| (t(x), f64::from(x.command.right_mm_s)))
+            .collect();
+        let name = mode_name(r.mode);
+        let panels: [(String, Vec<Series>); 4] = [
+            (
+                format!("{name}: left elbow angle, °"),
+                vec![("angle".into(), c, elbow), ("90°".into(), GREY, ninety)],
+            ),
+            (
+                "prediction, threshold, stimulus E".into(),
+                vec![
+                    ("prediction".into(), c, pred),
+                    ("threshold".into(), BLACK, theta),
+                    ("E".into(), GREY, stim),
+                ],
+            ),
+            (
+                "battery current, mA".into(),
+                vec![("current".into(), c, current)],
+            ),
+            (
+                "right wheel command, mm/s (spin left)".into(),
+                vec![("command".into(), c, right_cmd)],
+            ),
+        ];
+        for (area, (title, series)) in rows.iter().zip(panels.iter()) {
+            panel(area, title, span.clone(), series, "time, s")?;
+        }
+    }
+    root.present().map_err(err)
+}
+
+fn fig4(path: &Path, s: &InteractionSummary) -> std::io::Result<()> {
+    let root = SVGBackend::new(path, (1000, 420)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let cols = root.split_evenly((1, 2));
+    let x = |p: &AlignedPoint| p.offset as f64 * 0.02;
+    let span = (-interaction::BEFORE_TICKS as f64 * 0.02)..(interaction::AFTER_TICKS as f64 * 0.02);
+    let cur: Vec<Series> = vec![
+        (
+            "reactive".into(),
+            RED,
+            s.aligned
+                .iter()
+                .map(|p| (x(p), p.current_reactive.mean))
+                .collect(),
+        ),
+        (
+            "Pavlovian".into(),
+            BLUE,
+            s.aligned
+                .iter()
+                .map(|p| (x(p), p.current_pavlovian.mean))
+                .collect(),
+        ),
+    ];
+    let ang: Vec<Series> = vec![
+        (
+            "reactive".into(),
+            RED,
+            s.aligned
+                .iter()
+                .map(|p| (x(p), p.angle_reactive.mean))
+                .collect(),
+        ),
+        (
+            "Pavlovian".into(),
+            BLUE,
+            s.aligned
+                .iter()
+                .map(|p| (x(p), p.angle_pavlovian.mean))
+                .collect(),
+        ),
+    ];
+    if let Some(a) = cols.first() {
+        panel(
+            a,
+            "battery current, mA, aligned on the observed command",
+            span.clone(),
+            &cur,
+            "time from the command onset, s",
+        )?;
+    }
+    if let Some(a) = cols.get(1) {
+        panel(
+            a,
+            "rotation from odometry, °/tick",
+            span,
+            &ang,
+            "time from the command onset, s",
+        )?;
+    }
+    root.present().map_err(err)
+}

@@ -1,0 +1,88 @@
+//! The interaction experiment, short: one run per policy × 1 minute with the simulated operator driving the
+//! pose channel under virtual time. Same seed → same outcome; the response follows the operator's commands;
+//! the recordings (which carry the elbow features) replay exactly.
+
+use pavlov::config::Config;
+use pavlov::control::Mode;
+use pavlov_actors::experiment::interaction_report::{
+    InteractionOptions, run_study, table, write_all,
+};
+
+fn interaction_config() -> Config {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../config/interaction.toml"
+    ))
+    .expect("config/interaction.toml");
+    Config::from_toml(&text).expect("valid interaction config")
+}
+
+fn options(out: &std::path::Path, record: bool) -> InteractionOptions {
+    InteractionOptions {
+        runs_per_policy: 1,
+        minutes: 1.0,
+        seed: 4,
+        record,
+        threads: 2,
+        out: out.to_path_buf(),
+    }
+}
+
+#[test]
+fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
+    let out = std::env::temp_dir().join(format!("pavlov-interaction-{}", std::process::id()));
+    let a = run_study(&interaction_config(), &options(&out, true)).expect("study runs");
+    let b = run_study(&interaction_config(), &options(&out.join("again"), false)).expect("again");
+    let key = |s: &pavlov_actors::experiment::interaction_report::InteractionSummary| {
+        serde_json::to_value((
+            &s.timing,
+            &s.aligned,
+            s.runs
+                .iter()
+                .map(|r| (&r.metrics, &r.commands))
+                .collect::<Vec<_>>(),
+        ))
+        .unwrap()
+    };
+    assert_eq!(key(&a), key(&b), "same seed, same outcome");
+    assert_eq!(
+        a.runs.iter().map(|r| r.mode).collect::<Vec<_>>(),
+        vec![Mode::Reactive, Mode::Pavlovian]
+    );
+    for r in &a.runs {
+        assert_eq!(r.records.len(), 3000);
+        assert!(!r.commands.is_empty(), "the operator commanded in a minute");
+        // Most commands are answered by the response (the reactive gate follows the observed elbow).
+        let answered = r.metrics.latencies_ms().len();
+        assert!(
+            answered * 2 >= r.commands.len(),
+            "{answered} of {} commands answered",
+            r.commands.len()
+        );
+        let rec = pavlov_actors::recording::load(r.recording.as_ref().expect("recorded")).unwrap();
+        assert!(rec.records.iter().any(|t| t.elbow.is_some()));
+        let report = pavlov_actors::replay::replay(&rec).unwrap();
+        assert!(
+            report.exact(),
+            "{}",
+            pavlov_actors::replay::describe(&report)
+        );
+    }
+    write_all(&out, &a).expect("outputs");
+    for f in [
+        "summary.json",
+        "commands.csv",
+        "aligned.csv",
+        "fig3_timing.svg",
+        "fig4_aligned.svg",
+    ] {
+        assert!(
+            std::fs::metadata(out.join(f))
+                .map(|m| m.len() > 50)
+                .unwrap_or(false),
+            "{f}"
+        );
+    }
+    assert!(table(&a).contains("pavlovian"));
+    let _ = std::fs::remove_dir_all(&out);
+}
