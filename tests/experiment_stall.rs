@@ -120,3 +120,39 @@ fn a_short_study_is_deterministic_recorded_and_shows_the_effect() {
     assert!(table.contains("over-current observations"));
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn the_cli_writes_the_results_directory_and_its_recordings_replay() {
+    let out = tmp("stall-cli");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_pavlov"))
+        .args([
+            "experiment",
+            "stall",
+            "--runs",
+            "1",
+            "--minutes",
+            "0.5",
+            "--seed",
+            "2",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("pavlov experiment stall");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(stdout.contains("over-current observations"), "{stdout}");
+    assert!(out.join("summary.json").exists());
+    let replay = std::process::Command::new(env!("CARGO_BIN_EXE_pavlov"))
+        .arg("replay")
+        .arg(out.join("runs").join("01-pavlovian"))
+        .output()
+        .expect("pavlov replay");
+    assert!(replay.status.success());
+    assert!(String::from_utf8_lossy(&replay.stdout).contains("identical"));
+    let _ = std::fs::remove_dir_all(&out);
+}
