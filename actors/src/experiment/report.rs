@@ -182,7 +182,11 @@ pub fn table(summary: &Summary) -> String {
             (
                 format!("{:.2}", w.t),
                 format!("{:.1}", w.df),
-                format!("{:.3}", w.p),
+                if w.p < 0.001 {
+                    format!("{:.0e}", w.p)
+                } else {
+                    format!("{:.3}", w.p)
+                },
             )
         });
         let change = c
