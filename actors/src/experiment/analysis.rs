@@ -141,3 +141,66 @@ pub fn analyse(runs: &[RunResult], window_s: f64) -> Analysis {
         first_predictive_stop_s: describe(&firsts),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment::run::WindowCounts;
+    use pavlov::metrics::MetricsSummary;
+
+    fn run(index: usize, mode: Mode, oc: u64, windows: &[u64]) -> RunResult {
+        RunResult {
+            index,
+            mode,
+            seed: index as u64,
+            metrics: MetricsSummary {
+                ticks: 100,
+                elapsed_s: 2.0,
+                overcurrent_observations: oc,
+                stall_events: oc / 10,
+                time_stalled_s: oc as f64 * 0.02,
+                distance_m: 1.0,
+                energy_j: 1000.0 + oc as f64,
+                efficiency_m_per_kj: Some(1.0 / (1.0 + oc as f64 / 1000.0)),
+            },
+            windows: windows
+                .iter()
+                .map(|&w| WindowCounts {
+                    overcurrent_observations: w,
+                    ..WindowCounts::default()
+                })
+                .collect(),
+            recording: None,
+            recorded: 0,
+            recorder_dropped: 0,
+            lagged: 0,
+            wall_s: 0.0,
+            first_predictive_stop_s: (mode == Mode::Pavlovian).then_some(4.0 + index as f64),
+            excerpt: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn comparisons_curve_and_benefit_follow_the_runs() {
+        let runs = vec![
+            run(0, Mode::Reactive, 100, &[50, 50, 60]),
+            run(1, Mode::Pavlovian, 60, &[55, 20, 30]),
+            run(2, Mode::Reactive, 110, &[50, 60, 50]),
+            run(3, Mode::Pavlovian, 50, &[60, 30, 20]),
+        ];
+        let a = analyse(&runs, 30.0);
+        let oc = &a.comparisons[0];
+        assert_eq!(oc.metric, "overcurrent_observations");
+        assert_eq!((oc.reactive.mean, oc.pavlovian.mean), (105.0, 55.0));
+        assert!((oc.relative_change.unwrap() + 50.0 / 105.0).abs() < 1e-12);
+        assert!(oc.welch.unwrap().t < 0.0);
+        assert_eq!(a.learning_curve.len(), 3);
+        assert_eq!(a.learning_curve[1].start_s, 30.0);
+        assert_eq!(a.learning_curve[0].pavlovian.mean, 57.5);
+        // Window 0: Pavlovian above reactive; from window 1 on, below.
+        assert_eq!(a.benefit_from_window, Some(1));
+        assert_eq!(a.first_predictive_stop_s.n, 2);
+        assert_eq!(a.first_predictive_stop_s.mean, 6.0);
+        assert_eq!(metric(&runs[0], "nope"), None);
+    }
+}

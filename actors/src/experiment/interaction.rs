@@ -307,3 +307,54 @@ pub fn latency_test(runs: &[InteractionRun]) -> Option<WelchTest> {
     };
     welch(&lat(Mode::Reactive), &lat(Mode::Pavlovian))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pavlov::control::Action;
+    use pavlov::record::{LinkSummary, SensorSummary};
+
+    fn rec(seq: u64, stimulus: bool) -> Arc<TickRecord> {
+        Arc::new(TickRecord {
+            seq,
+            t_ms: seq as f64 * 20.0,
+            mode: Mode::Pavlovian,
+            obs_age_ticks: Some(0),
+            sensors: SensorSummary::default(),
+            obs: Vec::new(),
+            elbow: None,
+            stimulus,
+            predictions: Vec::new(),
+            gate: stimulus,
+            default_action: Action::STOP,
+            command: Action::STOP,
+            safety_stop: None,
+            estop: false,
+            lateness_us: 0,
+            link: LinkSummary::default(),
+            inputs: None,
+        })
+    }
+
+    #[test]
+    fn onsets_are_debounced_and_need_room_for_the_aligned_window() {
+        // Stimulus at 10 (too early for the window), 100..110, a flicker at 115 (debounced), 200..205,
+        // and 300 (too late: the run ends at 320).
+        let on = |i: u64| {
+            i == 10 || (100..110).contains(&i) || i == 115 || (200..205).contains(&i) || i == 300
+        };
+        let records: Vec<Arc<TickRecord>> = (0..320).map(|i| rec(i, on(i))).collect();
+        assert_eq!(observed_onsets(&records), vec![100, 200]);
+    }
+
+    #[test]
+    fn run_seeds_differ_between_runs_and_between_robot_and_operator() {
+        let (r0, h0) = run_seeds(1, 0);
+        let (r1, h1) = run_seeds(1, 1);
+        assert_ne!(r0, h0);
+        assert_ne!(r0, r1);
+        assert_ne!(h0, h1);
+        assert_eq!(run_seeds(1, 0), (r0, h0));
+        assert_eq!(r0, crate::experiment::run_seed(1, 0));
+    }
+}

@@ -11,6 +11,7 @@
 pub mod analysis;
 pub mod cli;
 pub mod interaction;
+pub mod interaction_plots;
 pub mod interaction_report;
 pub mod plots;
 pub mod report;

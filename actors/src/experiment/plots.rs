@@ -310,3 +310,59 @@ pub fn learning_curve(path: &Path, a: &Analysis) -> Io {
         .map_err(err)?;
     root.present().map_err(err)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pavlov::control::Action;
+    use pavlov::record::{LinkSummary, SensorSummary};
+
+    fn rec(seq: u64, default_action: Action, oc: bool) -> TickRecord {
+        TickRecord {
+            seq,
+            t_ms: seq as f64 * 20.0,
+            mode: Mode::Reactive,
+            obs_age_ticks: Some(0),
+            sensors: SensorSummary {
+                overcurrent_left: oc,
+                ..SensorSummary::default()
+            },
+            obs: Vec::new(),
+            elbow: None,
+            stimulus: false,
+            predictions: Vec::new(),
+            gate: false,
+            default_action,
+            command: default_action,
+            safety_stop: None,
+            estop: false,
+            lateness_us: 0,
+            link: LinkSummary::default(),
+            inputs: None,
+        }
+    }
+
+    #[test]
+    fn the_push_window_ends_with_the_drive_phase_that_hit_a_wall() {
+        let turn = Action::new(100, -100);
+        let drive = Action::new(200, 200);
+        // turn 0..10 (over-current while turning: ignored), drive 10..30 (clean), turn 30..40,
+        // drive 40..60 with over-current at 55, turn 60..70.
+        let records: Vec<TickRecord> = (0..70u64)
+            .map(|i| {
+                let a = match i {
+                    0..10 | 30..40 | 60..70 => turn,
+                    _ => drive,
+                };
+                rec(i, a, i == 3 || i == 55)
+            })
+            .collect();
+        let w = push_window(&records, 15);
+        assert_eq!(w.first().map(|r| r.seq), Some(45));
+        assert_eq!(w.last().map(|r| r.seq), Some(59));
+        // No over-current while driving: the first records.
+        let quiet: Vec<TickRecord> = (0..20u64).map(|i| rec(i, drive, false)).collect();
+        assert_eq!(push_window(&quiet, 5).len(), 5);
+        assert!(push_window(&[], 5).is_empty());
+    }
+}
