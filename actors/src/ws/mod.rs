@@ -11,6 +11,7 @@
 //!
 //! Nothing here can delay the tick: the hub reads the tick feed's lossy broadcast, every client reads the
 //! hub's lossy broadcast into its own bounded queue, and only the client's own writer waits on its socket.
+//! All of it runs on a separate single-worker runtime, so it never occupies the control actors' workers.
 
 pub mod auth;
 pub mod client;
@@ -43,6 +44,9 @@ const CLIENT_SEND_BUFFER: usize = 64 * 1024;
 /// Errors starting the endpoint.
 #[derive(Debug, thiserror::Error)]
 pub enum DashboardError {
+    /// The dashboard's runtime could not be created.
+    #[error("cannot start the dashboard's runtime: {0}")]
+    Runtime(std::io::Error),
     /// The listen address could not be bound.
     #[error("cannot listen on {addr} for the dashboard: {source}")]
     Bind {
@@ -72,13 +76,25 @@ pub struct DashboardStats {
     pub records_missed: u64,
 }
 
-/// The running endpoint.
+/// The running endpoint. It runs on its own single-worker tokio runtime (thread `dashboard`), so that
+/// websocket work can neither occupy the control actors' runtime workers nor take more than one core.
 pub struct Dashboard {
     addr: SocketAddr,
     state: Arc<http::AppState>,
     cancel: CancellationToken,
-    http: JoinHandle<()>,
-    hub: JoinHandle<()>,
+    http: Option<JoinHandle<()>>,
+    hub: Option<JoinHandle<()>>,
+    runtime: Option<tokio::runtime::Runtime>,
+}
+
+impl Drop for Dashboard {
+    fn drop(&mut self) {
+        self.cancel.cancel();
+        if let Some(rt) = self.runtime.take() {
+            // Allowed inside an async context, unlike dropping the runtime.
+            rt.shutdown_background();
+        }
+    }
 }
 
 fn redacted_config(config: &pavlov::config::Config) -> serde_json::Value {
@@ -94,18 +110,23 @@ impl Dashboard {
     /// `web_dir/node_modules/uplot/dist`.
     pub async fn start(server: &Server, web_dir: PathBuf) -> Result<Dashboard, DashboardError> {
         let cfg = &server.config.dashboard;
-        let listener = tokio::net::TcpListener::bind(&cfg.bind)
-            .await
-            .map_err(|source| DashboardError::Bind {
-                addr: cfg.bind.clone(),
-                source,
-            })?;
-        let addr = listener
-            .local_addr()
-            .map_err(|source| DashboardError::Bind {
-                addr: cfg.bind.clone(),
-                source,
-            })?;
+        let bind_error = |source| DashboardError::Bind {
+            addr: cfg.bind.clone(),
+            source,
+        };
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .thread_name("dashboard")
+            .enable_all()
+            .build()
+            .map_err(DashboardError::Runtime)?;
+        let std_listener = std::net::TcpListener::bind(&cfg.bind).map_err(bind_error)?;
+        std_listener.set_nonblocking(true).map_err(bind_error)?;
+        let addr = std_listener.local_addr().map_err(bind_error)?;
+        let listener = {
+            let _inside = runtime.enter();
+            tokio::net::TcpListener::from_std(std_listener).map_err(bind_error)?
+        };
         if !http::uplot_installed(&web_dir) {
             tracing::error!(
                 "the dashboard's chart library is missing ({}): {}",
@@ -143,7 +164,7 @@ impl Dashboard {
             rejected: AtomicU64::new(0),
             cancel: cancel.clone(),
         });
-        let hub = tokio::spawn(hub::run(
+        let hub = runtime.spawn(hub::run(
             hub,
             server.feed.subscribe(),
             HealthSources {
@@ -160,7 +181,7 @@ impl Dashboard {
         });
         let app = http::router(state.clone());
         let shutdown = cancel.clone();
-        let http = tokio::spawn(async move {
+        let http = runtime.spawn(async move {
             let serve =
                 axum::serve(listener, app).with_graceful_shutdown(shutdown.cancelled_owned());
             if let Err(e) = serve.await {
@@ -172,8 +193,9 @@ impl Dashboard {
             addr,
             state,
             cancel,
-            http,
-            hub,
+            http: Some(http),
+            hub: Some(hub),
+            runtime: Some(runtime),
         })
     }
 
@@ -210,9 +232,13 @@ impl Dashboard {
     }
 
     /// Closes every connection (code 1001) and stops listening.
-    pub async fn shutdown(self) {
+    pub async fn shutdown(mut self) {
         self.cancel.cancel();
-        let _ = tokio::time::timeout(Duration::from_secs(3), self.http).await;
-        let _ = self.hub.await;
+        if let Some(http) = self.http.take() {
+            let _ = tokio::time::timeout(Duration::from_secs(3), http).await;
+        }
+        if let Some(hub) = self.hub.take() {
+            let _ = tokio::time::timeout(Duration::from_secs(3), hub).await;
+        }
     }
 }
