@@ -273,6 +273,9 @@ async fn serve(
     };
     println!("pavlov is driving {robot_name}; press Ctrl-C to stop");
     println!("dashboard: {}", dash.url());
+    if server.config.dashboard.token.is_some() {
+        println!("dashboard commands need the token: open {}#token=<your token>", dash.url());
+    }
     if let Some(sk) = &server.skeleton {
         println!(
             "skeleton: listening for {} on udp://{}",
