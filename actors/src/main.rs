@@ -274,7 +274,10 @@ async fn serve(
     println!("pavlov is driving {robot_name}; press Ctrl-C to stop");
     println!("dashboard: {}", dash.url());
     if server.config.dashboard.token.is_some() {
-        println!("dashboard commands need the token: open {}#token=<your token>", dash.url());
+        println!(
+            "dashboard commands need the token: open {}#token=<your token>",
+            dash.url()
+        );
     }
     if let Some(sk) = &server.skeleton {
         println!(
