@@ -21,7 +21,8 @@ use tokio_util::sync::CancellationToken;
 
 use super::auth::{AccessPolicy, presented_token};
 use super::hub::{HubCounters, HubHandle};
-use super::protocol::{Hello, Limits, SUBPROTOCOL, Signals};
+use super::messages::{Hello, Limits, Signals};
+use super::protocol::SUBPROTOCOL;
 use super::session::{Session, SessionCounters};
 use crate::command::ControlRequest;
 

@@ -14,7 +14,8 @@ use pavlov::record::TickRecord;
 use tokio::sync::{broadcast, watch};
 use tokio_util::sync::CancellationToken;
 
-use super::protocol::{Health, STATUS_EVERY_TICKS, StatusMessage, TickMessage};
+use super::messages::{Health, StatusMessage, TickMessage};
+use super::protocol::STATUS_EVERY_TICKS;
 use crate::actuation::ActuationStats;
 use crate::link::writer::SharedWriterStats;
 use crate::ticker::SharedTickStats;

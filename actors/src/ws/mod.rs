@@ -1,7 +1,8 @@
 //! The dashboard endpoint: one HTTP port that serves the browser dashboard (`/`), a health check
 //! (`/healthz`) and the websocket (`/ws`) that streams every tick and takes commands.
 //!
-//! - [`protocol`]: the JSON messages (see `web/PROTOCOL.md`) and the parsing of client commands;
+//! - [`protocol`]: the client commands (see `web/PROTOCOL.md`), parsed with precise errors, and the replies;
+//! - [`messages`]: the server's `hello`, `tick` and `status` messages;
 //! - [`hub`]: serialises each tick once and fans it out, and keeps the run counters;
 //! - [`client`]: each client's bounded, drop-oldest queue and its tick-rate decimation;
 //! - [`session`]: one connection's reader, writer and forwarder;
@@ -18,6 +19,7 @@ pub mod client;
 pub mod http;
 pub mod hub;
 pub mod load;
+pub mod messages;
 pub mod protocol;
 pub mod session;
 
@@ -34,7 +36,7 @@ use tokio_util::sync::CancellationToken;
 use crate::server::Server;
 use auth::AccessPolicy;
 use hub::{HealthSources, Hub, HubCounters};
-use protocol::Signals;
+use messages::Signals;
 use session::SessionCounters;
 
 /// Kernel send buffer of each client socket. Kept small so that a slow client's backlog sits in its
