@@ -258,6 +258,22 @@ impl SkeletonConfig {
     }
 }
 
+/// `[checkpoint]`: where learned weights are saved.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CheckpointConfig {
+    /// Directory that `save_weights` writes into; a client names only the file.
+    pub dir: String,
+}
+
+impl Default for CheckpointConfig {
+    fn default() -> Self {
+        CheckpointConfig {
+            dir: "weights".into(),
+        }
+    }
+}
+
 /// The whole configuration file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -281,6 +297,9 @@ pub struct Config {
     /// `[dashboard]`.
     #[serde(default)]
     pub dashboard: DashboardConfig,
+    /// `[checkpoint]`.
+    #[serde(default)]
+    pub checkpoint: CheckpointConfig,
     /// `[skeleton]`.
     #[serde(default)]
     pub skeleton: SkeletonConfig,
@@ -335,6 +354,9 @@ impl Config {
             }
         }
         self.skeleton.validate()?;
+        if self.checkpoint.dir.trim().is_empty() {
+            return Err(invalid("checkpoint.dir", "must name a directory"));
+        }
         let d = &self.dashboard;
         let bind: std::net::SocketAddr = d.bind.parse().map_err(|_| {
             invalid(

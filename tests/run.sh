@@ -20,6 +20,8 @@ fi
 if [ -f web/package-lock.json ]; then
   step "installing the dashboard's npm packages (npm ci)"
   npm ci --prefix web --no-audit --no-fund --loglevel=error
+  step "dashboard JavaScript unit tests (node --test)"
+  npm test --prefix web
 fi
 
 step "cargo fmt --check"

@@ -568,7 +568,9 @@ async fn manual_mode_and_teleop_drive_the_wheels() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn learning_commands_are_applied() {
-    let lab = start().await;
+    let dir = tempdir::TempDir::new("weights");
+    let weights_dir = dir.path().to_path_buf();
+    let lab = start_with(move |cfg| cfg.checkpoint.dir = weights_dir.display().to_string()).await;
     let (mut ws, _) = lab.connect().await;
     let ack = command(
         &mut ws,
@@ -585,15 +587,19 @@ async fn learning_commands_are_applied() {
     assert_eq!(ack["type"], "ack", "{ack}");
     let ack = command(&mut ws, json!({"cmd":"reset_weights"}), 3).await;
     assert_eq!(ack["type"], "ack", "{ack}");
-    let dir = tempdir::TempDir::new("weights");
     let path = dir.path().join("w.json");
-    let ack = command(
+    let ack = command(&mut ws, json!({"cmd":"save_weights","path":"w.json"}), 4).await;
+    assert_eq!(ack["type"], "ack", "{ack}");
+    // A client names a file, never a place on the server's disk.
+    let outside = command(
         &mut ws,
-        json!({"cmd":"save_weights","path":path.to_str().unwrap()}),
-        4,
+        json!({"cmd":"save_weights","path":"/tmp/evil.json"}),
+        5,
     )
     .await;
-    assert_eq!(ack["type"], "ack", "{ack}");
+    assert_eq!(outside["type"], "error", "{outside}");
+    let up = command(&mut ws, json!({"cmd":"save_weights","path":"../w.json"}), 6).await;
+    assert_eq!(up["type"], "error", "{up}");
     let deadline = std::time::Instant::now() + WAIT;
     while !path.exists() && std::time::Instant::now() < deadline {
         tokio::time::sleep(Duration::from_millis(20)).await;

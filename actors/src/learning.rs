@@ -37,6 +37,17 @@ pub struct Learning {
     elbows: Option<ElbowFeatureTracker>,
     request_until: u64,
     period_ms: u64,
+    checkpoint_dir: std::path::PathBuf,
+}
+
+/// True for a bare file name: no directories, no `..`, nothing hidden.
+fn is_plain_file_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 128
+        && !name.starts_with('.')
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-'))
 }
 
 impl Learning {
@@ -51,6 +62,7 @@ impl Learning {
             elbows: uses_skeleton.then(ElbowFeatureTracker::new),
             request_until: 0,
             period_ms: config.tick.period_ms.max(1),
+            checkpoint_dir: config.checkpoint.dir.clone().into(),
         })
     }
 
@@ -80,17 +92,28 @@ impl Learning {
                 Ok(serde_json::json!({ "reset": true }))
             }
             ControlCommand::SaveWeights { path } => {
-                let path = path.unwrap_or_else(|| "pavlov-weights.json".to_string());
+                // A client names a file, never a place: it is written inside `[checkpoint] dir`.
+                let name = path.unwrap_or_else(|| format!("weights-tick{seq}.json"));
+                if !is_plain_file_name(&name) {
+                    return Err(format!(
+                        "save_weights takes a file name (letters, digits, '.', '_', '-'; not starting with '.'), \
+                         written into the checkpoint directory `{}`; got `{name}`",
+                        self.checkpoint_dir.display()
+                    ));
+                }
+                let path = self.checkpoint_dir.join(&name);
                 let snapshot = self.stage.snapshot();
                 let json = serde_json::to_vec_pretty(&snapshot).map_err(|e| e.to_string())?;
                 // The disk is not touched on the tick path: the write happens on the blocking pool.
-                let p = path.clone();
+                let (dir, p) = (self.checkpoint_dir.clone(), path.clone());
                 tokio::task::spawn_blocking(move || {
-                    if let Err(e) = std::fs::write(&p, json) {
-                        tracing::error!("could not save weights to {p}: {e}");
+                    if let Err(e) =
+                        std::fs::create_dir_all(&dir).and_then(|()| std::fs::write(&p, json))
+                    {
+                        tracing::error!("could not save weights to {}: {e}", p.display());
                     }
                 });
-                Ok(serde_json::json!({ "path": path }))
+                Ok(serde_json::json!({ "path": path.display().to_string() }))
             }
             other => Err(format!("learning cannot apply {other:?}")),
         }
@@ -141,6 +164,30 @@ pub async fn run(
                     tracing::error!("learning step failed: {e}");
                 }
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_plain_file_name;
+
+    #[test]
+    fn only_plain_file_names_are_accepted() {
+        for ok in ["w.json", "run-3_weights.json", "a"] {
+            assert!(is_plain_file_name(ok), "{ok}");
+        }
+        for bad in [
+            "",
+            "../x.json",
+            "/etc/passwd",
+            "a/b.json",
+            ".hidden",
+            "..",
+            "x y",
+            "ü.json",
+        ] {
+            assert!(!is_plain_file_name(bad), "{bad}");
         }
     }
 }
