@@ -143,29 +143,10 @@ pub struct MetricsSummary {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::{Action, Mode};
-    use crate::record::{LinkSummary, SensorSummary};
+    use crate::control::Mode;
 
     fn record(seq: u64, t_ms: f64) -> TickRecord {
-        TickRecord {
-            seq,
-            t_ms,
-            mode: Mode::Pavlovian,
-            obs_age_ticks: Some(0),
-            sensors: SensorSummary::default(),
-            obs: Vec::new(),
-            elbow: None,
-            stimulus: false,
-            predictions: Vec::new(),
-            gate: false,
-            default_action: Action::STOP,
-            command: Action::STOP,
-            safety_stop: None,
-            estop: false,
-            lateness_us: 0,
-            link: LinkSummary::default(),
-            inputs: None,
-        }
+        TickRecord::at_rest(seq, t_ms, Mode::Pavlovian)
     }
 
     #[test]

@@ -153,3 +153,30 @@ mod nan_as_null {
         Ok(opts.into_iter().map(|x| x.unwrap_or(f32::NAN)).collect())
     }
 }
+
+impl TickRecord {
+    /// A record of a tick on which nothing happened: the robot at rest, no observation values, no
+    /// predictions, no stimulus. Tests and tools build the records they need from it with struct update
+    /// syntax (`TickRecord { stimulus: true, ..TickRecord::at_rest(7, 140.0, mode) }`).
+    pub fn at_rest(seq: u64, t_ms: f64, mode: Mode) -> TickRecord {
+        TickRecord {
+            seq,
+            t_ms,
+            mode,
+            obs_age_ticks: Some(0),
+            sensors: SensorSummary::default(),
+            obs: Vec::new(),
+            elbow: None,
+            stimulus: false,
+            predictions: Vec::new(),
+            gate: false,
+            default_action: Action::STOP,
+            command: Action::STOP,
+            safety_stop: None,
+            estop: false,
+            lateness_us: 0,
+            link: LinkSummary::default(),
+            inputs: None,
+        }
+    }
+}

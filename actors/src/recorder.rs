@@ -242,28 +242,12 @@ impl Writer {
 mod tests {
     use super::*;
     use pavlov::config::Config;
-    use pavlov::control::{Action, Mode};
-    use pavlov::record::{LinkSummary, SensorSummary};
+    use pavlov::control::Mode;
 
     fn record(seq: u64) -> Arc<TickRecord> {
         Arc::new(TickRecord {
-            seq,
-            t_ms: seq as f64 * 20.0,
-            mode: Mode::Pavlovian,
-            obs_age_ticks: Some(0),
-            sensors: SensorSummary::default(),
             obs: vec![0.5],
-            elbow: None,
-            stimulus: false,
-            predictions: Vec::new(),
-            gate: false,
-            default_action: Action::STOP,
-            command: Action::STOP,
-            safety_stop: None,
-            estop: false,
-            lateness_us: 0,
-            link: LinkSummary::default(),
-            inputs: None,
+            ..TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Pavlovian)
         })
     }
 

@@ -311,28 +311,12 @@ pub fn latency_test(runs: &[InteractionRun]) -> Option<WelchTest> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use pavlov::control::Action;
-    use pavlov::record::{LinkSummary, SensorSummary};
 
     fn rec(seq: u64, stimulus: bool) -> Arc<TickRecord> {
         Arc::new(TickRecord {
-            seq,
-            t_ms: seq as f64 * 20.0,
-            mode: Mode::Pavlovian,
-            obs_age_ticks: Some(0),
-            sensors: SensorSummary::default(),
-            obs: Vec::new(),
-            elbow: None,
             stimulus,
-            predictions: Vec::new(),
             gate: stimulus,
-            default_action: Action::STOP,
-            command: Action::STOP,
-            safety_stop: None,
-            estop: false,
-            lateness_us: 0,
-            link: LinkSummary::default(),
-            inputs: None,
+            ..TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Pavlovian)
         })
     }
 
