@@ -18,6 +18,8 @@
 
 use serde::Serialize;
 
+pub mod live;
+
 /// Whether the fixed response was executing at one tick.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ResponseSample {

@@ -23,6 +23,7 @@ use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 type Ws = WebSocketStream<MaybeTlsStream<TcpStream>>;
 
 const STALL_CONFIG: &str = include_str!("../config/stall.toml");
+const INTERACTION_CONFIG: &str = include_str!("../config/interaction.toml");
 const WAIT: Duration = Duration::from_secs(5);
 
 struct Lab {
@@ -75,7 +76,11 @@ fn fake_web_dir() -> tempdir::TempDir {
 }
 
 async fn start_with(edit: impl FnOnce(&mut Config)) -> Lab {
-    let mut cfg = Config::from_toml(STALL_CONFIG).unwrap();
+    start_from(STALL_CONFIG, edit).await
+}
+
+async fn start_from(toml: &str, edit: impl FnOnce(&mut Config)) -> Lab {
+    let mut cfg = Config::from_toml(toml).unwrap();
     cfg.dashboard.bind = "127.0.0.1:0".into();
     edit(&mut cfg);
     cfg.validate().unwrap();
@@ -325,6 +330,28 @@ async fn ticks_stream_at_the_tick_rate_with_every_field() {
     assert!(status["counters"]["ticks"].as_u64().unwrap() > 50);
     assert!(status["counters"]["distance_m"].is_number());
     assert_eq!(status["clients"], 1);
+    assert!(
+        status.get("interaction").is_none(),
+        "the stall run has no commands: {status}"
+    );
+    lab.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn statuses_of_the_gesture_command_run_carry_the_interaction_metrics() {
+    // No skeleton socket: the stimulus stays off, so every figure is zero but present.
+    let lab = start_from(INTERACTION_CONFIG, |c| c.skeleton.enabled = Some(false)).await;
+    let (mut ws, _) = lab.connect().await;
+    let status = next_of(&mut ws, "status").await;
+    let i = &status["interaction"];
+    for key in ["commands", "early", "missed", "false_starts"] {
+        assert!(i[key].is_u64(), "`interaction.{key}` in {status}");
+    }
+    assert_eq!(i["commands"], 0, "{i}");
+    assert!(
+        i["mean_lead_ms"].is_null() && i["last_lead_ms"].is_null(),
+        "{i}"
+    );
     lab.stop().await;
 }
 

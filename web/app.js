@@ -2,7 +2,7 @@
 // run counters and tick health, and sends commands (mode, e-stop, teleop, request, learning, recording).
 
 import {
-  Backoff, GapCounter, Window, connectionTarget, fmt, fmtDuration, parseParam, teleopWheels, tokenFromHash,
+  Backoff, GapCounter, Window, connectionTarget, fmt, fmtDuration, fmtLead, parseParam, teleopWheels, tokenFromHash,
 } from './lib.js';
 
 const WINDOW_SECONDS = 30;
@@ -207,6 +207,14 @@ function onStatus(s) {
   $('h-skipped').className = h.ticks_skipped > 0 ? 'warn' : '';
   $('h-t2c').textContent = fmt(h.tick_to_command_p99_us, 0, 'µs');
   $('h-missed').textContent = `${fmt(state.gaps.missing)} / ${fmt(s.clients)}`;
+  const i = s.interaction;
+  $('commands-group').hidden = !i;
+  if (i) {
+    $('i-commands').textContent = `${fmt(i.commands)} (${fmt(i.missed)} missed)`;
+    $('i-early').textContent = fmt(i.early);
+    $('i-lead').textContent = fmtLead(i.mean_lead_ms);
+    $('i-false-starts').textContent = fmt(i.false_starts);
+  }
 }
 
 function onAck(a) {

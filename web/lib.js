@@ -122,6 +122,14 @@ export function fmt(value, digits = 0, unit = '') {
   return unit ? `${s} ${unit}` : s;
 }
 
+/** Formats a response lead in ms with its sign (`+` = the response came before the command); `—` when missing. */
+export function fmtLead(ms) {
+  if (ms === null || ms === undefined || Number.isNaN(ms)) return '—';
+  const r = Math.round(ms);
+  const sign = r > 0 ? '+' : r < 0 ? '−' : '';
+  return `${sign}${Math.abs(r).toLocaleString('en-US')} ms`;
+}
+
 /** Formats seconds as `m:ss` or `h:mm:ss`. */
 export function fmtDuration(seconds) {
   if (seconds === null || seconds === undefined || Number.isNaN(seconds)) return '—';

@@ -3,7 +3,7 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  Backoff, GapCounter, SUBPROTOCOL, Window, connectionTarget, fmt, fmtDuration, parseParam, teleopWheels, tokenFromHash,
+  Backoff, GapCounter, SUBPROTOCOL, Window, connectionTarget, fmt, fmtDuration, fmtLead, parseParam, teleopWheels, tokenFromHash,
 } from '../lib.js';
 
 test('the token comes from the URL fragment', () => {
@@ -79,4 +79,11 @@ test('learning parameters are checked before they are sent', () => {
   assert.deepEqual(parseParam(' 0.1 ', 'α', 0, 1), { value: 0.1 });
   assert.match(parseParam('abc', 'α', 0, 1).error, /number/);
   assert.match(parseParam('2', 'λ', 0, 1).error, /between 0 and 1/);
+});
+
+test('response leads show their sign: + before the command, − after', () => {
+  assert.equal(fmtLead(120.4), '+120 ms');
+  assert.equal(fmtLead(-1500), '−1,500 ms');
+  assert.equal(fmtLead(0.2), '0 ms');
+  assert.equal(fmtLead(null), '—');
 });

@@ -9,6 +9,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
 use axum::extract::ws::Utf8Bytes;
+use pavlov::interaction_metrics::live::LiveInteraction;
 use pavlov::metrics::RunMetrics;
 use pavlov::record::TickRecord;
 use tokio::sync::{broadcast, watch};
@@ -91,19 +92,23 @@ impl HubHandle {
     }
 }
 
-/// The hub's state: the run counters over every record seen.
+/// The hub's state: the run counters over every record seen, and the live interaction metrics when the
+/// stimulus is the gesture command.
 pub struct Hub {
     metrics: RunMetrics,
+    interaction: Option<LiveInteraction>,
     tx: broadcast::Sender<Outgoing>,
 }
 
 impl Hub {
-    /// A hub for a run ticking every `period_ms`, and the handle clients subscribe with.
-    pub fn new(period_ms: f64) -> (Hub, HubHandle) {
+    /// A hub for a run ticking every `period_ms`, and the handle clients subscribe with. With
+    /// `track_interaction` (the stimulus is the left-elbow command) the statuses carry `interaction`.
+    pub fn new(period_ms: f64, track_interaction: bool) -> (Hub, HubHandle) {
         let (tx, _) = broadcast::channel(HUB_CAPACITY);
         (
             Hub {
                 metrics: RunMetrics::new(period_ms),
+                interaction: track_interaction.then(LiveInteraction::new),
                 tx: tx.clone(),
             },
             HubHandle { tx },
@@ -118,6 +123,9 @@ impl Hub {
         clients: usize,
     ) {
         self.metrics.observe(record);
+        if let Some(live) = &mut self.interaction {
+            live.observe(record);
+        }
         let text = Utf8Bytes::from(TickMessage::new(record).to_json());
         // An error only means no client is connected.
         let _ = self.tx.send(Outgoing::Tick {
@@ -127,7 +135,10 @@ impl Hub {
         if record.seq % STATUS_EVERY_TICKS == 0 {
             let health = health();
             let counters = self.metrics.summary();
-            let status = StatusMessage::new(record.seq, &health, &counters, clients).to_json();
+            let interaction = self.interaction.as_ref().map(LiveInteraction::summary);
+            let status = StatusMessage::new(record.seq, &health, &counters, clients)
+                .with_interaction(interaction.as_ref())
+                .to_json();
             let _ = self.tx.send(Outgoing::Status(Utf8Bytes::from(status)));
         }
     }
@@ -198,7 +209,7 @@ mod tests {
 
     #[test]
     fn every_record_becomes_a_tick_and_every_tenth_a_status_with_counters() {
-        let (mut hub, handle) = Hub::new(20.0);
+        let (mut hub, handle) = Hub::new(20.0, false);
         let mut rx = handle.subscribe();
         for seq in 0..21 {
             hub.on_record(&record(seq), Health::default, 3);
@@ -226,5 +237,30 @@ mod tests {
         assert_eq!(last["counters"]["ticks"], 21);
         assert_eq!(last["counters"]["overcurrent_observations"], 11);
         assert_eq!(hub.metrics().ticks, 21);
+        assert!(last.get("interaction").is_none(), "{last}");
+    }
+
+    #[test]
+    fn an_interaction_hub_reports_commands_and_leads_in_its_statuses() {
+        let (mut hub, handle) = Hub::new(20.0, true);
+        let mut rx = handle.subscribe();
+        for seq in 0..21 {
+            let mut r = record(seq);
+            // The gate engages at tick 5, the stimulus at tick 8: one command answered 60 ms early.
+            r.gate = seq >= 5;
+            r.stimulus = seq >= 8;
+            hub.on_record(&r, Health::default, 1);
+        }
+        let mut last = None;
+        while let Ok(m) = rx.try_recv() {
+            if let Outgoing::Status(text) = m {
+                last = Some(serde_json::from_str::<serde_json::Value>(&text).unwrap());
+            }
+        }
+        let i = &last.unwrap()["interaction"];
+        assert_eq!(i["commands"], 1, "{i}");
+        assert_eq!(i["early"], 1, "{i}");
+        assert_eq!(i["false_starts"], 0, "{i}");
+        assert_eq!(i["mean_lead_ms"], 60.0, "{i}");
     }
 }

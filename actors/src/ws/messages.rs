@@ -2,6 +2,7 @@
 //! `status`, serialised straight from the records and counters they describe.
 
 use pavlov::control::{Action, Mode};
+use pavlov::interaction_metrics::live::LiveInteractionSummary;
 use pavlov::metrics::MetricsSummary;
 use pavlov::record::{
     ElbowSummary, LinkSummary, PredictionValue, SafetyStop, SensorSummary, TickRecord,
@@ -104,7 +105,8 @@ pub struct Health {
     pub actuation: ActuationStats,
 }
 
-/// A `status` message: health, run counters and the number of connected clients.
+/// A `status` message: health, run counters, the number of connected clients and, in the gesture-command
+/// experiment, the live interaction metrics.
 #[derive(Serialize)]
 pub struct StatusMessage<'a> {
     #[serde(rename = "type")]
@@ -113,6 +115,8 @@ pub struct StatusMessage<'a> {
     health: &'a Health,
     counters: &'a MetricsSummary,
     clients: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    interaction: Option<&'a LiveInteractionSummary>,
 }
 
 impl<'a> StatusMessage<'a> {
@@ -124,7 +128,14 @@ impl<'a> StatusMessage<'a> {
             health,
             counters,
             clients,
+            interaction: None,
         }
+    }
+
+    /// Adds the live interaction metrics (absent from the JSON when `None`).
+    pub fn with_interaction(mut self, interaction: Option<&'a LiveInteractionSummary>) -> Self {
+        self.interaction = interaction;
+        self
     }
 
     /// The JSON text.

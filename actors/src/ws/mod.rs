@@ -138,7 +138,11 @@ impl Dashboard {
         }
         let cancel = CancellationToken::new();
         let period_ms = server.config.tick.period_ms;
-        let (hub, hub_handle) = Hub::new(period_ms as f64);
+        let gesture_commands = matches!(
+            server.config.control.stimulus,
+            pavlov::config::StimulusSpec::LeftElbow { .. }
+        );
+        let (hub, hub_handle) = Hub::new(period_ms as f64, gesture_commands);
         let hub_counters = Arc::new(HubCounters::default());
         let state = Arc::new(http::AppState {
             policy: AccessPolicy::new(cfg, addr),
