@@ -179,31 +179,17 @@ pub async fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use pavlov::control::{Action, Mode};
-    use pavlov::record::{LinkSummary, SensorSummary};
+    use pavlov::control::Mode;
+    use pavlov::record::SensorSummary;
 
     fn record(seq: u64) -> TickRecord {
         TickRecord {
-            seq,
-            t_ms: seq as f64 * 20.0,
-            mode: Mode::Reactive,
-            obs_age_ticks: Some(0),
             sensors: SensorSummary {
                 overcurrent_left: seq % 2 == 0,
                 ..Default::default()
             },
             obs: vec![0.0; 3],
-            elbow: None,
-            stimulus: false,
-            predictions: Vec::new(),
-            gate: false,
-            default_action: Action::STOP,
-            command: Action::STOP,
-            safety_stop: None,
-            estop: false,
-            lateness_us: 0,
-            link: LinkSummary::default(),
-            inputs: None,
+            ..TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Reactive)
         }
     }
 
