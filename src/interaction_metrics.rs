@@ -19,6 +19,8 @@
 use serde::Serialize;
 
 pub mod live;
+pub mod live_physical;
+pub mod physical;
 
 /// Whether the fixed response was executing at one tick.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -147,7 +149,7 @@ pub fn response_onsets(samples: &[ResponseSample]) -> Vec<f64> {
     onsets
 }
 
-fn window(c: &CommandWindow, p: &MatchParams) -> (f64, f64) {
+pub(crate) fn window(c: &CommandWindow, p: &MatchParams) -> (f64, f64) {
     (
         c.onset_ms - p.anticipation_ms,
         c.end_ms.max(c.onset_ms) + p.max_lag_ms,

@@ -39,7 +39,7 @@ fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
             &s.aligned,
             s.runs
                 .iter()
-                .map(|r| (&r.metrics, &r.commands))
+                .map(|r| (&r.metrics, &r.commands, &r.physical))
                 .collect::<Vec<_>>(),
         ))
         .unwrap()
@@ -125,4 +125,18 @@ fn after_an_hour_the_pavlovian_control_responds_earlier_with_few_false_starts() 
         pavlovian.false_starts_per_minute
     );
     assert_eq!(pavlovian.missed, 0);
+    // The physical response (battery current drop) follows the decision: earlier too.
+    println!(
+        "current latency: Pavlovian {:.1} ± {:.1} ms vs reactive {:.1} ± {:.1} ms; motion latency: \
+         Pavlovian {:.1} ± {:.1} ms vs reactive {:.1} ± {:.1} ms",
+        pavlovian.current_latency_ms.mean,
+        pavlovian.current_latency_ms.se,
+        reactive.current_latency_ms.mean,
+        reactive.current_latency_ms.se,
+        pavlovian.motion_latency_ms.mean,
+        pavlovian.motion_latency_ms.se,
+        reactive.motion_latency_ms.mean,
+        reactive.motion_latency_ms.se
+    );
+    assert!(pavlovian.current_latency_ms.mean < reactive.current_latency_ms.mean);
 }

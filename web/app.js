@@ -213,6 +213,8 @@ function onStatus(s) {
     $('i-commands').textContent = `${fmt(i.commands)} (${fmt(i.missed)} missed)`;
     $('i-early').textContent = fmt(i.early);
     $('i-lead').textContent = fmtLead(i.mean_lead_ms);
+    $('i-current-lead').textContent = fmtLead(i.mean_current_lead_ms);
+    $('i-motion-lead').textContent = fmtLead(i.mean_motion_lead_ms);
     $('i-false-starts').textContent = fmt(i.false_starts);
   }
 }

@@ -18,6 +18,7 @@ use std::collections::VecDeque;
 
 use serde::Serialize;
 
+use super::live_physical::LivePhysical;
 use crate::record::TickRecord;
 
 /// Half-width of a command's window, ms.
@@ -41,6 +42,11 @@ pub struct LiveInteractionSummary {
     pub last_lead_ms: Option<f64>,
     /// Mean lead of the answered commands among the last [`RECENT_COMMANDS`] resolved ones, ms.
     pub mean_lead_ms: Option<f64>,
+    /// Mean lead of the battery current's drop over the last [`RECENT_COMMANDS`] commands, ms (positive =
+    /// before the stimulus; [`super::live_physical`]); only from [`LiveInteraction::observe`].
+    pub mean_current_lead_ms: Option<f64>,
+    /// Mean lead of the wheels' motion onset, the same way, ms.
+    pub mean_motion_lead_ms: Option<f64>,
 }
 
 /// The live tracker.
@@ -52,6 +58,7 @@ pub struct LiveInteraction {
     unmatched_responses_ms: VecDeque<f64>,
     recent_leads: VecDeque<Option<f64>>,
     summary: LiveInteractionSummary,
+    physical: LivePhysical,
 }
 
 impl LiveInteraction {
@@ -63,6 +70,7 @@ impl LiveInteraction {
     /// Feeds one tick record.
     pub fn observe(&mut self, record: &TickRecord) {
         self.observe_tick(record.t_ms, record.stimulus, record.gate);
+        self.physical.observe(record);
     }
 
     /// Feeds one tick: its time (ms, non-decreasing), the stimulus and the gate.
@@ -80,7 +88,11 @@ impl LiveInteraction {
 
     /// The figures so far.
     pub fn summary(&self) -> LiveInteractionSummary {
-        self.summary
+        LiveInteractionSummary {
+            mean_current_lead_ms: self.physical.mean_current_lead_ms(),
+            mean_motion_lead_ms: self.physical.mean_motion_lead_ms(),
+            ..self.summary
+        }
     }
 
     fn expire(&mut self, t_ms: f64) {

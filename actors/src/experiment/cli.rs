@@ -131,12 +131,7 @@ pub fn experiment(args: ExperimentArgs) -> Result<()> {
                     .out
                     .unwrap_or_else(|| PathBuf::from(format!("results/interaction-{}", a.seed))),
             };
-            eprintln!(
-                "running {} interaction runs of {} min…",
-                2 * opts.runs_per_policy,
-                opts.minutes
-            );
-            let summary = super::interaction_report::run_study(&config, &opts)?;
+            let summary = super::interaction_report::run_study_with_progress(&config, &opts, true)?;
             super::interaction_report::write_all(&opts.out, &summary)?;
             print!("{}", super::interaction_report::table(&summary));
             println!("results: {}", opts.out.display());

@@ -13,6 +13,8 @@ use std::sync::Arc;
 
 use pavlov::config::Config;
 use pavlov::control::Mode;
+use pavlov::interaction_metrics::live_physical::physical_sample;
+use pavlov::interaction_metrics::physical::{PhysicalLatency, PhysicalParams, measure_physical};
 use pavlov::interaction_metrics::{
     CommandWindow, InteractionMetrics, MatchParams, ResponseSample, measure,
 };
@@ -54,6 +56,9 @@ pub struct InteractionRun {
     pub metrics: InteractionMetrics,
     /// The ground-truth commands.
     pub commands: Vec<CommandWindow>,
+    /// Per command: when the battery current dropped and the wheels moved, relative to its onset
+    /// ([`pavlov::interaction_metrics::physical`]).
+    pub physical: Vec<PhysicalLatency>,
     /// Ticks of the observed command onsets used for the aligned averages.
     pub aligned_onsets: Vec<u64>,
     /// The recording, if written.
@@ -153,6 +158,13 @@ pub fn run(
         .filter(|c| c.onset_ms <= end_ms)
         .collect();
     let metrics = measure(&samples, &commands, &MatchParams::default());
+    let physical_samples: Vec<_> = records.iter().map(|r| physical_sample(r)).collect();
+    let physical = measure_physical(
+        &physical_samples,
+        &commands,
+        &MatchParams::default(),
+        &PhysicalParams::default(),
+    );
     let aligned_onsets = observed_onsets(&records)
         .into_iter()
         .rev()
@@ -166,6 +178,7 @@ pub fn run(
         human_seed,
         metrics,
         commands,
+        physical,
         aligned_onsets,
         recording: report.files.first().cloned(),
         wall_s: wall.elapsed().as_secs_f64(),
@@ -266,6 +279,10 @@ pub struct PolicyTiming {
     pub commands: usize,
     /// Latency of the response onset from the command onset, ms (answered commands).
     pub latency_ms: Describe,
+    /// Latency of the battery current's drop from the command onset, ms (commands with one).
+    pub current_latency_ms: Describe,
+    /// Latency of the wheels' motion onset from the command onset, ms (commands with one).
+    pub motion_latency_ms: Describe,
     /// Commands answered before their onset.
     pub anticipated: usize,
     /// Commands with no response.
@@ -280,12 +297,19 @@ pub struct PolicyTiming {
 pub fn timing(runs: &[InteractionRun], mode: Mode) -> PolicyTiming {
     let mine: Vec<&InteractionRun> = runs.iter().filter(|r| r.mode == mode).collect();
     let latencies: Vec<f64> = mine.iter().flat_map(|r| r.metrics.latencies_ms()).collect();
+    let physical = |pick: fn(&PhysicalLatency) -> Option<f64>| -> Vec<f64> {
+        mine.iter()
+            .flat_map(|r| r.physical.iter().filter_map(pick))
+            .collect()
+    };
     let minutes: f64 = mine.iter().map(|r| r.metrics.duration_ms / 60_000.0).sum();
     let per_min = |x: f64| if minutes > 0.0 { x / minutes } else { 0.0 };
     PolicyTiming {
         policy: mode_name(mode).into(),
         commands: mine.iter().map(|r| r.commands.len()).sum(),
         latency_ms: describe(&latencies),
+        current_latency_ms: describe(&physical(|l| l.current_ms)),
+        motion_latency_ms: describe(&physical(|l| l.motion_ms)),
         anticipated: mine.iter().map(|r| r.metrics.anticipated()).sum(),
         missed: mine.iter().map(|r| r.metrics.missed()).sum(),
         false_starts_per_minute: per_min(mine.iter().map(|r| r.metrics.false_starts as f64).sum()),

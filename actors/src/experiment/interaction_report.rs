@@ -51,8 +51,17 @@ pub struct InteractionSummary {
     pub wall_s: f64,
 }
 
-/// Runs every run (alternating reactive / Pavlovian) on `threads` threads.
+/// Runs every run (alternating reactive / Pavlovian) on `threads` threads, with no progress bar.
 pub fn run_study(base: &Config, o: &InteractionOptions) -> Result<InteractionSummary, RunError> {
+    run_study_with_progress(base, o, false)
+}
+
+/// [`run_study`], with a progress bar on stderr when `progress`.
+pub fn run_study_with_progress(
+    base: &Config,
+    o: &InteractionOptions,
+    progress: bool,
+) -> Result<InteractionSummary, RunError> {
     let wall = std::time::Instant::now();
     let period_s = base.tick.period_ms.max(1) as f64 / 1000.0;
     let ticks = (o.minutes * 60.0 / period_s).round().max(1.0) as usize;
@@ -66,6 +75,18 @@ pub fn run_study(base: &Config, o: &InteractionOptions) -> Result<InteractionSum
             (i, m)
         })
         .collect();
+    let bar = if progress {
+        indicatif::ProgressBar::new(specs.len() as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{elapsed_precise} [{bar:30}] {pos}/{len} runs {msg}",
+    ) {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message(format!("{} min each", o.minutes));
+    bar.tick();
     let mut runs = Vec::with_capacity(specs.len());
     for chunk in specs.chunks(o.threads.max(1)) {
         let outcomes: Vec<Result<InteractionRun, RunError>> = std::thread::scope(|s| {
@@ -92,9 +113,19 @@ pub fn run_study(base: &Config, o: &InteractionOptions) -> Result<InteractionSum
                 .collect()
         });
         for r in outcomes {
-            runs.push(r?);
+            let r = r?;
+            bar.inc(1);
+            bar.set_message(format!(
+                "run {} {}: mean latency {} ms, {:.1} s wall",
+                r.index,
+                mode_name(r.mode),
+                r.metrics.mean_latency_ms().map_or("–".into(), num),
+                r.wall_s
+            ));
+            runs.push(r);
         }
     }
+    bar.finish_and_clear();
     Ok(InteractionSummary {
         options: o.clone(),
         seed_derivation: "run i (even = reactive, odd = Pavlovian): robot seed \
@@ -128,10 +159,12 @@ pub fn table(s: &InteractionSummary) -> String {
     );
     let _ = writeln!(
         t,
-        "{:<10} {:>8} {:>20} {:>11} {:>7} {:>15} {:>18}",
+        "{:<10} {:>8} {:>20} {:>20} {:>20} {:>11} {:>7} {:>15} {:>18}",
         "policy",
         "commands",
         "latency ms (±SE)",
+        "current ms (±SE)",
+        "motion ms (±SE)",
         "anticipated",
         "missed",
         "false starts/min",
@@ -140,10 +173,22 @@ pub fn table(s: &InteractionSummary) -> String {
     for p in &s.timing {
         let _ = writeln!(
             t,
-            "{:<10} {:>8} {:>20} {:>11} {:>7} {:>15.2} {:>18.2}",
+            "{:<10} {:>8} {:>20} {:>20} {:>20} {:>11} {:>7} {:>15.2} {:>18.2}",
             p.policy,
             p.commands,
             format!("{} ± {}", num(p.latency_ms.mean), num(p.latency_ms.se)),
+            format!(
+                "{} ± {} ({})",
+                num(p.current_latency_ms.mean),
+                num(p.current_latency_ms.se),
+                p.current_latency_ms.n
+            ),
+            format!(
+                "{} ± {} ({})",
+                num(p.motion_latency_ms.mean),
+                num(p.motion_latency_ms.se),
+                p.motion_latency_ms.n
+            ),
             p.anticipated,
             p.missed,
             p.false_starts_per_minute + 0.0,
@@ -207,19 +252,25 @@ pub fn write_all(dir: &Path, s: &InteractionSummary) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
     let json = serde_json::to_string_pretty(s).map_err(std::io::Error::other)?;
     std::fs::write(dir.join("summary.json"), json)?;
-    let mut c = String::from("run,policy,command,onset_ms,end_ms,outcome\n");
+    let mut c = String::from(
+        "run,policy,command,onset_ms,end_ms,outcome,current_latency_ms,motion_latency_ms\n",
+    );
+    let opt = |x: Option<f64>| x.map_or(String::new(), |v| v.to_string());
     for r in &s.runs {
         for (k, (w, out)) in r.commands.iter().zip(&r.metrics.outcomes).enumerate() {
+            let phys = r.physical.get(k).copied().unwrap_or_default();
             let out = serde_json::to_string(out)
                 .unwrap_or_default()
                 .replace(',', ";");
             let _ = writeln!(
                 c,
-                "{},{},{k},{},{},{out}",
+                "{},{},{k},{},{},{out},{},{}",
                 r.index,
                 mode_name(r.mode),
                 w.onset_ms,
-                w.end_ms
+                w.end_ms,
+                opt(phys.current_ms),
+                opt(phys.motion_ms)
             );
         }
     }

@@ -230,11 +230,14 @@ mod tests {
     fn an_interaction_hub_reports_commands_and_leads_in_its_statuses() {
         let (mut hub, handle) = Hub::new(20.0, true);
         let mut rx = handle.subscribe();
-        for seq in 0..21 {
+        for seq in 0..121 {
             let mut r = record(seq);
-            // The gate engages at tick 5, the stimulus at tick 8: one command answered 60 ms early.
-            r.gate = seq >= 5;
-            r.stimulus = seq >= 8;
+            // The gate engages at tick 65, the stimulus at tick 68: one command answered 60 ms early; the
+            // wheels turn and the current rises from 150 to 600 mA at tick 66, 40 ms early.
+            r.gate = seq >= 65;
+            r.stimulus = seq >= 68;
+            r.sensors.angle_deg = i32::from(seq >= 66);
+            r.sensors.battery_current_ma = Some(if seq >= 66 { -600 } else { -150 });
             hub.on_record(&r, Health::default, 1);
         }
         let mut last = None;
@@ -248,5 +251,7 @@ mod tests {
         assert_eq!(i["early"], 1, "{i}");
         assert_eq!(i["false_starts"], 0, "{i}");
         assert_eq!(i["mean_lead_ms"], 60.0, "{i}");
+        assert_eq!(i["mean_current_lead_ms"], 40.0, "{i}");
+        assert_eq!(i["mean_motion_lead_ms"], 40.0, "{i}");
     }
 }
