@@ -19,6 +19,7 @@
 use serde::Serialize;
 
 pub mod live;
+pub mod live_aligned;
 pub mod live_physical;
 pub mod physical;
 

@@ -352,6 +352,24 @@ async fn statuses_of_the_gesture_command_run_carry_the_interaction_metrics() {
         i["mean_lead_ms"].is_null() && i["last_lead_ms"].is_null(),
         "{i}"
     );
+    // The aligned averages come on the statuses of every 50th tick only (at most 6 statuses away).
+    let mut aligned = None;
+    for _ in 0..7 {
+        let status = next_of(&mut ws, "status").await;
+        let seq = status["seq"].as_u64().unwrap();
+        match status["interaction"].get("aligned") {
+            Some(a) => {
+                assert_eq!(seq % 50, 0, "{status}");
+                aligned = Some(a.clone());
+                break;
+            }
+            None => assert_ne!(seq % 50, 0, "{status}"),
+        }
+    }
+    let a = aligned.expect("an aligned payload within 7 statuses");
+    assert_eq!(a["offsets_ms"].as_array().unwrap().len(), 76, "{a}");
+    assert_eq!(a["reactive"]["commands"], 0, "{a}");
+    assert_eq!(a["pavlovian"]["commands"], 0, "{a}");
     lab.stop().await;
 }
 

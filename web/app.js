@@ -2,12 +2,15 @@
 // run counters and tick health, and sends commands (mode, e-stop, teleop, request, learning, recording).
 
 import {
-  Backoff, GapCounter, Window, connectionTarget, fmt, fmtDuration, fmtLead, parseParam, teleopWheels, tokenFromHash,
+  Backoff, GapCounter, Window, alignedData, connectionTarget, fmt, fmtDuration, fmtLead, parseParam, teleopWheels, tokenFromHash,
 } from './lib.js';
 
 const WINDOW_SECONDS = 30;
 const TELEOP_REPEAT_MS = 200;
 const CHART_HEIGHT = 175;
+const ALIGNED_HEIGHT = 160;
+const REACTIVE_COLOR = '#d97706';
+const PAVLOVIAN_COLOR = '#2563eb';
 const COLORS = ['#2563eb', '#d97706', '#059669', '#7c3aed', '#db2777', '#0891b2'];
 
 const $ = (id) => document.getElementById(id);
@@ -24,6 +27,7 @@ const state = {
   gaps: new GapCounter(),
   stride: 1,
   charts: [],
+  aligned: null,
   dirty: false,
   mode: null,
   estop: false,
@@ -217,6 +221,8 @@ function onStatus(s) {
     $('i-motion-lead').textContent = fmtLead(i.mean_motion_lead_ms);
     $('i-false-starts').textContent = fmt(i.false_starts);
   }
+  if (!i) hideAligned();
+  else if (i.aligned) showAligned(alignedData(i.aligned));
 }
 
 function onAck(a) {
@@ -297,6 +303,54 @@ function buildCharts(predictionNames) {
   ];
 }
 
+// The aligned averages (paper, Figure 4): two small charts drawn from `interaction.aligned`, replaced whole
+// about once a second; hidden when the run has no interaction metrics.
+
+function makeAlignedChart(el, label, yRange) {
+  const rect = el.getBoundingClientRect();
+  const opts = {
+    width: Math.max(200, Math.floor(rect.width)),
+    height: ALIGNED_HEIGHT,
+    cursor: { drag: { x: false, y: false } },
+    legend: { live: false },
+    scales: { x: { time: false }, y: { range: yRange } },
+    axes: [axis('', { size: 28, values: (u, v) => v.map((s) => `${s}s`) }), axis(label)],
+    series: [
+      { label: 'offset' },
+      { label: 'reactive', stroke: REACTIVE_COLOR, width: 2, spanGaps: false },
+      { label: 'Pavlovian', stroke: PAVLOVIAN_COLOR, width: 2, spanGaps: false },
+    ],
+  };
+  return new window.uPlot(opts, [[], [], []], el);
+}
+
+function hideAligned() {
+  $('aligned-card').hidden = true;
+  if (state.aligned) {
+    state.aligned.current.destroy();
+    state.aligned.rotation.destroy();
+    state.aligned = null;
+  }
+}
+
+function showAligned(data) {
+  if (!data) return;
+  $('aligned-card').hidden = false;
+  $('aligned-hint').textContent = `mean per tick, 0 s = stimulus onset · reactive (orange): ${fmt(data.counts.reactive)} · `
+    + `Pavlovian (blue): ${fmt(data.counts.pavlovian)} commands`;
+  if (typeof window.uPlot !== 'function') return;
+  if (!state.aligned) {
+    state.aligned = {
+      current: makeAlignedChart($('chart-aligned-current'), 'current mA',
+        (u, lo, hi) => [Math.min(-500, Math.floor(((lo ?? 0) * 1.1) / 100) * 100), Math.max(0, hi ?? 0)]),
+      rotation: makeAlignedChart($('chart-aligned-rotation'), 'rotation °/tick',
+        (u, lo, hi) => [Math.min(-1, lo ?? 0), Math.max(1, Math.ceil((hi ?? 0) * 1.1))]),
+    };
+  }
+  state.aligned.current.setData(data.current);
+  state.aligned.rotation.setData(data.rotation);
+}
+
 function pushCharts(t) {
   if (state.charts.length === 0) return;
   const flag = (lane, on) => lane + (on ? 0.8 : 0);
@@ -335,6 +389,11 @@ function resizeCharts() {
   for (const c of state.charts) {
     const r = c.el.getBoundingClientRect();
     c.u.setSize({ width: Math.max(300, Math.floor(r.width)), height: CHART_HEIGHT });
+  }
+  if (state.aligned) {
+    for (const [u, id] of [[state.aligned.current, 'chart-aligned-current'], [state.aligned.rotation, 'chart-aligned-rotation']]) {
+      u.setSize({ width: Math.max(200, Math.floor($(id).getBoundingClientRect().width)), height: ALIGNED_HEIGHT });
+    }
   }
 }
 

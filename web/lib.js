@@ -149,3 +149,24 @@ export function parseParam(text, name, lo, hi) {
   if (v < lo || v > hi) return { error: `${name} must be between ${lo} and ${hi}` };
   return { value: v };
 }
+
+/**
+ * The uPlot data of the aligned averages (`status.interaction.aligned`, PROTOCOL.md): x in seconds from the
+ * command onset, then the reactive and the Pavlovian means; a mode with no commands yet is all gaps (null).
+ * Returns null when `aligned` is missing or malformed.
+ */
+export function alignedData(aligned) {
+  if (!aligned || !Array.isArray(aligned.offsets_ms)) return null;
+  const n = aligned.offsets_ms.length;
+  const xs = aligned.offsets_ms.map((ms) => ms / 1000);
+  const curve = (mode, key) => {
+    const values = mode && Array.isArray(mode[key]) ? mode[key] : [];
+    return Array.from({ length: n }, (_, k) => (typeof values[k] === 'number' ? values[k] : null));
+  };
+  const { reactive, pavlovian } = aligned;
+  return {
+    current: [xs, curve(reactive, 'current_ma'), curve(pavlovian, 'current_ma')],
+    rotation: [xs, curve(reactive, 'rotation_deg'), curve(pavlovian, 'rotation_deg')],
+    counts: { reactive: (reactive && reactive.commands) || 0, pavlovian: (pavlovian && pavlovian.commands) || 0 },
+  };
+}

@@ -3,7 +3,7 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  Backoff, GapCounter, SUBPROTOCOL, Window, connectionTarget, fmt, fmtDuration, fmtLead, parseParam, teleopWheels, tokenFromHash,
+  Backoff, GapCounter, SUBPROTOCOL, Window, alignedData, connectionTarget, fmt, fmtDuration, fmtLead, parseParam, teleopWheels, tokenFromHash,
 } from '../lib.js';
 
 test('the token comes from the URL fragment', () => {
@@ -86,4 +86,23 @@ test('response leads show their sign: + before the command, − after', () => {
   assert.equal(fmtLead(-1500), '−1,500 ms');
   assert.equal(fmtLead(0.2), '0 ms');
   assert.equal(fmtLead(null), '—');
+});
+
+test('aligned averages become uPlot data with gaps for missing points and modes', () => {
+  const aligned = {
+    offsets_ms: [-20, 0, 20],
+    reactive: { commands: 2, current_ma: [-150, null, -600], rotation_deg: [0, 1.5, 2] },
+    pavlovian: { commands: 0, current_ma: [null, null, null], rotation_deg: [null, null, null] },
+  };
+  const d = alignedData(aligned);
+  assert.deepEqual(d.current, [[-0.02, 0, 0.02], [-150, null, -600], [null, null, null]]);
+  assert.deepEqual(d.rotation[1], [0, 1.5, 2]);
+  assert.deepEqual(d.counts, { reactive: 2, pavlovian: 0 });
+  // A mode missing from the message, or curves shorter than the offsets, leave gaps.
+  const partial = alignedData({ offsets_ms: [0, 20], reactive: { commands: 1, current_ma: [-300] } });
+  assert.deepEqual(partial.current[1], [-300, null]);
+  assert.deepEqual(partial.rotation[2], [null, null]);
+  assert.deepEqual(partial.counts, { reactive: 1, pavlovian: 0 });
+  assert.equal(alignedData(undefined), null);
+  assert.equal(alignedData({}), null);
 });

@@ -10,6 +10,7 @@ use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
 use axum::extract::ws::Utf8Bytes;
 use pavlov::interaction_metrics::live::LiveInteraction;
+use pavlov::interaction_metrics::live_aligned::LiveAligned;
 use pavlov::metrics::RunMetrics;
 use pavlov::record::TickRecord;
 use tokio::sync::{broadcast, watch};
@@ -23,6 +24,10 @@ use crate::ticker::SharedTickStats;
 
 /// Capacity of the hub's broadcast to the clients' forwarders, in messages (about 4 s of ticks).
 pub const HUB_CAPACITY: usize = 256;
+
+/// Statuses carry `interaction.aligned` every this many ticks (a multiple of [`STATUS_EVERY_TICKS`]; once a
+/// second at 50 Hz): the curves are about 76 points × 2 series × 2 modes, too many for every status.
+pub const ALIGNED_EVERY_TICKS: u64 = 5 * STATUS_EVERY_TICKS;
 
 /// One message for the clients.
 #[derive(Debug, Clone)]
@@ -92,11 +97,11 @@ impl HubHandle {
     }
 }
 
-/// The hub's state: the run counters over every record seen, and the live interaction metrics when the
-/// stimulus is the gesture command.
+/// The hub's state: the run counters over every record seen, and the live interaction metrics (with the
+/// aligned averages) when the stimulus is the gesture command.
 pub struct Hub {
     metrics: RunMetrics,
-    interaction: Option<LiveInteraction>,
+    interaction: Option<(LiveInteraction, LiveAligned)>,
     tx: broadcast::Sender<Outgoing>,
 }
 
@@ -108,7 +113,8 @@ impl Hub {
         (
             Hub {
                 metrics: RunMetrics::new(period_ms),
-                interaction: track_interaction.then(LiveInteraction::new),
+                interaction: track_interaction
+                    .then(|| (LiveInteraction::new(), LiveAligned::new(period_ms))),
                 tx: tx.clone(),
             },
             HubHandle { tx },
@@ -123,8 +129,9 @@ impl Hub {
         clients: usize,
     ) {
         self.metrics.observe(record);
-        if let Some(live) = &mut self.interaction {
+        if let Some((live, aligned)) = &mut self.interaction {
             live.observe(record);
+            aligned.observe(record);
         }
         let text = Utf8Bytes::from(TickMessage::new(record).to_json());
         // An error only means no client is connected.
@@ -135,9 +142,15 @@ impl Hub {
         if record.seq % STATUS_EVERY_TICKS == 0 {
             let health = health();
             let counters = self.metrics.summary();
-            let interaction = self.interaction.as_ref().map(LiveInteraction::summary);
+            let interaction = self.interaction.as_ref().map(|(live, _)| live.summary());
+            let aligned = self
+                .interaction
+                .as_ref()
+                .filter(|_| record.seq % ALIGNED_EVERY_TICKS == 0)
+                .map(|(_, aligned)| aligned.summary());
             let status = StatusMessage::new(record.seq, &health, &counters, clients)
                 .with_interaction(interaction.as_ref())
+                .with_aligned(aligned.as_ref())
                 .to_json();
             let _ = self.tx.send(Outgoing::Status(Utf8Bytes::from(status)));
         }
@@ -253,5 +266,41 @@ mod tests {
         assert_eq!(i["mean_lead_ms"], 60.0, "{i}");
         assert_eq!(i["mean_current_lead_ms"], 40.0, "{i}");
         assert_eq!(i["mean_motion_lead_ms"], 40.0, "{i}");
+    }
+
+    #[test]
+    fn statuses_carry_the_aligned_averages_once_a_second() {
+        let (mut hub, handle) = Hub::new(20.0, true);
+        let mut rx = handle.subscribe();
+        for seq in 0..=200 {
+            let mut r = record(seq);
+            // A Pavlovian command at tick 50; the current steps to −600 mA at tick 45.
+            r.mode = Mode::Pavlovian;
+            r.stimulus = (50..60).contains(&seq);
+            r.sensors.battery_current_ma = Some(if (45..90).contains(&seq) { -600 } else { -150 });
+            hub.on_record(&r, Health::default, 1);
+        }
+        let mut with_aligned = Vec::new();
+        let mut last_aligned = None;
+        while let Ok(m) = rx.try_recv() {
+            if let Outgoing::Status(text) = m {
+                let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+                assert!(v["interaction"].is_object(), "{v}");
+                if let Some(a) = v["interaction"].get("aligned") {
+                    with_aligned.push(v["seq"].as_u64().unwrap());
+                    last_aligned = Some(a.clone());
+                }
+            }
+        }
+        assert_eq!(with_aligned, vec![0, 50, 100, 150, 200]);
+        let a = last_aligned.unwrap();
+        assert_eq!(a["offsets_ms"].as_array().unwrap().len(), 76);
+        assert_eq!(a["pavlovian"]["commands"], 1, "{a}");
+        assert_eq!(a["reactive"]["commands"], 0, "{a}");
+        // Offset −100 ms (tick 45): the step; −120 ms (tick 44): the rest current.
+        assert_eq!(a["offsets_ms"][20], -100.0);
+        assert_eq!(a["pavlovian"]["current_ma"][20], -600.0, "{a}");
+        assert_eq!(a["pavlovian"]["current_ma"][19], -150.0, "{a}");
+        assert!(a["reactive"]["current_ma"][0].is_null(), "{a}");
     }
 }

@@ -3,6 +3,7 @@
 
 use pavlov::control::{Action, Mode};
 use pavlov::interaction_metrics::live::LiveInteractionSummary;
+use pavlov::interaction_metrics::live_aligned::AlignedSummary;
 use pavlov::metrics::MetricsSummary;
 use pavlov::record::{
     ElbowSummary, LinkSummary, PredictionValue, SafetyStop, SensorSummary, TickRecord,
@@ -116,7 +117,16 @@ pub struct StatusMessage<'a> {
     counters: &'a MetricsSummary,
     clients: usize,
     #[serde(skip_serializing_if = "Option::is_none")]
-    interaction: Option<&'a LiveInteractionSummary>,
+    interaction: Option<InteractionStatus<'a>>,
+}
+
+/// The `interaction` object: the live metrics and, on some statuses, the aligned averages.
+#[derive(Serialize)]
+struct InteractionStatus<'a> {
+    #[serde(flatten)]
+    summary: &'a LiveInteractionSummary,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    aligned: Option<&'a AlignedSummary>,
 }
 
 impl<'a> StatusMessage<'a> {
@@ -134,7 +144,18 @@ impl<'a> StatusMessage<'a> {
 
     /// Adds the live interaction metrics (absent from the JSON when `None`).
     pub fn with_interaction(mut self, interaction: Option<&'a LiveInteractionSummary>) -> Self {
-        self.interaction = interaction;
+        self.interaction = interaction.map(|summary| InteractionStatus {
+            summary,
+            aligned: None,
+        });
+        self
+    }
+
+    /// Adds the aligned averages to `interaction` (no effect without it; absent from the JSON when `None`).
+    pub fn with_aligned(mut self, aligned: Option<&'a AlignedSummary>) -> Self {
+        if let Some(i) = &mut self.interaction {
+            i.aligned = aligned;
+        }
         self
     }
 
