@@ -262,14 +262,26 @@ impl SkeletonConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CheckpointConfig {
-    /// Directory that `save_weights` writes into; a client names only the file.
+    /// Directory that `save_weights` and the periodic checkpoints write into; a client names only the file.
     pub dir: String,
+    /// Seconds of ticks between periodic checkpoints (0: only at shutdown).
+    pub every_s: u64,
+    /// How many periodic checkpoints to keep (the oldest are deleted).
+    pub keep: usize,
+    /// Restore the newest checkpoint in `dir` before the first tick (`pavlov serve --resume`).
+    pub resume: bool,
+    /// Write periodic and shut-down checkpoints (`pavlov serve` turns this on; experiments leave it off).
+    pub autosave: bool,
 }
 
 impl Default for CheckpointConfig {
     fn default() -> Self {
         CheckpointConfig {
             dir: "weights".into(),
+            every_s: 60,
+            keep: 5,
+            resume: false,
+            autosave: false,
         }
     }
 }
@@ -356,6 +368,12 @@ impl Config {
         self.skeleton.validate()?;
         if self.checkpoint.dir.trim().is_empty() {
             return Err(invalid("checkpoint.dir", "must name a directory"));
+        }
+        if self.checkpoint.keep == 0 {
+            return Err(invalid(
+                "checkpoint.keep",
+                "must keep at least 1 checkpoint",
+            ));
         }
         let d = &self.dashboard;
         let bind: std::net::SocketAddr = d.bind.parse().map_err(|_| {

@@ -7,12 +7,14 @@
 use pavlov::agent::{LearnInput, LearnOutput, LearningStage, summary};
 use pavlov::config::Config;
 use pavlov::learn::LearnError;
+use pavlov::learn::checkpoint::Checkpoint;
 use pavlov::record::SensorSummary;
 use pavlov::skeleton::{ElbowFeatureTracker, PoseTracker};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
+use crate::checkpoint::CheckpointWriter;
 use crate::command::{ControlCommand, LearningCommand};
 use crate::sensor_ingest::Observation;
 
@@ -38,6 +40,17 @@ pub struct Learning {
     request_until: u64,
     period_ms: u64,
     checkpoint_dir: std::path::PathBuf,
+    autosave: Option<Autosave>,
+    /// Ticks learned before this run (from a resumed checkpoint): checkpoints count lifelong ticks.
+    tick_offset: u64,
+}
+
+/// Periodic and final checkpoints of the learned state.
+struct Autosave {
+    config: Config,
+    every_ticks: u64,
+    last_seq: u64,
+    writer: CheckpointWriter,
 }
 
 /// True for a bare file name: no directories, no `..`, nothing hidden.
@@ -63,7 +76,65 @@ impl Learning {
             request_until: 0,
             period_ms: config.tick.period_ms.max(1),
             checkpoint_dir: config.checkpoint.dir.clone().into(),
+            autosave: None,
+            tick_offset: 0,
         })
+    }
+
+    /// Checkpoints into `[checkpoint] dir` every `every_s` seconds of ticks and when the loop ends.
+    pub fn with_autosave(mut self, config: &Config) -> std::io::Result<Self> {
+        let c = &config.checkpoint;
+        let writer = CheckpointWriter::spawn(c.dir.clone().into(), c.keep)?;
+        self.autosave = Some(Autosave {
+            config: config.clone(),
+            every_ticks: (c.every_s * 1000).div_ceil(self.period_ms),
+            last_seq: 0,
+            writer,
+        });
+        Ok(self)
+    }
+
+    /// Continues from `checkpoint` (already checked against the configuration).
+    pub fn resume(&mut self, checkpoint: &Checkpoint) -> Result<(), LearnError> {
+        self.stage.restore(&checkpoint.state)?;
+        self.tick_offset = checkpoint.created_tick;
+        Ok(())
+    }
+
+    /// A checkpoint of the current state at this run's tick `seq`.
+    fn checkpoint(&self, config: &Config, seq: u64) -> Option<Checkpoint> {
+        Checkpoint::new(config, self.tick_offset + seq, self.stage.snapshot())
+            .map_err(|e| tracing::error!("cannot build a checkpoint: {e}"))
+            .ok()
+    }
+
+    /// Hands a periodic checkpoint to the writer when one is due.
+    fn autosave_if_due(&mut self, seq: u64) {
+        let Some(a) = &self.autosave else { return };
+        if a.every_ticks == 0 || seq < a.last_seq + a.every_ticks {
+            return;
+        }
+        if let Some(c) = self.checkpoint(&a.config, seq) {
+            a.writer.submit(c);
+        }
+        if let Some(a) = &mut self.autosave {
+            a.last_seq = seq;
+        }
+    }
+
+    /// Writes the final checkpoint and waits until every checkpoint is on disk.
+    async fn finish(mut self, seq: u64) {
+        let Some(a) = self.autosave.take() else {
+            return;
+        };
+        let last = self.checkpoint(&a.config, seq);
+        let writer = a.writer;
+        if tokio::task::spawn_blocking(move || writer.finish(last))
+            .await
+            .is_err()
+        {
+            tracing::error!("the final checkpoint write panicked");
+        }
     }
 
     /// Names of the observation vector's dimensions.
@@ -163,9 +234,11 @@ pub async fn run(
                 if let Err(e) = learning.stage.learn() {
                     tracing::error!("learning step failed: {e}");
                 }
+                learning.autosave_if_due(seq);
             }
         }
     }
+    learning.finish(seq).await;
 }
 
 #[cfg(test)]

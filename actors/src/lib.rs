@@ -7,6 +7,7 @@
 
 pub mod actuation;
 pub mod bench;
+pub mod checkpoint;
 pub mod command;
 pub mod experiment;
 pub mod feed;

@@ -107,6 +107,10 @@ enum Command {
         /// it, recording starts and stops on the dashboard's commands, under ./recordings.
         #[arg(long, value_name = "DIR")]
         record: Option<PathBuf>,
+        /// Continue learning from the newest checkpoint in [checkpoint] dir. Refused (before the robot is
+        /// touched) if there is none or it was made for a different configuration.
+        #[arg(long)]
+        resume: bool,
     },
     /// Reproduce the paper's experiments on the simulated Create (e.g. `pavlov experiment stall --seed 1`).
     Experiment(pavlov_actors::experiment::cli::ExperimentArgs),
@@ -234,9 +238,22 @@ async fn serve(
     robot: Option<String>,
     dashboard: DashboardArgs,
     record: Option<PathBuf>,
+    resume: bool,
 ) -> Result<()> {
     let mut cfg = load_config(&args)?;
     dashboard.apply(&mut cfg)?;
+    // The server checkpoints its weights periodically and at shutdown.
+    cfg.checkpoint.autosave = true;
+    cfg.checkpoint.resume |= resume;
+    if cfg.checkpoint.resume {
+        let (path, cp) =
+            pavlov_actors::checkpoint::load_for_resume(&cfg).context("cannot resume (--resume)")?;
+        println!(
+            "resuming from {} (tick {})",
+            path.display(),
+            cp.created_tick
+        );
+    }
     let target = match robot {
         Some(path) => RobotTarget::Serial(path),
         None => RobotTarget::Simulated,
@@ -404,7 +421,8 @@ fn main() -> Result<()> {
                 robot,
                 dashboard,
                 record,
-            } => serve(config, robot, dashboard, record).await,
+                resume,
+            } => serve(config, robot, dashboard, record, resume).await,
             Command::Experiment(args) => pavlov_actors::experiment::cli::experiment(args),
             Command::Replay(args) => pavlov_actors::experiment::cli::replay(args),
             Command::Sim {

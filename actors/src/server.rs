@@ -143,6 +143,8 @@ impl Server {
         let stream = config.robot.stream_ids();
         let period = Duration::from_millis(config.tick.period_ms);
         let cancel = CancellationToken::new();
+        // Learning (and any checkpoint to resume) is checked before a byte goes to the robot.
+        let learning = build_learning(&config)?;
         let startup = handshake::startup_bytes(model, config.robot.oi_mode, &stream)
             .map_err(LinkError::from)?;
         link_writer
@@ -153,7 +155,6 @@ impl Server {
         tracing::info!(%model, ?stream, "robot link up: start-up sequence sent");
         let parser = StreamParser::new(&stream).map_err(LinkError::from)?;
 
-        let learning = Learning::new(&config).map_err(|e| ServerError::Learning(e.to_string()))?;
         let obs_names = learning.obs_names();
         let gating = GatingStage::new(
             config.control.mode,
@@ -306,6 +307,26 @@ impl Server {
         };
         ShutdownReport { sim_robot }
     }
+}
+
+/// Learning for `config`: resumed from the newest checkpoint if `[checkpoint] resume`, checkpointing
+/// if `[checkpoint] autosave`.
+fn build_learning(config: &Config) -> Result<Learning, ServerError> {
+    let mut learning = Learning::new(config).map_err(|e| ServerError::Learning(e.to_string()))?;
+    if config.checkpoint.resume {
+        let (path, checkpoint) = crate::checkpoint::load_for_resume(config)
+            .map_err(|e| ServerError::Learning(format!("--resume: {e}")))?;
+        learning
+            .resume(&checkpoint)
+            .map_err(|e| ServerError::Learning(format!("--resume: {}: {e}", path.display())))?;
+        tracing::info!(path = %path.display(), tick = checkpoint.created_tick, "resumed learning from a checkpoint");
+    }
+    if config.checkpoint.autosave {
+        learning = learning.with_autosave(config).map_err(|e| {
+            ServerError::Learning(format!("cannot start the checkpoint writer: {e}"))
+        })?;
+    }
+    Ok(learning)
 }
 
 /// Logs tick health once a minute until `cancel` fires.

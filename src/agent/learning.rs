@@ -231,6 +231,11 @@ impl LearningStage {
     pub fn snapshot(&self) -> SetSnapshot {
         self.set.snapshot()
     }
+
+    /// Restores a snapshot taken from a stage of the same predictions (on error nothing changes).
+    pub fn restore(&mut self, snapshot: &SetSnapshot) -> Result<(), LearnError> {
+        self.set.restore(snapshot)
+    }
 }
 
 #[cfg(test)]

@@ -10,6 +10,7 @@
 //!
 //! Facts: `shared/reference/learning.md` (§3.1 tile coding, §4.1 the update equations).
 
+pub mod checkpoint;
 pub mod error;
 pub mod inputs;
 pub mod set;
