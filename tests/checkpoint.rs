@@ -132,8 +132,15 @@ fn write_stall_checkpoint(dir: &Path, tick: u64) {
 #[tokio::test(start_paused = true)]
 async fn a_checkpoint_of_another_configuration_is_refused() {
     let dir = fresh_dir("mismatch");
-    let mut cfg = config_in(&dir);
+    let mut cfg = config_in(&dir.join("absent"));
     cfg.checkpoint.resume = true;
+    let err = Server::start(cfg.clone(), RobotTarget::Simulated)
+        .await
+        .err()
+        .expect("no checkpoint directory to resume from")
+        .to_string();
+    assert!(err.contains("no checkpoint"), "{err}");
+    cfg.checkpoint.dir = dir.display().to_string();
     let err = Server::start(cfg.clone(), RobotTarget::Simulated)
         .await
         .err()

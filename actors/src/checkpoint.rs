@@ -91,10 +91,11 @@ pub fn prune(dir: &Path, keep: usize) -> std::io::Result<()> {
 /// The newest checkpoint in `config`'s directory, checked against `config`.
 pub fn load_for_resume(config: &Config) -> Result<(PathBuf, Checkpoint), ResumeError> {
     let dir = PathBuf::from(&config.checkpoint.dir);
-    let files = list(&dir).map_err(|source| ResumeError::Dir {
-        dir: dir.clone(),
-        source,
-    })?;
+    let files = match list(&dir) {
+        Ok(files) => files,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(ResumeError::None(dir)),
+        Err(source) => return Err(ResumeError::Dir { dir, source }),
+    };
     let Some((_, path)) = files.last().cloned() else {
         return Err(ResumeError::None(dir));
     };
