@@ -21,6 +21,7 @@ fn options(out: &std::path::Path, record: bool) -> InteractionOptions {
     InteractionOptions {
         runs_per_policy: 1,
         minutes: 1.0,
+        aligned_commands: 40,
         seed: 4,
         record,
         threads: 2,
@@ -96,6 +97,7 @@ fn after_an_hour_the_pavlovian_control_responds_earlier_with_few_false_starts() 
     let opts = InteractionOptions {
         runs_per_policy: 1,
         minutes: 60.0,
+        aligned_commands: 40,
         seed: 1,
         record: false,
         threads: 2,

@@ -42,6 +42,9 @@ pub struct InteractionArgs {
     /// Minutes per run (the paper: under 10).
     #[arg(long, default_value_t = 10.0, value_name = "MIN")]
     pub minutes: f64,
+    /// How many of each run's last observed commands the aligned averages (Figure 4) use (the paper: 40).
+    #[arg(long, default_value_t = 40, value_name = "N")]
+    pub commands: usize,
     /// The experiment's seed.
     #[arg(long, default_value_t = 1, value_name = "S")]
     pub seed: u64,
@@ -124,6 +127,7 @@ pub fn experiment(args: ExperimentArgs) -> Result<()> {
             let opts = super::interaction_report::InteractionOptions {
                 runs_per_policy: a.runs,
                 minutes: a.minutes,
+                aligned_commands: a.commands,
                 seed: a.seed,
                 record: !a.no_record,
                 threads: default_threads(),

@@ -6,7 +6,7 @@
 //! `Rng::new(seed).fork(i).next_u64()` and operator seed `Rng::new(seed).fork(i).fork(1).next_u64()`.
 //! Per policy: when the response started relative to each ground-truth command onset
 //! ([`pavlov::interaction_metrics`]), and the battery current and rotation averaged over the last
-//! [`ALIGNED_COMMANDS`] observed command onsets of each run (the paper's Figure 4).
+//! N observed command onsets of each run (`--commands`, the paper: 40; the paper's Figure 4).
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -32,8 +32,6 @@ use crate::recorder::Recorder;
 use crate::recording::RecordingHeader;
 use crate::server::{RobotTarget, Server};
 
-/// Observed command onsets averaged per run (the paper: the last 40).
-pub const ALIGNED_COMMANDS: usize = 40;
 /// Aligned window: ticks before the onset.
 pub const BEFORE_TICKS: i64 = 25;
 /// Aligned window: ticks after the onset.
@@ -83,6 +81,7 @@ pub fn run(
     mode: Mode,
     seed: u64,
     ticks: usize,
+    aligned_commands: usize,
     record_dir: Option<PathBuf>,
 ) -> Result<InteractionRun, RunError> {
     let wall = std::time::Instant::now();
@@ -168,7 +167,7 @@ pub fn run(
     let aligned_onsets = observed_onsets(&records)
         .into_iter()
         .rev()
-        .take(ALIGNED_COMMANDS)
+        .take(aligned_commands)
         .rev()
         .collect();
     Ok(InteractionRun {

@@ -12,21 +12,29 @@ use plotters::prelude::*;
 use super::interaction::{self, AlignedPoint, InteractionRun};
 use super::interaction_report::InteractionSummary;
 use super::mode_name;
+use pavlov::stats::Describe;
 
 fn err<E: std::fmt::Display>(e: E) -> std::io::Error {
     std::io::Error::other(e.to_string())
 }
 
 type Series = (String, RGBColor, Vec<(f64, f64)>);
+/// A shaded band (x, low, high) in a series' colour: the 95 % confidence interval of a mean.
+type Band = (RGBColor, Vec<(f64, f64, f64)>);
 
 fn panel(
     area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
     title: &str,
     x: std::ops::Range<f64>,
     series: &[Series],
+    bands: &[Band],
     x_desc: &str,
 ) -> std::io::Result<()> {
-    let ys = series.iter().flat_map(|s| s.2.iter().map(|p| p.1));
+    let ys = series.iter().flat_map(|s| s.2.iter().map(|p| p.1)).chain(
+        bands
+            .iter()
+            .flat_map(|b| b.1.iter().flat_map(|p| [p.1, p.2])),
+    );
     let (lo, hi) = ys
         .filter(|v| v.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
@@ -42,6 +50,18 @@ fn panel(
         .build_cartesian_2d(x, (lo - pad)..(hi + pad))
         .map_err(err)?;
     ch.configure_mesh().x_desc(x_desc).draw().map_err(err)?;
+    for (color, pts) in bands {
+        let outline: Vec<(f64, f64)> = pts
+            .iter()
+            .map(|p| (p.0, p.2))
+            .chain(pts.iter().rev().map(|p| (p.0, p.1)))
+            .filter(|p| p.1.is_finite())
+            .collect();
+        if outline.len() > 2 {
+            ch.draw_series(std::iter::once(Polygon::new(outline, color.mix(0.18))))
+                .map_err(err)?;
+        }
+    }
     for (label, color, pts) in series {
         let c = *color;
         ch.draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))
@@ -147,7 +167,7 @@ pub fn fig3(path: &Path, s: &InteractionSummary) -> std::io::Result<()> {
             ),
         ];
         for (area, (title, series)) in rows.iter().zip(panels.iter()) {
-            panel(area, title, span.clone(), series, "time, s")?;
+            panel(area, title, span.clone(), series, &[], "time, s")?;
         }
     }
     root.present().map_err(err)
@@ -196,21 +216,44 @@ pub fn fig4(path: &Path, s: &InteractionSummary) -> std::io::Result<()> {
                 .collect(),
         ),
     ];
+    // 95 % confidence bands of each mean (±1.96 standard errors).
+    let band = |color: RGBColor, d: fn(&AlignedPoint) -> &Describe| -> Band {
+        (
+            color,
+            s.aligned
+                .iter()
+                .map(|p| {
+                    let v = d(p);
+                    (x(p), v.mean - 1.96 * v.se, v.mean + 1.96 * v.se)
+                })
+                .collect(),
+        )
+    };
+    let cur_bands = [
+        band(RED, |p| &p.current_reactive),
+        band(BLUE, |p| &p.current_pavlovian),
+    ];
+    let ang_bands = [
+        band(RED, |p| &p.angle_reactive),
+        band(BLUE, |p| &p.angle_pavlovian),
+    ];
     if let Some(a) = cols.first() {
         panel(
             a,
-            "battery current, mA, aligned on the observed command",
+            "battery current, mA, aligned on the observed command (95 % CI)",
             span.clone(),
             &cur,
+            &cur_bands,
             "time from the command onset, s",
         )?;
     }
     if let Some(a) = cols.get(1) {
         panel(
             a,
-            "rotation from odometry, °/tick",
+            "rotation from odometry, °/tick (95 % CI)",
             span,
             &ang,
+            &ang_bands,
             "time from the command onset, s",
         )?;
     }

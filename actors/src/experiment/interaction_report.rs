@@ -22,6 +22,8 @@ pub struct InteractionOptions {
     pub runs_per_policy: usize,
     /// Minutes per run (the paper: under 10).
     pub minutes: f64,
+    /// How many of each run's last observed commands the aligned averages use (the paper: 40).
+    pub aligned_commands: usize,
     /// The experiment's seed.
     pub seed: u64,
     /// Record every run.
@@ -99,7 +101,7 @@ pub fn run_study_with_progress(
                     s.spawn(move || {
                         tracing::subscriber::with_default(
                             tracing::subscriber::NoSubscriber::default(),
-                            || interaction::run(base, i, m, o.seed, ticks, dir),
+                            || interaction::run(base, i, m, o.seed, ticks, o.aligned_commands, dir),
                         )
                     })
                 })
@@ -205,7 +207,7 @@ pub fn table(s: &InteractionSummary) -> String {
     let _ = writeln!(
         t,
         "aligned on the observed onset (last {} per run): battery current mA, reactive / Pavlovian",
-        interaction::ALIGNED_COMMANDS
+        s.options.aligned_commands
     );
     let mut line = String::new();
     for p in s
