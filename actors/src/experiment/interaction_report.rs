@@ -77,16 +77,7 @@ pub fn run_study_with_progress(
             (i, m)
         })
         .collect();
-    let bar = if progress {
-        indicatif::ProgressBar::new(specs.len() as u64)
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{elapsed_precise} [{bar:30}] {pos}/{len} runs {msg}",
-    ) {
-        bar.set_style(style.progress_chars("=> "));
-    }
+    let bar = super::progress_bar(specs.len(), progress);
     bar.set_message(format!("{} min each", o.minutes));
     bar.tick();
     let mut runs = Vec::with_capacity(specs.len());

@@ -151,3 +151,18 @@ pub fn run_all(
     }
     Ok(out)
 }
+
+/// The progress bar both studies show on stderr (hidden when `visible` is false).
+pub fn progress_bar(runs: usize, visible: bool) -> indicatif::ProgressBar {
+    let bar = if visible {
+        indicatif::ProgressBar::new(runs as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{elapsed_precise} [{bar:30}] {pos}/{len} runs {msg}",
+    ) {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar
+}

@@ -11,16 +11,7 @@ use super::{StallOptions, WINDOW_S, analyse, plan, run_all};
 pub fn run_study(base: &Config, opts: &StallOptions, progress: bool) -> anyhow::Result<Summary> {
     let wall = Instant::now();
     let specs = plan(base, opts);
-    let bar = if progress {
-        indicatif::ProgressBar::new(specs.len() as u64)
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{elapsed_precise} [{bar:30}] {pos}/{len} runs {msg}",
-    ) {
-        bar.set_style(style.progress_chars("=> "));
-    }
+    let bar = super::progress_bar(specs.len(), progress);
     let on_done = |_done: usize, _total: usize, r: &super::RunResult| {
         bar.inc(1);
         bar.set_message(format!(
