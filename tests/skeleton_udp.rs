@@ -14,10 +14,11 @@ use pavlov::config::SkeletonFormat;
 use pavlov::skeleton::{
     ElbowAngle, ElbowFeatureTracker, InvalidReason, Joint, PoseTracker, Side, elbow_angle_deg,
 };
+use pavlov_actors::human_sender::{bundle, message as msg, osceleton_joint as osc_joint};
 use pavlov_actors::skeleton_ingest::{
     IngestSettings, IngestStats, RECEIVE_BUFFER_BYTES, SkeletonIngest, spawn,
 };
-use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
+use rosc::{OscPacket, OscType};
 use tokio::net::UdpSocket;
 use tokio::sync::watch;
 use tokio::time::Instant;
@@ -132,36 +133,6 @@ impl Sender {
     }
 }
 
-fn msg(addr: &str, args: Vec<OscType>) -> OscPacket {
-    OscPacket::Message(OscMessage {
-        addr: addr.into(),
-        args,
-    })
-}
-
-fn bundle(content: Vec<OscPacket>) -> OscPacket {
-    OscPacket::Bundle(OscBundle {
-        timetag: OscTime {
-            seconds: 0,
-            fractional: 1,
-        },
-        content,
-    })
-}
-
-fn osc_joint(name: &str, user: i32, p: [f64; 3]) -> OscPacket {
-    msg(
-        "/joint",
-        vec![
-            OscType::String(name.into()),
-            OscType::Int(user),
-            OscType::Float(p[0] as f32),
-            OscType::Float(p[1] as f32),
-            OscType::Float(p[2] as f32),
-        ],
-    )
-}
-
 /// One recorded body: its tracking id and 25 camera-space positions in metres.
 struct Body {
     id: String,
@@ -211,7 +182,7 @@ async fn replay(format: SkeletonFormat) -> (usize, f64, f64) {
                     .zip(KINECT_V2_JOINTS)
                     .map(|(p, name)| {
                         msg(
-                            &format!("/bodies/{}/joints/{name}", b.id),
+                            format!("/bodies/{}/joints/{name}", b.id),
                             vec![
                                 OscType::Float(p[0] as f32),
                                 OscType::Float(p[1] as f32),

@@ -70,28 +70,47 @@ pub struct SendReport {
     pub commands: usize,
 }
 
-fn message(addr: String, args: Vec<OscType>) -> OscPacket {
-    OscPacket::Message(OscMessage { addr, args })
+/// An OSC message (also used by the skeleton tests to build packets).
+pub fn message(addr: impl Into<String>, args: Vec<OscType>) -> OscPacket {
+    OscPacket::Message(OscMessage {
+        addr: addr.into(),
+        args,
+    })
 }
 
-fn bundle(content: Vec<OscPacket>) -> OscPacket {
+/// An OSC bundle with the "immediately" time tag, as OSCeleton sends them.
+pub fn bundle(content: Vec<OscPacket>) -> OscPacket {
     OscPacket::Bundle(OscBundle {
         timetag: IMMEDIATELY,
         content,
     })
 }
 
+/// OSCeleton's `/joint ,sifff name user x y z`.
+pub fn osceleton_joint(name: &str, user: i32, p: [f64; 3]) -> OscPacket {
+    message(
+        "/joint",
+        vec![
+            OscType::String(name.into()),
+            OscType::Int(user),
+            OscType::Float(p[0] as f32),
+            OscType::Float(p[1] as f32),
+            OscType::Float(p[2] as f32),
+        ],
+    )
+}
+
 /// OSCeleton's start of a session: a bundle of `/new_user` and `/new_skel` for `user`.
 pub fn session_start(user: i32) -> OscPacket {
     bundle(vec![
-        message("/new_user".into(), vec![OscType::Int(user)]),
-        message("/new_skel".into(), vec![OscType::Int(user)]),
+        message("/new_user", vec![OscType::Int(user)]),
+        message("/new_skel", vec![OscType::Int(user)]),
     ])
 }
 
 /// OSCeleton's end of a session: `/lost_user` for `user`.
 pub fn session_end(user: i32) -> OscPacket {
-    message("/lost_user".into(), vec![OscType::Int(user)])
+    message("/lost_user", vec![OscType::Int(user)])
 }
 
 /// The packets (datagrams) of one frame in `format`.
@@ -108,16 +127,7 @@ pub fn frame_packets(frame: &HumanFrame, format: SkeletonFormat) -> Vec<OscPacke
                     } else {
                         pos_mm
                     };
-                    message(
-                        "/joint".into(),
-                        vec![
-                            OscType::String(joint.osceleton_name().into()),
-                            OscType::Int(frame.user_id),
-                            f(p[0]),
-                            f(p[1]),
-                            f(p[2]),
-                        ],
-                    )
+                    osceleton_joint(joint.osceleton_name(), frame.user_id, p)
                 })
                 .collect();
             vec![bundle(joints)]

@@ -1,41 +1,11 @@
 //! Unit tests of the skeleton decoder: both formats, bundles, swap_lr, and every malformed kind.
 
 use super::*;
-use rosc::{OscBundle, OscTime};
-
-fn msg(addr: &str, args: Vec<OscType>) -> OscPacket {
-    OscPacket::Message(OscMessage {
-        addr: addr.into(),
-        args,
-    })
-}
-
-fn bundle(content: Vec<OscPacket>) -> OscPacket {
-    OscPacket::Bundle(OscBundle {
-        timetag: OscTime {
-            seconds: 0,
-            fractional: 1,
-        },
-        content,
-    })
-}
-
-fn osc_joint(name: &str, user: i32, p: [f32; 3]) -> OscPacket {
-    msg(
-        "/joint",
-        vec![
-            OscType::String(name.into()),
-            OscType::Int(user),
-            OscType::Float(p[0]),
-            OscType::Float(p[1]),
-            OscType::Float(p[2]),
-        ],
-    )
-}
+use crate::human_sender::{bundle, message as msg, osceleton_joint as osc_joint};
 
 fn kinect_joint(id: &str, name: &str, p: [f32; 3], state: &str) -> OscPacket {
     msg(
-        &format!("/bodies/{id}/joints/{name}"),
+        format!("/bodies/{id}/joints/{name}"),
         vec![
             OscType::Float(p[0]),
             OscType::Float(p[1]),
@@ -95,7 +65,7 @@ fn normalized_coordinates_are_transformed_back_to_mm() {
     let d = Decoder::new(SkeletonFormat::OsceletonNormalized, false);
     let mm = [-190.0, 300.0, 2500.0];
     let n = pavlov::skeleton::mm_to_osceleton_normalized(mm);
-    let p = osc_joint("r_hand", 2, [n[0] as f32, n[1] as f32, n[2] as f32]);
+    let p = osc_joint("r_hand", 2, n);
     let (events, _, _) = run(d, &p);
     let [SkeletonEvent::Joint { joint, pos_mm, .. }] = events.as_slice() else {
         panic!("{events:?}")
@@ -116,7 +86,7 @@ fn kinect_v2_metres_states_and_64_bit_ids() {
         kinect_joint(id, "HandLeft", [0.0, 0.0, 2.5], "NotTracked"),
         kinect_joint(id, "SpineBase", [0.0, 0.0, 2.5], "Tracked"),
         msg(
-            &format!("/bodies/{id}/hands/Left"),
+            format!("/bodies/{id}/hands/Left"),
             vec![OscType::String("Open".into())],
         ),
     ]);
@@ -191,8 +161,8 @@ fn malformed_messages_are_counted_by_kind_and_good_ones_still_decode() {
         msg("/joint", vec![OscType::String("l_elbow".into())]),
         msg("/new_user", vec![OscType::String("x".into())]),
         osc_joint("l_elbow", -3, [1.0, 2.0, 3.0]),
-        osc_joint("l_elbow", 1, [f32::NAN, 2.0, 3.0]),
-        osc_joint("l_hand", 1, [1.0, f32::INFINITY, 3.0]),
+        osc_joint("l_elbow", 1, [f64::NAN, 2.0, 3.0]),
+        osc_joint("l_hand", 1, [1.0, f64::INFINITY, 3.0]),
         msg("/something/else", vec![]),
         kinect_joint("5", "ElbowLeft", [0.1, 0.2, 0.3], "Tracked"),
         osc_joint("l_shoulder", 1, [1.0, 2.0, 3.0]),
