@@ -13,6 +13,7 @@
 //! - [`skeleton`]: joints, elbow angles and their smoothing, for the gesture-command experiment.
 //! - [`sim`]: a byte-exact simulated Create and a simulated human operator.
 //! - [`record`]: [`record::TickRecord`], everything that happened on one tick.
+//! - [`supervision`]: the robot link's state machine: stale stream, re-sync, reconnect, Safe-mode trips.
 //! - [`rng`]: the seeded random-number generator every stochastic part of the core draws from.
 
 pub mod agent;
@@ -28,3 +29,4 @@ pub mod rng;
 pub mod sim;
 pub mod skeleton;
 pub mod stats;
+pub mod supervision;

@@ -84,6 +84,21 @@ pub struct LinkSummary {
     pub bad_frames: u64,
     /// Bytes skipped while searching for a frame, so far.
     pub skipped_bytes: u64,
+    /// The supervisor's view of the link (recordings older than link supervision read as `up`).
+    #[serde(default)]
+    pub state: crate::supervision::LinkState,
+    /// The robot's OI mode from packet 35, corrected for the mode-plus-one quirk (0 Off … 3 Full).
+    #[serde(default)]
+    pub mode: Option<u8>,
+    /// Why the robot last tripped to Passive, while it stays tripped.
+    #[serde(default)]
+    pub trip: Option<crate::supervision::TripCause>,
+    /// Times the port was reopened, so far.
+    #[serde(default)]
+    pub reconnects: u64,
+    /// Times the stream went stale, so far.
+    #[serde(default)]
+    pub stale_events: u64,
 }
 
 /// The learning stage's exact inputs on a tick, so that a recording can be replayed bit for bit (the

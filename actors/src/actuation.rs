@@ -174,6 +174,7 @@ impl Decision {
                 good_frames: obs.parser.good_frames,
                 bad_frames: obs.parser.bad_frames,
                 skipped_bytes: obs.parser.skipped_bytes,
+                ..Default::default()
             },
             inputs: Some(inputs),
         }

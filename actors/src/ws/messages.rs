@@ -281,6 +281,7 @@ mod tests {
                 good_frames: 9,
                 bad_frames: 1,
                 skipped_bytes: 3,
+                ..Default::default()
             },
             inputs: None,
         };
