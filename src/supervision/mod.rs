@@ -5,11 +5,13 @@
 //! - [`LinkState`]: up, stale, reconnecting, tripped to Passive, or down for good.
 //! - [`TripCause`]: why the robot left Safe for Passive, read from the frame that showed the trip.
 //! - [`mode`]: reading the OI mode (packet 35), including the firmware's mode-plus-one quirk.
+//! - [`monitor`]: [`monitor::LinkMonitor`], the state machine that turns frames and ticks into actions.
 //!
 //! The runtime (actors/) calls into this once per received frame and once per tick; nothing here reads a
 //! clock or a socket.
 
 pub mod mode;
+pub mod monitor;
 
 use serde::{Deserialize, Serialize};
 
