@@ -101,6 +101,11 @@ pub struct SimRobot {
     output: Vec<u8>,
     tx_level: usize,
     baud: u32,
+    /// Fault injection: the line's real rate when it differs from `baud` (a robot that fell back to a
+    /// slower rate), bits/s.
+    line_baud: Option<u32>,
+    /// Fault injection: report packet 35 as mode + 1 (the firmware quirk of reference §5.5).
+    mode_quirk: bool,
     stream_ids: Vec<u8>,
     stream_paused: bool,
     drive: DriveTarget,
@@ -129,6 +134,8 @@ impl SimRobot {
             output: Vec::new(),
             tx_level: 0,
             baud: model.baud(),
+            line_baud: None,
+            mode_quirk: false,
             stream_ids: Vec::new(),
             stream_paused: false,
             drive: DriveTarget::STOP,
@@ -173,7 +180,7 @@ impl SimRobot {
 
     /// Advances the world by exactly 15 ms and, if a stream runs, sends one frame.
     pub fn step(&mut self) {
-        let budget = crate::oi::model::stream_budget_bytes(self.baud);
+        let budget = crate::oi::model::stream_budget_bytes(self.line_rate());
         self.tx_level = self.tx_level.saturating_sub(budget);
         self.world.step();
         let commands = [
@@ -239,9 +246,32 @@ impl SimRobot {
         &self.stream_ids
     }
 
+    /// Fault injection: makes packet 35 read mode + 1 (Safe as 3, Full as 4), as some Create 2
+    /// firmware does (`AutonomyLab/create_robot#64`, `AutonomyLab/libcreate#67`).
+    pub fn set_mode_quirk(&mut self, on: bool) {
+        self.mode_quirk = on;
+    }
+
+    /// True when packet 35 reads mode + 1.
+    pub fn mode_quirk(&self) -> bool {
+        self.mode_quirk
+    }
+
+    /// Fault injection: the transmit line really runs at `baud` bits/s whatever the OI baud is (`None`:
+    /// at the OI baud). A line slower than the stream needs overflows the transmit buffer, and the
+    /// stream corrupts [C1 p14; C2 p22].
+    pub fn set_line_baud(&mut self, baud: Option<u32>) {
+        self.line_baud = baud;
+    }
+
+    /// The rate the transmit buffer drains at, bits/s.
+    pub fn line_rate(&self) -> u32 {
+        self.line_baud.unwrap_or(self.baud)
+    }
+
     /// Queues `bytes` for sending; whatever does not fit in the transmit buffer is lost.
     fn transmit(&mut self, bytes: &[u8]) {
-        let budget = crate::oi::model::stream_budget_bytes(self.baud);
+        let budget = crate::oi::model::stream_budget_bytes(self.line_rate());
         let capacity = budget + self.world.params().tx_buffer_bytes;
         let room = capacity.saturating_sub(self.tx_level);
         let sent = bytes.len().min(room);

@@ -95,8 +95,7 @@ impl SimRobot {
         self.mode = mode;
     }
 
-    /// Create 2 Reset (7): like re-inserting the battery [C2 p8, p27]. The banner is a short one built
-    /// from the lines a real Create 2 prints (pycreate2#12, reference §5.5), not a byte-exact copy.
+    /// Create 2 Reset (7): like re-inserting the battery [C2 p8, p27]; prints [`SimRobot::boot_banner`].
     fn reset(&mut self) {
         self.odometry = crate::sim::odometry::Odometry::new(self.world.params());
         self.stream_ids.clear();
@@ -106,12 +105,18 @@ impl SimRobot {
         self.song_steps_left = 0;
         self.baud = self.model.baud();
         self.enter(OiMode::Off);
-        let banner = format!(
+        let banner = self.boot_banner();
+        self.transmit(banner.as_bytes());
+    }
+
+    /// The text a Create 2 prints when it boots (after Reset or power-on), lines ending in CR LF: a short
+    /// banner built from the lines a real one prints (pycreate2#12, reference §5.5), not a byte-exact copy.
+    pub fn boot_banner(&self) -> String {
+        format!(
             "\r\nbl-start\r\nRoomba by iRobot!\r\nr3-robot/tags/release-stm32-3.7.7:6913 CLEAN\r\n\
              initial-lithium-battery-capacity: set to {} mAH\r\n",
             self.world.params().capacity_mah.round() as i64
-        );
-        self.transmit(banner.as_bytes());
+        )
     }
 
     fn define_song(&mut self, number: u8, notes: &[(u8, u8)]) {

@@ -65,7 +65,7 @@ impl SimRobot {
         v.set(id::CARGO_BAY_DIGITAL_INPUTS, cargo);
         v.set(id::CARGO_BAY_ANALOG_SIGNAL, 0);
         v.set(id::CHARGING_SOURCES, 0);
-        v.set(id::OI_MODE, self.mode.code());
+        v.set(id::OI_MODE, self.mode.code() + i32::from(self.mode_quirk));
         v.set(id::SONG_NUMBER, i32::from(self.song_number));
         v.set(id::SONG_PLAYING, i32::from(self.song_steps_left > 0));
         v.set(id::STREAM_PACKET_COUNT, self.stream_ids.len() as i32);
