@@ -23,11 +23,13 @@
 //! robot's sensors on its next step); the link is hung, closes, or carries bytes; the carried bytes are
 //! the boot banner (first step only, if asked), a text line between frames, the robot's bytes with
 //! perhaps a text line spliced inside, all then subject to byte drops, flips and duplicates; a burst
-//! may hold them back for a few steps. Whether each link event fires is drawn every step from one
+//! may hold them back for a few steps; a steady latency delays them. Hangs and ends of file lose the
+//! step's bytes and any held back or in flight. Whether each link event fires is drawn every step from one
 //! stream, and bytes, text, durations, trips and host bytes have streams of their own, so changing
 //! one rate barely moves when the other faults fire.
 
 mod bytes;
+mod counters;
 mod parse;
 mod spec;
 mod text;
@@ -35,14 +37,18 @@ mod trip;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_robot;
 
 use std::borrow::Cow;
+use std::collections::VecDeque;
 
 use crate::rng::Rng;
 use crate::sim::robot::SimRobot;
 use crate::sim::world::STEP_SECONDS;
 
 pub use bytes::{ByteRates, ByteTally};
+pub use counters::FaultCounters;
 pub use parse::FaultSpecError;
 pub use spec::{FaultSpec, MsRange, PRESETS};
 pub use text::{battery_line, is_text_byte};
@@ -70,72 +76,6 @@ pub struct StepOutcome {
     pub link: LinkFault,
 }
 
-/// What has been injected so far. Byte counts are bytes; step counts are 15 ms steps.
-#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
-pub struct FaultCounters {
-    /// Robot→host bytes that went through the byte faults (robot output plus injected text).
-    pub bytes_seen: u64,
-    /// Robot→host bytes dropped.
-    pub dropped_bytes: u64,
-    /// Robot→host bytes with one bit inverted.
-    pub flipped_bytes: u64,
-    /// Robot→host bytes sent twice.
-    pub duplicated_bytes: u64,
-    /// Boot banners sent.
-    pub banners: u64,
-    /// Text lines sent between frames.
-    pub text_lines: u64,
-    /// Text lines spliced inside the step's bytes.
-    pub text_inside: u64,
-    /// Bytes of injected text (banners and lines).
-    pub text_bytes: u64,
-    /// Bursts started.
-    pub bursts: u64,
-    /// Steps whose output was held back by a burst.
-    pub held_steps: u64,
-    /// Hangs started.
-    pub hangs: u64,
-    /// Steps the link was hung.
-    pub hang_steps: u64,
-    /// Ends of file.
-    pub eofs: u64,
-    /// Robot→host bytes lost to hangs and ends of file (including bytes a burst was holding).
-    pub lost_bytes: u64,
-    /// Trip events started (wheel drops plus cliffs).
-    pub trips: u64,
-    /// Trip events that lifted the robot.
-    pub wheel_drop_trips: u64,
-    /// Trip events that put a cliff under a sensor.
-    pub cliff_trips: u64,
-    /// Host→robot bytes offered to [`FaultInjector::host_bytes`].
-    pub host_bytes_seen: u64,
-    /// Host→robot bytes dropped.
-    pub host_dropped: u64,
-    /// Host→robot bytes with one bit inverted.
-    pub host_flipped: u64,
-    /// Host→robot bytes lost while the link was hung.
-    pub host_lost: u64,
-}
-
-impl FaultCounters {
-    /// Every fault event injected: byte faults (both ways), banners, text lines, bursts, hangs, ends of
-    /// file and trips.
-    pub fn total_events(&self) -> u64 {
-        self.dropped_bytes
-            + self.flipped_bytes
-            + self.duplicated_bytes
-            + self.banners
-            + self.text_lines
-            + self.text_inside
-            + self.bursts
-            + self.hangs
-            + self.eofs
-            + self.trips
-            + self.host_dropped
-            + self.host_flipped
-    }
-}
-
 /// The per-step link events drawn at the start of a step (all drawn every step, so the sequence of
 /// one kind does not depend on the rates of the others).
 struct StepDraws {
@@ -160,6 +100,8 @@ pub struct FaultInjector {
     banner_pending: bool,
     held: Vec<u8>,
     hold_steps_left: u32,
+    /// Each step's bytes waiting out the steady latency, oldest first.
+    in_flight: VecDeque<Vec<u8>>,
     hang_steps_left: u32,
     hung: bool,
     trip: Option<ActiveTrip>,
@@ -192,6 +134,7 @@ impl FaultInjector {
             banner_pending: spec.banner,
             held: Vec::new(),
             hold_steps_left: 0,
+            in_flight: VecDeque::new(),
             hang_steps_left: 0,
             hung: false,
             trip: None,
@@ -274,17 +217,20 @@ impl FaultInjector {
         let link = self.link_state(&draws);
         self.hung = link == LinkFault::Hung;
         if link != LinkFault::Normal {
-            self.counters.lost_bytes += (out.len() + self.held.len()) as u64;
+            let in_flight: usize = self.in_flight.iter().map(Vec::len).sum();
+            self.counters.lost_bytes += (out.len() + self.held.len() + in_flight) as u64;
             self.held.clear();
             self.hold_steps_left = 0;
+            self.in_flight.clear();
             return StepOutcome {
                 bytes: Vec::new(),
                 link,
             };
         }
         let wire = self.wire_bytes(robot, out, &draws);
+        let released = self.burst(wire, draws.burst);
         StepOutcome {
-            bytes: self.burst(wire, draws.burst),
+            bytes: self.delay(released),
             link,
         }
     }
@@ -373,6 +319,19 @@ impl FaultInjector {
         self.counters.flipped_bytes += tally.flipped;
         self.counters.duplicated_bytes += tally.duplicated;
         wire
+    }
+
+    /// The steady latency: bytes come out `delay_ms` (in whole steps) after they went in.
+    fn delay(&mut self, bytes: Vec<u8>) -> Vec<u8> {
+        if self.spec.delay_ms == 0 {
+            return bytes;
+        }
+        self.in_flight.push_back(bytes);
+        if self.in_flight.len() > steps_for_ms(self.spec.delay_ms) as usize {
+            self.in_flight.pop_front().unwrap_or_default()
+        } else {
+            Vec::new()
+        }
     }
 
     /// Holds bytes during a burst; returns what is released now.

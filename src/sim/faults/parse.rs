@@ -7,7 +7,8 @@
 //! flag  := quirk | banner                          (or quirk=true|false, banner=true|false)
 //! key   := drop | flip | dup | text | inside | burst | hang | eof | trip | host_drop | host_flip
 //!                                                  (probabilities in [0, 1], e.g. 1e-4)
-//!        | burst_steps (integer ≥ 2) | hang_ms | trip_ms (ms: "300" or "200..3000")
+//!        | burst_steps (integer ≥ 2) | delay_ms (integer ms)
+//!        | hang_ms | trip_ms (ms: "300" or "200..3000")
 //!        | baud (line bits/s, > 0, or "none")
 //! ```
 //!
@@ -22,7 +23,7 @@ use super::spec::{FaultSpec, MsRange, PRESETS};
 pub enum FaultSpecError {
     /// The key is not part of the grammar.
     #[error(
-        "unknown fault `{key}` (expected one of {PRESETS:?}, drop, flip, dup, text, inside, burst, burst_steps, hang, hang_ms, eof, trip, trip_ms, host_drop, host_flip, quirk, baud, banner)"
+        "unknown fault `{key}` (expected one of {PRESETS:?}, drop, flip, dup, text, inside, burst, burst_steps, delay_ms, hang, hang_ms, eof, trip, trip_ms, host_drop, host_flip, quirk, baud, banner)"
     )]
     UnknownKey { key: String },
     /// A key that needs `=value` had none.
@@ -115,6 +116,7 @@ fn apply_valued(spec: &mut FaultSpec, key: &str, value: &str) -> Result<(), Faul
             }
             spec.burst_steps = steps;
         }
+        "delay_ms" => spec.delay_ms = integer(key, value)?,
         "hang_ms" => spec.hang_ms = ms_range(key, value)?,
         "trip_ms" => spec.trip_ms = ms_range(key, value)?,
         "baud" | "line_baud" => {
@@ -200,7 +202,7 @@ mod tests {
     #[test]
     fn a_full_spec_sets_every_field() {
         let s = parse(
-            "drop=1e-4, flip=2e-4,dup=3e-4,text=0.002,inside=0.001,burst=0.002,burst_steps=8,\
+            "drop=1e-4, flip=2e-4,dup=3e-4,text=0.002,inside=0.001,burst=0.002,burst_steps=8,delay_ms=45,\
              hang=2e-5,hang_ms=100..400,eof=1e-5,trip=1e-5,trip_ms=50,host_drop=0.5,host_flip=0.25,\
              quirk,baud=19200,banner",
         )
@@ -212,6 +214,7 @@ mod tests {
         assert_eq!(s.text_inside, 0.001);
         assert_eq!(s.burst, 0.002);
         assert_eq!(s.burst_steps, 8);
+        assert_eq!(s.delay_ms, 45);
         assert_eq!(s.hang, 2e-5);
         assert_eq!(s.hang_ms, MsRange::new(100, 400));
         assert_eq!(s.eof, 1e-5);
@@ -233,6 +236,7 @@ mod tests {
         }
         assert!(!parse("quirk").unwrap().is_none());
         assert!(!parse("baud=19200").unwrap().is_none());
+        assert!(!parse("delay_ms=15").unwrap().is_none());
         assert!(parse("quirk=false,drop=0").unwrap().is_none());
     }
 
@@ -263,7 +267,7 @@ mod tests {
                 s.trip,
             ];
             assert!(rates.iter().all(|&r| r > 0.0 && r < 0.1), "{s:?}");
-            assert!(s.mode_quirk && s.banner && s.line_baud.is_none());
+            assert!(s.mode_quirk && s.banner && s.line_baud.is_none() && s.delay_ms > 0);
         }
     }
 

@@ -61,6 +61,9 @@ pub struct FaultSpec {
     pub burst: f64,
     /// Longest burst, 15 ms steps (≥ 2).
     pub burst_steps: u32,
+    /// A steady latency, ms (rounded up to whole 15 ms steps): every byte reaches the wire this long
+    /// after the robot sent it, evenly paced (a USB adapter's latency timer, a Bluetooth bridge).
+    pub delay_ms: u32,
     /// Per step: the link hangs silently both ways for a duration drawn from `hang_ms`; the robot keeps
     /// running, its output and the host's bytes are lost meanwhile.
     pub hang: f64,
@@ -96,6 +99,7 @@ impl Default for FaultSpec {
             text_inside: 0.0,
             burst: 0.0,
             burst_steps: DEFAULT_BURST_STEPS,
+            delay_ms: 0,
             hang: 0.0,
             hang_ms: DEFAULT_HANG,
             eof: 0.0,
@@ -121,7 +125,8 @@ impl FaultSpec {
 
     /// A mix for runs of hours that exercises every fault: at 66.7 steps/s and a 84-byte frame,
     /// about 200 dropped, 200 flipped and 200 duplicated bytes an hour, a text line between frames
-    /// every ~10 s and one inside a frame every ~75 s, a burst of up to 300 ms every ~15 s, and about
+    /// every ~10 s and one inside a frame every ~75 s, a burst of up to 300 ms every ~15 s, a steady
+    /// 30 ms latency, and about
     /// once an hour each a hang (0.2–3 s), an end of file and a trip (0.1–1 s); the mode+1 quirk and
     /// the boot banner are on. The line runs at the configured baud.
     pub fn soak() -> Self {
@@ -132,6 +137,7 @@ impl FaultSpec {
             text: 1.5e-3,
             text_inside: 2e-4,
             burst: 1e-3,
+            delay_ms: 30,
             hang: 4e-6,
             eof: 4e-6,
             trip: 4e-6,
@@ -141,10 +147,11 @@ impl FaultSpec {
         }
     }
 
-    /// Every fault at a high rate, for short tests: ~8 % of 84-byte frames damaged by byte faults,
-    /// a text line every 1.5 s, a burst every 1.5 s, a hang, a trip every 15 s, an end of file every
-    /// 30 s, host bytes dropped or flipped at 1e-3, the quirk and the banner. The line baud is left
-    /// alone (a slow line breaks every frame; ask for it with `baud=`).
+    /// Every fault at a high rate, for short tests: ~7 % of 84-byte frames damaged by byte faults,
+    /// a text line between frames every 1.5 s and inside one every 3 s, a burst every 1.5 s, a steady
+    /// 30 ms latency, a hang and a trip every ~15 s, an end of file every ~30 s, host bytes dropped or
+    /// flipped at 1e-3, the quirk and the banner. The line baud is left alone (a slow line breaks every
+    /// frame; ask for it with `baud=`).
     pub fn all() -> Self {
         FaultSpec {
             drop: 3e-4,
@@ -153,6 +160,7 @@ impl FaultSpec {
             text: 0.01,
             text_inside: 0.005,
             burst: 0.01,
+            delay_ms: 30,
             hang: 1e-3,
             eof: 5e-4,
             trip: 1e-3,
@@ -190,6 +198,7 @@ impl FaultSpec {
             self.host_flip,
         ];
         rates.iter().all(|&r| r <= 0.0)
+            && self.delay_ms == 0
             && !self.mode_quirk
             && self.line_baud.is_none()
             && !self.banner
@@ -228,6 +237,9 @@ impl std::fmt::Display for FaultSpec {
         );
         if self.burst_steps != d.burst_steps {
             items.push(format!("burst_steps={}", self.burst_steps));
+        }
+        if self.delay_ms != d.delay_ms {
+            items.push(format!("delay_ms={}", self.delay_ms));
         }
         if self.hang_ms != d.hang_ms {
             items.push(format!("hang_ms={}", self.hang_ms));

@@ -1,25 +1,23 @@
-//! Tests of [`FaultInjector`] on a streaming simulated Create 2, read back through the host's
-//! [`StreamParser`].
+//! Tests of [`FaultInjector`]'s link faults on a streaming simulated Create 2, read back through the
+//! host's [`StreamParser`]; the helpers here serve `tests_robot` too.
 
 use super::*;
 use crate::oi::Model;
 use crate::oi::SensorValues;
-use crate::oi::packets::{bits, id};
 use crate::oi::parser::StreamParser;
 use crate::sim::params::SimParams;
-use crate::sim::robot::OiMode;
 
-const START: u8 = 128;
-const SAFE: u8 = 131;
-const FULL: u8 = 132;
-const DRIVE: u8 = 137;
-const STREAM: u8 = 148;
+pub(super) const START: u8 = 128;
+pub(super) const SAFE: u8 = 131;
+pub(super) const FULL: u8 = 132;
+pub(super) const DRIVE: u8 = 137;
+pub(super) const STREAM: u8 = 148;
 /// The Create 2's all-sensors group: an 84-byte frame.
-const GROUP: u8 = 100;
-const FRAME_LEN: usize = 84;
+pub(super) const GROUP: u8 = 100;
+pub(super) const FRAME_LEN: usize = 84;
 
 /// Drive at `velocity` mm/s on `radius` mm (1: turn in place counter-clockwise).
-fn drive(velocity: i16, radius: i16) -> Vec<u8> {
+pub(super) fn drive(velocity: i16, radius: i16) -> Vec<u8> {
     let mut v = vec![DRIVE];
     v.extend_from_slice(&velocity.to_be_bytes());
     v.extend_from_slice(&radius.to_be_bytes());
@@ -28,7 +26,7 @@ fn drive(velocity: i16, radius: i16) -> Vec<u8> {
 
 /// A Create 2 in `mode` (SAFE or FULL), turning in place (so every frame differs), streaming group
 /// 100, with `spec` configured.
-fn robot_with(mode: u8, spec: &FaultSpec, seed: u64) -> (SimRobot, FaultInjector) {
+pub(super) fn robot_with(mode: u8, spec: &FaultSpec, seed: u64) -> (SimRobot, FaultInjector) {
     let mut robot = SimRobot::new(Model::Create2, SimParams::for_model(Model::Create2), seed);
     let injector = FaultInjector::new(spec.clone(), seed);
     injector.configure(&mut robot);
@@ -38,19 +36,19 @@ fn robot_with(mode: u8, spec: &FaultSpec, seed: u64) -> (SimRobot, FaultInjector
     (robot, injector)
 }
 
-fn spec(text: &str) -> FaultSpec {
+pub(super) fn spec(text: &str) -> FaultSpec {
     text.parse().unwrap()
 }
 
 /// One step: the robot's own bytes and what the injector made of them.
-fn step(robot: &mut SimRobot, injector: &mut FaultInjector) -> (Vec<u8>, StepOutcome) {
+pub(super) fn step(robot: &mut SimRobot, injector: &mut FaultInjector) -> (Vec<u8>, StepOutcome) {
     robot.step();
     let out = robot.take_output();
     let outcome = injector.after_step(robot, out.clone());
     (out, outcome)
 }
 
-fn run(
+pub(super) fn run(
     robot: &mut SimRobot,
     injector: &mut FaultInjector,
     steps: usize,
@@ -58,7 +56,7 @@ fn run(
     (0..steps).map(|_| step(robot, injector)).collect()
 }
 
-fn frames_of(bytes: &[u8]) -> Vec<SensorValues> {
+pub(super) fn frames_of(bytes: &[u8]) -> Vec<SensorValues> {
     let mut parser = StreamParser::new(&[GROUP]).unwrap();
     let mut frames = Vec::new();
     parser.feed(bytes, |v| frames.push(v));
@@ -324,119 +322,6 @@ fn hang_durations_stay_within_their_range() {
 }
 
 #[test]
-fn a_wheel_drop_in_safe_mode_trips_to_passive_and_shows_in_the_next_frame() {
-    for (mode, expect) in [(SAFE, 1), (FULL, 3)] {
-        let (mut r, mut f) = robot_with(mode, &FaultSpec::none(), 9);
-        run(&mut r, &mut f, 10);
-        f.inject_trip(&mut r, TripKind::WheelDrop, 5);
-        let (_, outcome) = step(&mut r, &mut f);
-        let frame = frames_of(&outcome.bytes).pop().unwrap();
-        let drops = bits::WHEEL_DROP_LEFT | bits::WHEEL_DROP_RIGHT;
-        assert_eq!(frame.get(id::BUMPS_WHEEL_DROPS).unwrap() & drops, drops);
-        assert_eq!(frame.get(id::OI_MODE), Some(expect), "mode {mode}");
-        // The event ends after its 5 steps; Safe stays tripped.
-        let results = run(&mut r, &mut f, 5);
-        let last = frames_of(&results[4].1.bytes).pop().unwrap();
-        assert_eq!(last.get(id::BUMPS_WHEEL_DROPS).unwrap() & drops, 0);
-        assert_eq!(last.get(id::OI_MODE), Some(expect));
-        assert_eq!(f.active_trip(), None);
-    }
-}
-
-#[test]
-fn a_cliff_while_driving_forward_in_safe_mode_trips_to_passive() {
-    for (mode, expect) in [(SAFE, OiMode::Passive), (FULL, OiMode::Full)] {
-        let (mut r, mut f) = robot_with(mode, &FaultSpec::none(), 10);
-        r.receive(&drive(100, 0x7FFF));
-        run(&mut r, &mut f, 10);
-        f.inject_trip(&mut r, TripKind::Cliff(1), 3);
-        let (_, outcome) = step(&mut r, &mut f);
-        let frame = frames_of(&outcome.bytes).pop().unwrap();
-        assert_eq!(frame.get(id::CLIFF_FRONT_LEFT), Some(1));
-        assert_eq!(frame.get(id::CLIFF_LEFT), Some(0));
-        assert_eq!(r.oi_mode(), expect);
-    }
-}
-
-#[test]
-fn random_trips_of_both_kinds_come_and_go() {
-    let (mut r, mut f) = robot_with(FULL, &spec("trip=0.01,trip_ms=15..150"), 11);
-    let mut tripped_steps = 0;
-    for _ in 0..5000 {
-        let (_, outcome) = step(&mut r, &mut f);
-        let frame = frames_of(&outcome.bytes).pop().unwrap();
-        let cliffs: i32 = [
-            id::CLIFF_LEFT,
-            id::CLIFF_FRONT_LEFT,
-            id::CLIFF_FRONT_RIGHT,
-            id::CLIFF_RIGHT,
-        ]
-        .iter()
-        .map(|&p| frame.get_or_zero(p))
-        .sum();
-        let drops = frame.get_or_zero(id::BUMPS_WHEEL_DROPS) & bits::WHEEL_DROP_LEFT;
-        if cliffs > 0 || drops > 0 {
-            tripped_steps += 1;
-        }
-        assert!(cliffs <= 1);
-    }
-    let c = f.counters();
-    assert!(c.wheel_drop_trips > 5 && c.cliff_trips > 5, "{c:?}");
-    assert_eq!(c.trips, c.wheel_drop_trips + c.cliff_trips);
-    // Each lasts 1..=10 steps: between the shortest and longest possible totals.
-    assert!(tripped_steps as u64 + 1 >= c.trips && tripped_steps as u64 <= 10 * c.trips);
-    assert_eq!(r.oi_mode(), OiMode::Full, "Full ignores trips");
-}
-
-#[test]
-fn the_quirk_makes_packet_35_read_mode_plus_one() {
-    let (mut r, mut f) = robot_with(SAFE, &spec("quirk"), 12);
-    assert!(r.mode_quirk());
-    let (_, outcome) = step(&mut r, &mut f);
-    assert_eq!(frames_of(&outcome.bytes)[0].get(id::OI_MODE), Some(3));
-    r.receive(&[FULL]);
-    let (_, outcome) = step(&mut r, &mut f);
-    assert_eq!(frames_of(&outcome.bytes)[0].get(id::OI_MODE), Some(4));
-    r.receive(&[START]);
-    let (_, outcome) = step(&mut r, &mut f);
-    assert_eq!(frames_of(&outcome.bytes)[0].get(id::OI_MODE), Some(2));
-    assert_eq!(r.oi_mode(), OiMode::Passive);
-}
-
-#[test]
-fn a_line_at_19200_baud_breaks_the_group_100_stream() {
-    for (text, broken) in [("baud=19200", true), ("none", false)] {
-        let (mut r, mut f) = robot_with(FULL, &spec(text), 13);
-        let mut parser = StreamParser::new(&[GROUP]).unwrap();
-        for (_, outcome) in run(&mut r, &mut f, 300) {
-            parser.feed(&outcome.bytes, |_| {});
-        }
-        let stats = parser.stats();
-        if broken {
-            assert_eq!(r.line_rate(), 19_200);
-            assert!(stats.good_frames < 10, "{stats:?}");
-            assert!(stats.bad_frames > 200, "{stats:?}");
-            assert!(r.counters().dropped_tx_bytes > 10_000);
-        } else {
-            assert_eq!(stats.good_frames, 300);
-            assert_eq!(stats.bad_frames, 0);
-        }
-    }
-}
-
-#[test]
-fn the_banner_comes_first_and_once() {
-    let (mut r, mut f) = robot_with(FULL, &spec("banner"), 14);
-    let results = run(&mut r, &mut f, 3);
-    let banner = r.boot_banner().into_bytes();
-    assert!(results[0].1.bytes.starts_with(&banner));
-    assert!(results[0].1.bytes.ends_with(&results[0].0));
-    assert_eq!(results[1].1.bytes, results[1].0);
-    assert_eq!(f.counters().banners, 1);
-    assert!(String::from_utf8_lossy(&banner).contains("Roomba by iRobot!"));
-}
-
-#[test]
 fn host_byte_faults_apply_only_when_asked() {
     let mut plain = FaultInjector::new(FaultSpec::none(), 1);
     assert!(matches!(
@@ -465,4 +350,34 @@ fn no_faults_pass_the_robot_bytes_through_untouched() {
         );
     }
     assert_eq!(f.counters().total_events(), 0);
+}
+
+#[test]
+fn a_steady_delay_shifts_every_step_by_whole_steps() {
+    let (mut r, mut f) = robot_with(FULL, &spec("delay_ms=40"), 16);
+    let results = run(&mut r, &mut f, 50);
+    for (i, (_, outcome)) in results.iter().enumerate() {
+        match i.checked_sub(3) {
+            None => assert!(outcome.bytes.is_empty(), "step {i}"),
+            Some(j) => assert_eq!(outcome.bytes, results[j].0, "step {i}"),
+        }
+    }
+}
+
+#[test]
+fn an_end_of_file_loses_what_was_in_flight_or_held() {
+    let (mut r, mut f) = robot_with(FULL, &spec("delay_ms=30,burst=1,burst_steps=4"), 17);
+    run(&mut r, &mut f, 7);
+    let lost_before = f.counters().lost_bytes;
+    let in_flight = f.in_flight.iter().map(Vec::len).sum::<usize>() + f.held.len();
+    assert!(in_flight >= 2 * FRAME_LEN);
+    f.spec.eof = 1.0;
+    let (_, outcome) = step(&mut r, &mut f);
+    assert_eq!(outcome.link, LinkFault::Eof);
+    assert!(outcome.bytes.is_empty());
+    assert_eq!(
+        f.counters().lost_bytes - lost_before,
+        (in_flight + FRAME_LEN) as u64
+    );
+    assert!(f.in_flight.is_empty() && f.held.is_empty());
 }
