@@ -10,6 +10,9 @@ use crate::control::{Mode, Policy};
 use crate::learn::PredictionSpec;
 use crate::oi::Model;
 
+mod link;
+pub use link::LinkConfig;
+
 /// A configuration error, naming the offending key.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum ConfigError {
@@ -151,11 +154,26 @@ pub struct ControlConfig {
 pub struct SimConfig {
     /// Seed of every random draw in the simulation.
     pub seed: u64,
+    /// Faults the simulated Create injects (see `pavlov::sim::faults::FaultSpec`), e.g. `none`, `soak`, or
+    /// `drop=1e-4,flip=1e-4,hang=2e-5`.
+    pub faults: String,
 }
 
 impl Default for SimConfig {
     fn default() -> Self {
-        SimConfig { seed: 1 }
+        SimConfig {
+            seed: 1,
+            faults: "none".into(),
+        }
+    }
+}
+
+impl SimConfig {
+    /// The parsed fault specification.
+    pub fn fault_spec(&self) -> Result<crate::sim::faults::FaultSpec, ConfigError> {
+        self.faults
+            .parse()
+            .map_err(|e: crate::sim::faults::FaultSpecError| invalid("sim.faults", e.to_string()))
     }
 }
 
@@ -299,6 +317,9 @@ pub struct Config {
     /// `[safety]`.
     #[serde(default)]
     pub safety: SafetyConfig,
+    /// `[link]`.
+    #[serde(default)]
+    pub link: LinkConfig,
     /// `[control]`.
     pub control: ControlConfig,
     /// `[[predictions]]`, learned side by side.
@@ -366,6 +387,8 @@ impl Config {
             }
         }
         self.skeleton.validate()?;
+        self.link.validate()?;
+        self.sim.fault_spec()?;
         if self.checkpoint.dir.trim().is_empty() {
             return Err(invalid("checkpoint.dir", "must name a directory"));
         }

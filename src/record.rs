@@ -69,8 +69,10 @@ pub enum SafetyStop {
     StaleObservation,
     /// No fresh action arrived from the gate in time (pipeline stalled).
     NoFreshAction,
-    /// The robot link is down.
+    /// The robot link is not up (stream stale, reconnecting, or closed).
     LinkDown,
+    /// The robot tripped from Safe to Passive by itself; control resumes after the operator's `rearm`.
+    RobotTripped,
 }
 
 /// The robot link's state on a tick.

@@ -192,8 +192,28 @@ function renderNow() {
   $('now-safety').className = t.safety_stop ? 'alarm' : '';
   $('tick-count').textContent = fmt(state.ticks);
   $('h-frames').textContent = `${fmt(t.link.good_frames)} / ${fmt(t.link.bad_frames)}`;
-  $('h-link').textContent = t.link.up ? `up · ${fmt(t.link.skipped_bytes)} B skipped` : 'DOWN';
-  $('h-link').className = t.link.up ? '' : 'alarm';
+  renderLink(t.link);
+}
+
+const OI_MODES = ['Off', 'Passive', 'Safe', 'Full'];
+const LINK_WORDS = {
+  stale: 'Robot stream stale — wheels stopped, re-sending Start and Stream.',
+  reconnecting: 'Robot link lost — wheels stopped, reopening the port.',
+  down: 'Robot link down.',
+};
+
+function renderLink(link) {
+  const st = link.state || (link.up ? 'up' : 'down');
+  $('h-link').textContent = st === 'up' ? `up · ${fmt(link.skipped_bytes)} B skipped` : st.toUpperCase();
+  $('h-link').className = st === 'up' ? '' : 'alarm';
+  $('h-mode').textContent = link.mode == null ? '—' : (OI_MODES[link.mode] || String(link.mode));
+  $('h-reconnects').textContent = `${fmt(link.stale_events || 0)} / ${fmt(link.reconnects || 0)}`;
+  const tripped = st === 'tripped';
+  $('trip-banner').hidden = !tripped;
+  if (tripped) $('trip-cause').textContent = (link.trip || 'unknown').replace(/_/g, ' ');
+  const words = LINK_WORDS[st];
+  $('link-banner').hidden = !words;
+  if (words) $('link-banner').textContent = words;
 }
 
 function onStatus(s) {
@@ -439,6 +459,7 @@ const KEYS = { ArrowUp: 'up', ArrowDown: 'down', ArrowLeft: 'left', ArrowRight: 
 function wireControls() {
   $('estop').addEventListener('click', () => send('estop'));
   $('release').addEventListener('click', () => send('release'));
+  $('rearm').addEventListener('click', () => send('rearm'));
   $('request').addEventListener('click', () => send('human_request', { duration_ms: 500 }));
   for (const b of document.querySelectorAll('.mode')) {
     b.addEventListener('click', () => send('set_mode', { mode: b.dataset.mode }));

@@ -1,7 +1,8 @@
 //! The actuation actor: the only writer of motion commands, and the robot's last line of safety.
 //!
 //! For each decision it writes Drive Direct (right wheel first) through the link writer, unless the e-stop is
-//! latched, the observation behind the decision is stale, or the link is down — then it writes a stop. On
+//! latched, the observation behind the decision is stale, the link is not up (stale, reconnecting) or the
+//! robot has tripped to Passive — then it writes a stop. On
 //! every tick it also checks that a fresh decision has arrived; after `max_action_age_ticks` ticks without
 //! one (a stalled pipeline) it stops the wheels by itself. It then assembles the tick's [`TickRecord`] and
 //! publishes it to the feed (dashboard, recorder, metrics).
@@ -13,6 +14,7 @@ use pavlov::control::Action;
 use pavlov::oi::Model;
 use pavlov::oi::command::Command;
 use pavlov::record::{SafetyStop, TickRecord};
+use pavlov::supervision::LinkState;
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 
@@ -60,7 +62,9 @@ impl Actuation {
         let obs = &d.prediction.observation;
         if estop {
             Some(SafetyStop::EStop)
-        } else if !obs.link_up {
+        } else if obs.link.state == LinkState::Tripped {
+            Some(SafetyStop::RobotTripped)
+        } else if obs.link.state != LinkState::Up {
             Some(SafetyStop::LinkDown)
         } else if obs
             .age_ticks
@@ -169,13 +173,7 @@ impl Decision {
             safety_stop,
             estop,
             lateness_us: obs.tick.lateness().as_micros().min(u32::MAX as u128) as u32,
-            link: pavlov::record::LinkSummary {
-                up: obs.link_up,
-                good_frames: obs.parser.good_frames,
-                bad_frames: obs.parser.bad_frames,
-                skipped_bytes: obs.parser.skipped_bytes,
-                ..Default::default()
-            },
+            link: obs.link,
             inputs: Some(inputs),
         }
     }

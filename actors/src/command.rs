@@ -68,6 +68,8 @@ pub enum ControlCommand {
     },
     /// Stop recording.
     StopRecording {},
+    /// Resume Safe/Full control after the robot tripped to Passive (cliff, wheel drop, charger).
+    Rearm {},
 }
 
 fn default_request_ms() -> u64 {
@@ -120,6 +122,8 @@ pub struct CommandRoutes {
     pub learning: mpsc::Sender<LearningCommand>,
     /// The e-stop latch that actuation watches.
     pub estop: watch::Sender<bool>,
+    /// Link supervision's inbox (re-arm after a trip).
+    pub link: mpsc::Sender<crate::link::supervisor::LinkCommand>,
     /// The recorder's inbox, when recording is available.
     pub recorder: Option<mpsc::Sender<(ControlCommand, oneshot::Sender<CommandResult>)>>,
 }
@@ -175,6 +179,22 @@ pub async fn route(
             | ControlCommand::ResetWeights {}
             | ControlCommand::SaveWeights { .. }) => {
                 forward(&routes.learning, LearningCommand::Apply(c, reply)).await
+            }
+            ControlCommand::Rearm {} => {
+                let (tx, rx) = oneshot::channel();
+                if routes
+                    .link
+                    .send(crate::link::supervisor::LinkCommand::Rearm(tx))
+                    .await
+                    .is_err()
+                {
+                    let _ = reply.send(Err("the robot link is not running".into()));
+                    continue;
+                }
+                let _ = reply.send(
+                    rx.await
+                        .unwrap_or_else(|_| Err("the robot link stopped".into())),
+                );
             }
             c @ (ControlCommand::StartRecording { .. } | ControlCommand::StopRecording {}) => {
                 match &routes.recorder {

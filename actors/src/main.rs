@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 use pavlov::config::{Config, SkeletonFormat};
 use pavlov::control::Mode;
 use pavlov::oi::Model;
+use pavlov::sim::faults::{FaultInjector, FaultSpec};
 use pavlov::sim::params::SimParams;
 use pavlov::sim::robot::SimRobot;
 use pavlov_actors::human_sender::{SenderOptions, send_human};
@@ -54,6 +55,10 @@ struct ConfigArgs {
     /// Override [sim] seed: the seed of the simulated robot (and human).
     #[arg(long, value_name = "N")]
     seed: Option<u64>,
+    /// Override [sim] faults: what the simulated Create injects, e.g. `soak`, `all` or
+    /// `drop=1e-4,flip=1e-4,text=0.002,hang=2e-5,eof=1e-5,trip=1e-5,quirk` (see README, "Fault injection").
+    #[arg(long, value_name = "SPEC")]
+    faults: Option<String>,
 }
 
 /// The dashboard endpoint's command-line overrides.
@@ -127,6 +132,10 @@ enum Command {
         /// Seed of the simulation's random draws.
         #[arg(long, default_value_t = 1, value_name = "N")]
         seed: u64,
+        /// Faults to inject: a preset (none, soak, all) or `key=value,...` (see README, "Fault injection").
+        /// On a PTY an end-of-file cannot be signalled without destroying the device, so `eof` hangs instead.
+        #[arg(long, default_value = "none", value_name = "SPEC")]
+        faults: String,
     },
     /// Benchmark: run the server on the simulator in real time and print tick lateness and
     /// tick-to-command latency percentiles.
@@ -204,6 +213,9 @@ fn load_config(args: &ConfigArgs) -> Result<Config> {
     }
     if let Some(s) = args.seed {
         cfg.sim.seed = s;
+    }
+    if let Some(f) = &args.faults {
+        cfg.sim.faults = f.clone();
     }
     cfg.validate().with_context(|| {
         format!("invalid configuration in {origin} after command-line overrides")
@@ -319,11 +331,19 @@ async fn serve(
     Ok(())
 }
 
-async fn sim_pty(model: Model, seed: u64) -> Result<()> {
+async fn sim_pty(model: Model, seed: u64, faults: &str) -> Result<()> {
     let cancel = CancellationToken::new();
     let robot = SimRobot::new(model, SimParams::for_model(model), seed);
-    let pty = transport::spawn_sim_pty(robot, cancel.clone())
+    let spec: FaultSpec = faults
+        .parse()
+        .with_context(|| format!("invalid --faults `{faults}`"))?;
+    if !spec.is_none() {
+        tracing::info!(faults = %spec.describe(), "injecting faults");
+    }
+    let injector = FaultInjector::new(spec, seed);
+    let pty = transport::spawn_sim_pty(robot, injector, cancel.clone())
         .context("cannot start the simulated robot")?;
+    let status = pty.status.clone();
     println!("{}", pty.path);
     tracing::info!(path = %pty.path, %model, seed, "simulated Create listening on a pseudo-terminal");
     shutdown_signal().await;
@@ -332,6 +352,7 @@ async fn sim_pty(model: Model, seed: u64) -> Result<()> {
     // The robot's final state, one JSON line on stdout, so scripts and tests can check how it was left.
     let world = robot.world();
     let c = robot.counters();
+    let injected = status.borrow().faults.clone();
     println!(
         "{}",
         serde_json::json!({
@@ -341,6 +362,8 @@ async fn sim_pty(model: Model, seed: u64) -> Result<()> {
             "commands": c.commands,
             "frames_sent": c.frames_sent,
             "elapsed_s": robot.elapsed_steps() as f64 * 0.015,
+            "safety_trips": c.safety_trips,
+            "faults": injected,
         })
     );
     Ok(())
@@ -429,7 +452,8 @@ fn main() -> Result<()> {
                 pty: _,
                 model,
                 seed,
-            } => sim_pty(model, seed).await,
+                faults,
+            } => sim_pty(model, seed, &faults).await,
             Command::Human {
                 to,
                 seed,

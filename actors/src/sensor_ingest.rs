@@ -3,19 +3,23 @@
 //! It reads the link continuously and feeds the core's [`StreamParser`], which resynchronises after garbage
 //! and only commits frames whose checksum holds. It keeps just the newest frame (it never works through a
 //! backlog) but sums the odometry packets (distance 19, angle 20) over every frame, because the robot resets
-//! them each time it reports them. On each tick it sends learning an [`Observation`] with the frame's age.
+//! them each time it reports them. On each tick it sends learning an [`Observation`] with the frame's age
+//! and the link's state. It hosts link supervision ([`Supervisor`]): every frame and tick goes to it, and
+//! a reopened port's reader replaces the old one here.
 
 use std::time::Duration;
 
 use pavlov::oi::SensorValues;
 use pavlov::oi::packets::id;
-use pavlov::oi::parser::{ParserStats, StreamParser};
+use pavlov::oi::parser::StreamParser;
+use pavlov::record::LinkSummary;
 use tokio::io::AsyncReadExt;
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
 use crate::link::LinkReader;
+use crate::link::supervisor::{LinkCommand, Supervisor};
 use crate::ticker::Tick;
 
 /// The robot's state as seen at one tick.
@@ -31,25 +35,41 @@ pub struct Observation {
     pub distance_mm: i32,
     /// Angle (degrees) summed over every frame since the previous tick.
     pub angle_deg: i32,
-    /// Parser counters so far.
-    pub parser: ParserStats,
-    /// False once the link has reached end-of-file or failed.
-    pub link_up: bool,
+    /// The link's state, mode, counters.
+    pub link: LinkSummary,
+}
+
+/// The channels and link parts the ingest works with.
+pub struct IngestLink {
+    /// The robot-to-host half of the link.
+    pub reader: LinkReader,
+    /// The stream parser for the requested packets.
+    pub parser: StreamParser,
+    /// Link supervision (re-sync, reopen, trips).
+    pub supervisor: Supervisor,
+    /// Link commands from the router.
+    pub commands: mpsc::Receiver<LinkCommand>,
 }
 
 /// Runs until `cancel` fires or the tick channel closes.
 pub async fn run(
-    mut link: LinkReader,
-    mut parser: StreamParser,
+    link: IngestLink,
     period: Duration,
     mut ticks: watch::Receiver<Option<Tick>>,
     out: mpsc::Sender<Observation>,
     cancel: CancellationToken,
 ) {
+    let IngestLink {
+        reader,
+        mut parser,
+        mut supervisor,
+        mut commands,
+    } = link;
+    let mut reader = Some(reader);
     let mut buf = vec![0u8; 4096];
     let mut newest: Option<(SensorValues, Instant)> = None;
     let (mut distance, mut angle) = (0i32, 0i32);
-    let mut link_up = true;
+    let mut commands_open = true;
     loop {
         tokio::select! {
             biased;
@@ -59,6 +79,7 @@ pub async fn run(
                     break;
                 }
                 let Some(tick) = *ticks.borrow_and_update() else { continue };
+                supervisor.on_tick();
                 let age_ticks = newest.as_ref().map(|(_, at)| {
                     let age = tick.deadline.saturating_duration_since(*at);
                     (age.as_micros() / period.as_micros().max(1)) as u32
@@ -69,31 +90,51 @@ pub async fn run(
                     age_ticks,
                     distance_mm: std::mem::take(&mut distance),
                     angle_deg: std::mem::take(&mut angle),
-                    parser: parser.stats(),
-                    link_up,
+                    link: supervisor.summary(parser.stats()),
                 };
                 if out.try_send(obs).is_err() {
                     tracing::debug!("learning is behind; observation for tick {} dropped", tick.seq);
                 }
             }
-            n = link.read(&mut buf), if link_up => match n {
+            command = commands.recv(), if commands_open => match command {
+                Some(c) => supervisor.command(c),
+                None => commands_open = false,
+            },
+            fresh = supervisor.reopen_finished(), if supervisor.reopening() => {
+                if let Some(fresh) = fresh {
+                    // Bytes of a frame cut by the reconnect must not join the new port's first frame.
+                    parser.reset();
+                    reader = Some(fresh);
+                }
+            }
+            n = read_link(&mut reader, &mut buf), if reader.is_some() => match n {
                 Ok(0) => {
                     tracing::warn!("robot link closed (end of file)");
-                    link_up = false;
+                    reader = None;
+                    supervisor.on_lost();
                 }
                 Err(e) => {
                     tracing::warn!("robot link read failed: {e}");
-                    link_up = false;
+                    reader = None;
+                    supervisor.on_lost();
                 }
                 Ok(n) => {
                     let now = Instant::now();
                     parser.feed(&buf[..n], |frame| {
                         distance = distance.saturating_add(frame.get_or_zero(id::DISTANCE));
                         angle = angle.saturating_add(frame.get_or_zero(id::ANGLE));
+                        supervisor.on_frame(&frame);
                         newest = Some((frame, now));
                     });
                 }
             }
         }
+    }
+}
+
+async fn read_link(reader: &mut Option<LinkReader>, buf: &mut [u8]) -> std::io::Result<usize> {
+    match reader {
+        Some(r) => r.read(buf).await,
+        None => std::future::pending().await,
     }
 }

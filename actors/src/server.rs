@@ -29,9 +29,12 @@ use crate::command::{self, CommandRoutes, ControlRequest};
 use crate::feed::TickFeed;
 use crate::gating;
 use crate::learning::{self, Learning};
+use crate::link::opener::{LinkOpener, SerialOpener};
+use crate::link::supervisor::Supervisor;
 use crate::link::{LinkError, LinkReader, LinkWriter, handshake, transport, writer};
 use crate::ticker::{self, SharedTickStats};
 use pavlov::agent::GatingStage;
+use pavlov::sim::faults::FaultInjector;
 
 /// Where the robot is.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -48,6 +51,9 @@ pub enum ServerError {
     /// The robot link failed.
     #[error(transparent)]
     Link(#[from] LinkError),
+    /// The configuration is invalid.
+    #[error("configuration: {0}")]
+    Config(#[from] pavlov::config::ConfigError),
     /// Learning could not be set up from the configuration.
     #[error("learning: {0}")]
     Learning(String),
@@ -75,6 +81,8 @@ pub struct Server {
     pub skeleton: Option<crate::skeleton_ingest::SkeletonIngest>,
     /// Names of the observation vector's dimensions, in record order.
     pub obs_names: Vec<String>,
+    /// The in-process simulated robot's state after each step (and the faults injected), when simulated.
+    pub sim_status: Option<watch::Receiver<transport::SimStatus>>,
     cancel: CancellationToken,
     sim_cancel: CancellationToken,
     actors: Vec<JoinHandle<()>>,
@@ -105,21 +113,32 @@ impl Server {
     ) -> Result<Server, ServerError> {
         let model = config.robot.model;
         let sim_cancel = CancellationToken::new();
-        let (reader, writer, sim) = match &target {
+        let mut sim_status = None;
+        let (link, sim) = match &target {
             RobotTarget::Simulated => {
                 let robot = SimRobot::new(model, SimParams::for_model(model), config.sim.seed);
-                let l = transport::spawn_sim(robot, sim_cancel.clone());
-                (l.reader, l.writer, Some(l.robot))
+                let faults = config.sim.fault_spec()?;
+                // The injector forks its own streams from the seed, apart from the robot's.
+                let injector = FaultInjector::new(faults, config.sim.seed);
+                let l = transport::spawn_sim_with_faults(robot, injector, sim_cancel.clone());
+                let opener: Box<dyn LinkOpener> = Box::new(l.device);
+                sim_status = Some(l.status);
+                ((l.reader, l.writer, Some(opener)), Some(l.robot))
             }
             RobotTarget::Serial(path) => {
                 let (r, w) = transport::open_serial(path, model)?;
-                (r, w, None)
+                let opener: Box<dyn LinkOpener> = Box::new(SerialOpener::new(path.clone(), model));
+                ((r, w, Some(opener)), None)
             }
         };
-        Self::start_on_link_with_recorder(config, reader, writer, sim, sim_cancel, recorder).await
+        let mut server =
+            Self::start_on_link_with_recorder(config, link, sim, sim_cancel, recorder).await?;
+        server.sim_status = sim_status;
+        Ok(server)
     }
 
-    /// Starts the server on an already open link (`sim`: the simulator task behind it, if any).
+    /// Starts the server on an already open link (`sim`: the simulator task behind it, if any). The link
+    /// cannot be reopened: a dead stream is re-synced with backoff instead.
     pub async fn start_on_link(
         config: Config,
         reader: LinkReader,
@@ -127,18 +146,25 @@ impl Server {
         sim: Option<JoinHandle<SimRobot>>,
         sim_cancel: CancellationToken,
     ) -> Result<Server, ServerError> {
-        Self::start_on_link_with_recorder(config, reader, link_writer, sim, sim_cancel, None).await
+        Self::start_on_link_with_recorder(
+            config,
+            (reader, link_writer, None),
+            sim,
+            sim_cancel,
+            None,
+        )
+        .await
     }
 
-    /// [`Server::start_on_link`] with an optional recorder.
+    /// [`Server::start_on_link`] with a way to reopen the link and an optional recorder.
     pub async fn start_on_link_with_recorder(
         config: Config,
-        reader: LinkReader,
-        mut link_writer: LinkWriter,
+        link: (LinkReader, LinkWriter, Option<Box<dyn LinkOpener>>),
         sim: Option<JoinHandle<SimRobot>>,
         sim_cancel: CancellationToken,
         recorder: Option<crate::recorder::RecorderLink>,
     ) -> Result<Server, ServerError> {
+        let (reader, mut link_writer, opener) = link;
         let model = config.robot.model;
         let stream = config.robot.stream_ids();
         let period = Duration::from_millis(config.tick.period_ms);
@@ -152,6 +178,7 @@ impl Server {
             .await
             .map_err(LinkError::Io)?;
         link_writer.flush().await.map_err(LinkError::Io)?;
+        let link_up_at = Instant::now();
         tracing::info!(%model, ?stream, "robot link up: start-up sequence sent");
         let parser = StreamParser::new(&stream).map_err(LinkError::from)?;
 
@@ -168,6 +195,8 @@ impl Server {
         let (pred_tx, pred_rx) = mpsc::channel(4);
         let (dec_tx, dec_rx) = mpsc::channel(4);
         let (write_tx, write_rx) = mpsc::channel(16);
+        let (control_tx, control_rx) = mpsc::channel(8);
+        let (link_cmd_tx, link_cmd_rx) = mpsc::channel(4);
         let (cmd_tx, cmd_rx) = mpsc::channel(64);
         let (gating_cmd_tx, gating_cmd_rx) = mpsc::channel(16);
         let (learning_cmd_tx, learning_cmd_rx) = mpsc::channel(16);
@@ -185,6 +214,7 @@ impl Server {
         let writer = tokio::spawn(writer::run(
             link_writer,
             write_rx,
+            control_rx,
             shutdown,
             writer_stats.clone(),
         ));
@@ -198,8 +228,12 @@ impl Server {
                 cancel.clone(),
             )),
             tokio::spawn(crate::sensor_ingest::run(
-                reader,
-                parser,
+                crate::sensor_ingest::IngestLink {
+                    reader,
+                    parser,
+                    supervisor: Supervisor::new(&config, opener, control_tx, link_up_at),
+                    commands: link_cmd_rx,
+                },
                 period,
                 tick_rx.clone(),
                 obs_tx,
@@ -238,6 +272,7 @@ impl Server {
                 CommandRoutes {
                     gating: gating_cmd_tx,
                     learning: learning_cmd_tx,
+                    link: link_cmd_tx,
                     estop: estop_tx,
                     recorder: recorder_commands,
                 },
@@ -265,6 +300,7 @@ impl Server {
             started,
             config,
             obs_names,
+            sim_status: None,
             skeleton,
             _cancel_on_drop: cancel.clone().drop_guard(),
             cancel,

@@ -24,6 +24,41 @@ pub fn startup_bytes(model: Model, mode: DriveMode, stream: &[u8]) -> Result<Vec
     Ok(out)
 }
 
+/// The bytes of a re-sync after a stale stream: Start, then Safe/Full unless the robot has tripped (a
+/// trip is never overridden without the operator), then Stream again [create_oi.md §4.3 (4), §1.3 libcreate].
+pub fn resync_bytes(
+    model: Model,
+    mode: Option<DriveMode>,
+    stream: &[u8],
+) -> Result<Vec<u8>, OiError> {
+    match mode {
+        Some(mode) => startup_bytes(model, mode, stream),
+        None => {
+            check_stream_budget(stream, model.baud())?;
+            let mut out = Command::Start.encode(model)?;
+            out.extend(Command::Stream(stream.to_vec()).encode(model)?);
+            Ok(out)
+        }
+    }
+}
+
+/// The mode command alone (Safe or Full), sent when the operator re-arms after a trip.
+pub fn mode_bytes(model: Model, mode: DriveMode) -> Result<Vec<u8>, OiError> {
+    match mode {
+        DriveMode::Safe => Command::Safe,
+        DriveMode::Full => Command::Full,
+    }
+    .encode(model)
+}
+
+/// The OI mode code (packet 35) of a drive mode.
+pub fn mode_code(mode: DriveMode) -> u8 {
+    match mode {
+        DriveMode::Safe => pavlov::supervision::mode::code::SAFE,
+        DriveMode::Full => pavlov::supervision::mode::code::FULL,
+    }
+}
+
 /// The shut-down bytes: Drive Direct 0 0, Pause Stream, Start (→ Passive).
 pub fn shutdown_bytes(model: Model) -> Result<Vec<u8>, OiError> {
     let mut out = Command::DriveDirect { right: 0, left: 0 }.encode(model)?;
@@ -50,6 +85,22 @@ mod tests {
         assert_eq!(
             shutdown_bytes(Model::Create1).unwrap(),
             vec![145, 0, 0, 0, 0, 150, 0, 128]
+        );
+    }
+
+    #[test]
+    fn resync_sends_the_mode_only_when_not_tripped() {
+        assert_eq!(
+            resync_bytes(Model::Create1, Some(DriveMode::Safe), &[6]).unwrap(),
+            vec![128, 131, 148, 1, 6]
+        );
+        assert_eq!(
+            resync_bytes(Model::Create1, None, &[6]).unwrap(),
+            vec![128, 148, 1, 6]
+        );
+        assert_eq!(
+            mode_bytes(Model::Create2, DriveMode::Full).unwrap(),
+            vec![132]
         );
     }
 

@@ -4,8 +4,12 @@
 //! - [`transport`]: opening a serial port, or spawning the simulated robot behind an in-process stream or a PTY.
 //! - [`handshake`]: Start, Safe/Full and Stream at start-up; stop, pause and Passive at shut-down.
 //! - [`writer`]: the writer actor, the only task that writes to the robot.
+//! - [`opener`]: reopening a serial port, or plugging a new connection into the simulated robot.
+//! - [`supervisor`]: stale-stream detection, re-sync, reconnect with backoff, trips (see `pavlov::supervision`).
 
 pub mod handshake;
+pub mod opener;
+pub mod supervisor;
 pub mod transport;
 pub mod writer;
 

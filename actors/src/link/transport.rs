@@ -10,12 +10,15 @@ use std::time::Duration;
 use futures_util::FutureExt;
 
 use pavlov::oi::Model;
+use pavlov::sim::faults::{FaultCounters, FaultInjector, FaultSpec, LinkFault};
 use pavlov::sim::robot::SimRobot;
-use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, ReadHalf, WriteHalf};
+use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio_serial::{DataBits, FlowControl, Parity, SerialPortBuilderExt, StopBits};
 use tokio_util::sync::CancellationToken;
 
+use super::opener::{SIM_LINK_BUFFER, SimDevice};
 use super::{LinkError, LinkReader, LinkWriter};
 
 /// The OI sensor period: the robot steps and streams every 15 ms [C1 p13; C2 p21].
@@ -37,25 +40,73 @@ pub fn open_serial(path: &str, model: Model) -> Result<(LinkReader, LinkWriter),
     Ok((Box::new(r), Box::new(w)))
 }
 
+/// What the simulator task publishes after every step, for tests, soak runs and `pavlov sim`'s report.
+#[derive(Debug, Clone, Default)]
+pub struct SimStatus {
+    /// 15 ms steps run.
+    pub steps: u64,
+    /// The OI mode (packet 35 value, without any quirk).
+    pub oi_mode: i32,
+    /// Actual wheel speeds `[left, right]`, mm/s.
+    pub wheel_speed_mm_s: [f64; 2],
+    /// A host connection is plugged in.
+    pub connected: bool,
+    /// Bytes flow on the line this step (not hung, not unplugged).
+    pub flowing: bool,
+    /// The step at which the robot last received a byte from the host.
+    pub last_host_byte_step: u64,
+    /// What the fault injector has done so far.
+    pub faults: FaultCounters,
+}
+
 /// A simulated robot running behind an in-process byte stream.
 pub struct SimLink {
     /// Host side, robot-to-host bytes.
     pub reader: LinkReader,
     /// Host side, host-to-robot bytes.
     pub writer: LinkWriter,
-    /// The simulator task; it returns the robot when the host closes its writer or `cancel` fires.
+    /// The robot's plug: opens a new connection to the same running robot (link supervision uses it to
+    /// reconnect after an end-of-file or a hang).
+    pub device: SimDevice,
+    /// The simulator task; it returns the robot when the host has closed its link and dropped every
+    /// [`SimDevice`], or when `cancel` fires.
     pub robot: JoinHandle<SimRobot>,
+    /// The robot's state after each step.
+    pub status: watch::Receiver<SimStatus>,
 }
 
 /// Spawns `robot` behind a tokio duplex stream.
 pub fn spawn_sim(robot: SimRobot, cancel: CancellationToken) -> SimLink {
-    let (host, device) = tokio::io::duplex(64 * 1024);
+    spawn_sim_with_faults(robot, FaultInjector::new(FaultSpec::none(), 0), cancel)
+}
+
+/// Spawns `robot` behind a tokio duplex stream, with `faults` injected on the line and into the robot.
+pub fn spawn_sim_with_faults(
+    mut robot: SimRobot,
+    faults: FaultInjector,
+    cancel: CancellationToken,
+) -> SimLink {
+    faults.configure(&mut robot);
+    let (device, sockets) = SimDevice::new();
+    let (host, first) = tokio::io::duplex(SIM_LINK_BUFFER);
     let (reader, writer) = tokio::io::split(host);
-    let handle = tokio::spawn(run_sim(robot, device, cancel));
+    let (status_tx, status) = watch::channel(SimStatus::default());
+    let handle = tokio::spawn(drive_sim(
+        robot,
+        Plug {
+            first: Some(first),
+            more: Some(sockets),
+        },
+        (faults, status_tx),
+        cancel,
+        EndOfFile::Stop,
+    ));
     SimLink {
         reader: Box::new(reader),
         writer: Box::new(writer),
+        device,
         robot: handle,
+        status,
     }
 }
 
@@ -65,67 +116,164 @@ pub fn spawn_sim(robot: SimRobot, cancel: CancellationToken) -> SimLink {
 /// or when `cancel` fires, and hands the robot back so callers can inspect the final physical state.
 pub async fn run_sim<S>(robot: SimRobot, io: S, cancel: CancellationToken) -> SimRobot
 where
-    S: AsyncRead + AsyncWrite + Unpin,
+    S: AsyncRead + AsyncWrite + Unpin + Send + 'static,
 {
-    drive_sim(robot, io, cancel, EndOfFile::Stop).await
+    drive_sim(
+        robot,
+        Plug {
+            first: Some(io),
+            more: None,
+        },
+        (
+            FaultInjector::new(FaultSpec::none(), 0),
+            watch::channel(SimStatus::default()).0,
+        ),
+        cancel,
+        EndOfFile::Stop,
+    )
+    .await
 }
 
 /// What the simulator does when its host closes the link.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum EndOfFile {
-    /// Stop and hand the robot back (in-process link).
+    /// Wait for the next connection from the plug, and stop when there can be none.
     Stop,
-    /// Keep running for the next client (PTY).
+    /// Keep running on the same stream for the next client (PTY).
     KeepRunning,
+}
+
+/// Where the robot's connections come from.
+struct Plug<S> {
+    /// The connection the robot starts on.
+    first: Option<S>,
+    /// Later connections ([`SimDevice::connect`]); `None` for a fixed stream.
+    more: Option<mpsc::Receiver<S>>,
+}
+
+impl<S> Plug<S> {
+    /// The next connection; `None` when no more can come.
+    async fn next(&mut self) -> Option<S> {
+        if let Some(s) = self.first.take() {
+            return Some(s);
+        }
+        match &mut self.more {
+            Some(rx) => rx.recv().await,
+            None => None,
+        }
+    }
+}
+
+/// Counts each step's link fault and says whether bytes flow.
+fn link_flows(outcome: LinkFault) -> bool {
+    matches!(outcome, LinkFault::Normal)
 }
 
 async fn drive_sim<S>(
     mut robot: SimRobot,
-    io: S,
+    mut plug: Plug<S>,
+    (mut faults, status): (FaultInjector, watch::Sender<SimStatus>),
     cancel: CancellationToken,
     eof: EndOfFile,
 ) -> SimRobot
 where
     S: AsyncRead + AsyncWrite + Unpin,
 {
-    let (mut rx, mut tx) = tokio::io::split(io);
+    let mut conn: Option<(ReadHalf<S>, WriteHalf<S>)> = None;
+    let mut plugged = true;
     let mut step = tokio::time::interval(SIM_STEP);
     let mut buf = vec![0u8; 4096];
     let mut reading = true;
+    let mut flowing = true;
+    let mut last_host_byte_step = 0;
     loop {
         tokio::select! {
             biased;
             _ = cancel.cancelled() => break,
-            n = rx.read(&mut buf), if reading => match n {
-                Ok(0) if eof == EndOfFile::Stop => break,
-                Ok(0) => {
-                    // No client on the PTY right now: poll again on the next step.
-                    reading = false;
+            next = plug.next(), if plugged => match next {
+                Some(io) => {
+                    conn = Some(tokio::io::split(io));
+                    reading = true;
                 }
-                Ok(n) => robot.receive(&buf[..n]),
-                Err(e) => {
-                    if eof == EndOfFile::Stop {
-                        tracing::debug!("simulator link read: {e}");
+                None => {
+                    plugged = false;
+                    if conn.is_none() {
                         break;
                     }
-                    reading = false;
+                }
+            },
+            n = read_conn(&mut conn, &mut buf), if reading && conn.is_some() => match n {
+                Ok(n) if n > 0 => {
+                    // While the line hangs, what the host sends is lost.
+                    if flowing {
+                        let bytes = faults.host_bytes(&buf[..n]);
+                        robot.receive(&bytes);
+                        last_host_byte_step = robot.elapsed_steps();
+                    }
+                }
+                other => {
+                    if let Err(e) = other {
+                        tracing::debug!("simulator link read: {e}");
+                    }
+                    match eof {
+                        EndOfFile::Stop => {
+                            conn = None;
+                            if !plugged {
+                                break;
+                            }
+                        }
+                        // No client on the PTY right now: poll again on the next step.
+                        EndOfFile::KeepRunning => reading = false,
+                    }
                 }
             },
             _ = step.tick() => {
                 reading = true;
                 robot.step();
                 let out = robot.take_output();
+                let outcome = faults.after_step(&mut robot, out);
+                flowing = link_flows(outcome.link);
+                if outcome.link == LinkFault::Eof {
+                    // Unplug: the host reads end-of-file and must reconnect through the device. A PTY
+                    // cannot signal end-of-file without destroying the device: it hangs this step instead.
+                    if eof == EndOfFile::Stop {
+                        conn = None;
+                    }
+                    flowing = false;
+                }
                 // A UART transmits whether or not anyone listens: when the host is not reading and the
                 // buffer is full, the bytes are lost instead of stalling the robot's clock.
-                if !out.is_empty() {
-                    if let Some(Err(e)) = tx.write(&out).now_or_never() {
-                        tracing::debug!("simulator link write: {e}");
-                    }
+                if flowing
+                    && !outcome.bytes.is_empty()
+                    && let Some((_, tx)) = conn.as_mut()
+                    && let Some(Err(e)) = tx.write(&outcome.bytes).now_or_never()
+                {
+                    tracing::debug!("simulator link write: {e}");
                 }
+                let world = robot.world();
+                status.send_replace(SimStatus {
+                    steps: robot.elapsed_steps(),
+                    oi_mode: robot.oi_mode().code(),
+                    wheel_speed_mm_s: [world.wheel_speed_mm_s(0), world.wheel_speed_mm_s(1)],
+                    connected: conn.is_some(),
+                    flowing,
+                    last_host_byte_step,
+                    faults: faults.counters().clone(),
+                });
             }
         }
     }
     robot
+}
+
+async fn read_conn<S: AsyncRead>(
+    conn: &mut Option<(ReadHalf<S>, WriteHalf<S>)>,
+    buf: &mut [u8],
+) -> std::io::Result<usize> {
+    match conn {
+        Some((rx, _)) => rx.read(buf).await,
+        None => std::future::pending().await,
+    }
 }
 
 /// A simulated robot on a pseudo-terminal: `path` is the device a client opens.
@@ -134,29 +282,37 @@ pub struct SimPty {
     pub path: String,
     /// The simulator task.
     pub robot: JoinHandle<SimRobot>,
+    /// The robot's state after each step.
+    pub status: watch::Receiver<SimStatus>,
     // Holding the slave open keeps the master readable while no client is attached.
     _slave: tokio_serial::SerialStream,
 }
 
-/// Creates a PTY and runs `robot` on its master side.
-pub fn spawn_sim_pty(robot: SimRobot, cancel: CancellationToken) -> Result<SimPty, LinkError> {
+/// Creates a PTY and runs `robot` on its master side, with `faults` injected.
+pub fn spawn_sim_pty(
+    mut robot: SimRobot,
+    faults: FaultInjector,
+    cancel: CancellationToken,
+) -> Result<SimPty, LinkError> {
     use tokio_serial::SerialPort;
     let (master, slave) = tokio_serial::SerialStream::pair().map_err(LinkError::Pty)?;
     let path = slave.name().unwrap_or_default();
-    let handle = tokio::spawn(run_sim_pty(robot, master, cancel));
+    faults.configure(&mut robot);
+    let (status_tx, status) = watch::channel(SimStatus::default());
+    let handle = tokio::spawn(drive_sim(
+        robot,
+        Plug {
+            first: Some(master),
+            more: None,
+        },
+        (faults, status_tx),
+        cancel,
+        EndOfFile::KeepRunning,
+    ));
     Ok(SimPty {
         path,
+        status,
         robot: handle,
         _slave: slave,
     })
-}
-
-/// Like [`run_sim`], but a client closing the device is not the end: the robot keeps running and the
-/// next client that opens the device picks up where the last left off.
-async fn run_sim_pty(
-    robot: SimRobot,
-    io: tokio_serial::SerialStream,
-    cancel: CancellationToken,
-) -> SimRobot {
-    drive_sim(robot, io, cancel, EndOfFile::KeepRunning).await
 }

@@ -1,10 +1,14 @@
 //! The link writer actor: the only task that writes bytes to the robot.
 //!
-//! Actuation hands it whole commands through a bounded queue and never waits for the port. The writer
-//! stamps when each motor command reached the OS (tick-to-command latency). On shut-down it writes the
-//! stop/pause/Passive sequence, flushes, and closes its half of the link.
+//! Actuation hands it whole commands through a bounded queue and never waits for the port. Link
+//! supervision has a second, priority queue ([`WriterControl`]): bytes to send first (re-sync, re-arm) and
+//! a freshly reopened port to switch to, with the start-up sequence to send on it. A write that the port
+//! does not take within [`WRITE_TIMEOUT`] is abandoned and counted, so a hung port never holds the queue.
+//! The writer stamps when each motor command reached the OS (tick-to-command latency). On shut-down it
+//! writes the stop/pause/Passive sequence, flushes, and closes its half of the link.
 
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use tokio::io::AsyncWriteExt;
 use tokio::sync::mpsc;
@@ -22,6 +26,22 @@ pub struct WriteRequest {
     pub tick_deadline: Option<Instant>,
 }
 
+/// A write that takes longer than this is abandoned (the port is hung; supervision will reopen it).
+pub const WRITE_TIMEOUT: Duration = Duration::from_millis(200);
+
+/// Link supervision's requests, served before any motor command.
+pub enum WriterControl {
+    /// Send these bytes now (Start and Stream again, or the mode after a re-arm).
+    Send(Vec<u8>),
+    /// Switch to a reopened port and send `startup` on it; the old port is closed.
+    Replace {
+        /// The new port's host-to-robot half.
+        link: LinkWriter,
+        /// The start-up sequence.
+        startup: Vec<u8>,
+    },
+}
+
 /// Counters of the writer.
 #[derive(Default)]
 pub struct WriterStats {
@@ -31,6 +51,10 @@ pub struct WriterStats {
     pub errors: u64,
     /// Bytes written.
     pub bytes: u64,
+    /// Writes abandoned after [`WRITE_TIMEOUT`].
+    pub timeouts: u64,
+    /// Ports switched to after a reopen.
+    pub replaced: u64,
 }
 
 /// Shared handle on the writer's statistics.
@@ -40,40 +64,100 @@ pub type SharedWriterStats = Arc<Mutex<WriterStats>>;
 pub async fn run(
     mut link: LinkWriter,
     mut requests: mpsc::Receiver<WriteRequest>,
+    mut control: mpsc::Receiver<WriterControl>,
     shutdown: Vec<u8>,
     stats: SharedWriterStats,
 ) {
-    while let Some(req) = requests.recv().await {
-        let res = async {
-            link.write_all(&req.bytes).await?;
-            link.flush().await
-        }
-        .await;
-        let done = Instant::now();
-        if let Ok(mut s) = stats.lock() {
-            match res {
-                Ok(()) => {
-                    s.bytes += req.bytes.len() as u64;
-                    if let Some(d) = req.tick_deadline {
-                        s.tick_to_command.record(done.saturating_duration_since(d));
+    let mut control_open = true;
+    loop {
+        tokio::select! {
+            biased;
+            c = control.recv(), if control_open => match c {
+                Some(WriterControl::Send(bytes)) => {
+                    let res = write_bounded(&mut link, &bytes).await;
+                    count(&stats, &res, bytes.len(), None, Instant::now());
+                }
+                Some(WriterControl::Replace { link: fresh, startup }) => {
+                    // Dropping the old half closes it; a port that has hung is simply abandoned.
+                    link = fresh;
+                    if let Ok(mut s) = stats.lock() {
+                        s.replaced += 1;
                     }
+                    let res = write_bounded(&mut link, &startup).await;
+                    count(&stats, &res, startup.len(), None, Instant::now());
                 }
-                Err(ref e) => {
-                    s.errors += 1;
-                    tracing::warn!("robot link write failed: {e}");
-                }
+                None => control_open = false,
+            },
+            req = requests.recv() => {
+                let Some(req) = req else { break };
+                let res = write_bounded(&mut link, &req.bytes).await;
+                count(&stats, &res, req.bytes.len(), req.tick_deadline, Instant::now());
             }
         }
     }
     if let Err(e) = async {
-        link.write_all(&shutdown).await?;
-        link.flush().await?;
-        link.shutdown().await
+        tokio::time::timeout(WRITE_TIMEOUT, async {
+            link.write_all(&shutdown).await?;
+            link.flush().await?;
+            link.shutdown().await
+        })
+        .await
+        .map_err(|_| std::io::Error::new(std::io::ErrorKind::TimedOut, "the port took nothing"))?
     }
     .await
     {
         tracing::error!("could not send the shut-down sequence to the robot: {e}");
     } else {
         tracing::info!("robot stopped, stream paused, OI back in Passive");
+    }
+}
+
+/// The outcome of one write.
+enum WriteOutcome {
+    Done,
+    Failed(std::io::Error),
+    TimedOut,
+}
+
+async fn write_bounded(link: &mut LinkWriter, bytes: &[u8]) -> WriteOutcome {
+    let write = async {
+        link.write_all(bytes).await?;
+        link.flush().await
+    };
+    match tokio::time::timeout(WRITE_TIMEOUT, write).await {
+        Ok(Ok(())) => WriteOutcome::Done,
+        Ok(Err(e)) => WriteOutcome::Failed(e),
+        Err(_) => WriteOutcome::TimedOut,
+    }
+}
+
+fn count(
+    stats: &SharedWriterStats,
+    res: &WriteOutcome,
+    len: usize,
+    deadline: Option<Instant>,
+    done: Instant,
+) {
+    let Ok(mut s) = stats.lock() else { return };
+    match res {
+        WriteOutcome::Done => {
+            s.bytes += len as u64;
+            if let Some(d) = deadline {
+                s.tick_to_command.record(done.saturating_duration_since(d));
+            }
+        }
+        WriteOutcome::Failed(e) => {
+            s.errors += 1;
+            // Every tick writes; while the link is down only the first few failures are worth a line.
+            if s.errors <= 3 || s.errors.is_power_of_two() {
+                tracing::warn!(errors = s.errors, "robot link write failed: {e}");
+            }
+        }
+        WriteOutcome::TimedOut => {
+            s.timeouts += 1;
+            if s.timeouts <= 3 || s.timeouts.is_power_of_two() {
+                tracing::warn!(timeouts = s.timeouts, "robot link write timed out");
+            }
+        }
     }
 }

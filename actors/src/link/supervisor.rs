@@ -1,0 +1,266 @@
+//! The async side of link supervision: it feeds the core's [`LinkMonitor`] with frames, ticks and link
+//! failures, and carries out what it asks — re-sending Start and Stream through the writer's priority
+//! queue, reopening the port in a background task (so a slow `open` never holds the tick), and handing the
+//! reopened port's halves to the sensor ingest and the writer.
+//!
+//! It lives inside the sensor ingest actor, which sees every frame and every tick.
+
+use pavlov::config::{Config, DriveMode};
+use pavlov::oi::parser::ParserStats;
+use pavlov::oi::{Model, SensorValues};
+use pavlov::record::LinkSummary;
+use pavlov::supervision::LinkState;
+use pavlov::supervision::monitor::{LinkAction, LinkMonitor, MonitorCounters};
+use tokio::sync::{mpsc, oneshot};
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+
+use super::opener::LinkOpener;
+use super::writer::WriterControl;
+use super::{LinkError, LinkReader, LinkWriter, handshake};
+use crate::command::CommandResult;
+
+/// Commands for the link, from the command router.
+#[derive(Debug)]
+pub enum LinkCommand {
+    /// The operator re-arms after a trip to Passive: send Safe/Full again.
+    Rearm(oneshot::Sender<CommandResult>),
+}
+
+type Reopen = JoinHandle<Result<(LinkReader, LinkWriter), LinkError>>;
+
+/// Link supervision for one server run.
+pub struct Supervisor {
+    monitor: LinkMonitor,
+    opener: Option<Box<dyn LinkOpener>>,
+    control: mpsc::Sender<WriterControl>,
+    model: Model,
+    mode: DriveMode,
+    stream: Vec<u8>,
+    base: Instant,
+    reopening: Option<Reopen>,
+    control_full: u64,
+}
+
+impl Supervisor {
+    /// Supervision per `config`; the start-up sequence went out at `base`. Without an `opener` the port
+    /// cannot be reopened, and a dead link is re-synced with backoff instead.
+    pub fn new(
+        config: &Config,
+        opener: Option<Box<dyn LinkOpener>>,
+        control: mpsc::Sender<WriterControl>,
+        base: Instant,
+    ) -> Self {
+        let mode = config.robot.oi_mode;
+        Supervisor {
+            monitor: LinkMonitor::new(
+                config.link.monitor(),
+                handshake::mode_code(mode),
+                config.link.mode_quirk,
+                0,
+            ),
+            opener,
+            control,
+            model: config.robot.model,
+            mode,
+            stream: config.robot.stream_ids(),
+            base,
+            reopening: None,
+            control_full: 0,
+        }
+    }
+
+    fn now_ms(&self) -> u64 {
+        Instant::now()
+            .saturating_duration_since(self.base)
+            .as_millis()
+            .min(u128::from(u64::MAX)) as u64
+    }
+
+    /// A valid frame arrived.
+    pub fn on_frame(&mut self, values: &SensorValues) {
+        let before = (self.monitor.state(), self.monitor.trip());
+        self.monitor.on_frame(self.now_ms(), values);
+        self.log_change(before);
+    }
+
+    /// The link reached end-of-file or failed.
+    pub fn on_lost(&mut self) {
+        let before = (self.monitor.state(), self.monitor.trip());
+        self.monitor.on_link_lost(self.now_ms());
+        self.log_change(before);
+    }
+
+    /// Once per tick: acts on what the monitor asks.
+    pub fn on_tick(&mut self) {
+        let before = (self.monitor.state(), self.monitor.trip());
+        let now = self.now_ms();
+        match self.monitor.on_tick(now) {
+            None => {}
+            Some(LinkAction::Resync { with_mode }) => {
+                let mode = with_mode.then_some(self.mode);
+                match handshake::resync_bytes(self.model, mode, &self.stream) {
+                    Ok(bytes) => self.send(WriterControl::Send(bytes)),
+                    Err(e) => tracing::error!("cannot encode the re-sync: {e}"),
+                }
+            }
+            Some(LinkAction::Reopen) => match self.opener.as_mut() {
+                Some(opener) => {
+                    tracing::info!("reopening {}", opener.describe());
+                    self.reopening = Some(tokio::spawn(opener.open()));
+                }
+                None => {
+                    // Nothing to reopen: send the whole start-up sequence again, with backoff.
+                    self.monitor.reopen_failed(now);
+                    match handshake::startup_bytes(self.model, self.mode, &self.stream) {
+                        Ok(bytes) => self.send(WriterControl::Send(bytes)),
+                        Err(e) => tracing::error!("cannot encode the start-up sequence: {e}"),
+                    }
+                }
+            },
+            Some(LinkAction::SendMode) => self.send_mode(),
+        }
+        self.log_change(before);
+    }
+
+    /// True while a reopen runs.
+    pub fn reopening(&self) -> bool {
+        self.reopening.is_some()
+    }
+
+    /// Waits for the running reopen; on success hands the new port's writer (with the start-up sequence)
+    /// to the writer and returns the reader. Pending forever when no reopen runs.
+    pub async fn reopen_finished(&mut self) -> Option<LinkReader> {
+        let Some(task) = self.reopening.as_mut() else {
+            return std::future::pending().await;
+        };
+        let result = task.await;
+        self.reopening = None;
+        let now = self.now_ms();
+        match result {
+            Ok(Ok((reader, writer))) => {
+                match handshake::startup_bytes(self.model, self.mode, &self.stream) {
+                    Ok(startup) => {
+                        self.monitor.reopened(now);
+                        tracing::info!(
+                            reconnects = self.monitor.counters().reconnects,
+                            "robot link reopened; start-up sequence sent"
+                        );
+                        self.send(WriterControl::Replace {
+                            link: writer,
+                            startup,
+                        });
+                        Some(reader)
+                    }
+                    Err(e) => {
+                        tracing::error!("cannot encode the start-up sequence: {e}");
+                        self.monitor.reopen_failed(now);
+                        None
+                    }
+                }
+            }
+            Ok(Err(e)) => {
+                self.monitor.reopen_failed(now);
+                let c = self.monitor.counters();
+                if c.reopen_failures <= 3 || c.reopen_failures.is_power_of_two() {
+                    tracing::warn!(
+                        failures = c.reopen_failures,
+                        "cannot reopen the robot link: {e}"
+                    );
+                }
+                None
+            }
+            Err(e) => {
+                tracing::error!("the reopen task failed: {e}");
+                self.monitor.reopen_failed(now);
+                None
+            }
+        }
+    }
+
+    /// Applies a link command.
+    pub fn command(&mut self, command: LinkCommand) {
+        match command {
+            LinkCommand::Rearm(reply) => {
+                let result = match self.monitor.trip() {
+                    None => Err(format!(
+                        "the robot has not tripped (link {}); nothing to re-arm",
+                        self.monitor.state().name()
+                    )),
+                    Some(cause) => {
+                        if self.monitor.rearm(self.now_ms()).is_some() {
+                            self.send_mode();
+                        }
+                        tracing::warn!(
+                            "operator re-armed after a trip ({}): {:?} sent",
+                            cause.describe(),
+                            self.mode
+                        );
+                        Ok(serde_json::json!({ "rearmed": cause, "mode": self.mode }))
+                    }
+                };
+                let _ = reply.send(result);
+            }
+        }
+    }
+
+    fn send_mode(&mut self) {
+        match handshake::mode_bytes(self.model, self.mode) {
+            Ok(bytes) => self.send(WriterControl::Send(bytes)),
+            Err(e) => tracing::error!("cannot encode the mode command: {e}"),
+        }
+    }
+
+    fn send(&mut self, c: WriterControl) {
+        if self.control.try_send(c).is_err() {
+            self.control_full += 1;
+            tracing::warn!(
+                "the link writer's control queue is full; a supervision write was dropped"
+            );
+        }
+    }
+
+    fn log_change(&self, before: (LinkState, Option<pavlov::supervision::TripCause>)) {
+        let (state, trip) = (self.monitor.state(), self.monitor.trip());
+        if (state, trip) == before {
+            return;
+        }
+        let c = self.monitor.counters();
+        match state {
+            LinkState::Up => tracing::info!(
+                outage_ms = c.last_outage_ms,
+                "robot link up (was {})",
+                before.0.name()
+            ),
+            LinkState::Stale => tracing::warn!("robot stream stale: re-sending Start and Stream"),
+            LinkState::Reconnecting => tracing::warn!("robot link lost: reconnecting"),
+            LinkState::Tripped => tracing::error!(
+                "the robot left {:?} for Passive by itself ({}); send `rearm` to resume control",
+                self.mode,
+                trip.map_or("unknown cause", |t| t.describe())
+            ),
+            LinkState::Down => tracing::warn!("robot link down"),
+        }
+    }
+
+    /// The link's state for the tick record.
+    pub fn summary(&self, parser: ParserStats) -> LinkSummary {
+        let c = self.monitor.counters();
+        LinkSummary {
+            up: self.monitor.state() == LinkState::Up,
+            good_frames: parser.good_frames,
+            bad_frames: parser.bad_frames,
+            skipped_bytes: parser.skipped_bytes,
+            state: self.monitor.state(),
+            mode: self.monitor.mode(),
+            trip: self.monitor.trip(),
+            reconnects: c.reconnects,
+            stale_events: c.stale_events,
+        }
+    }
+
+    /// The monitor's counters.
+    pub fn counters(&self) -> MonitorCounters {
+        self.monitor.counters()
+    }
+}
