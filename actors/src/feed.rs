@@ -59,10 +59,92 @@ impl TickFeed {
     pub fn recorder_dropped(&self) -> u64 {
         self.recorder_dropped.load(Ordering::Relaxed)
     }
+
+    /// Records queued for the recorder and not yet taken by it (`None` without a recorder).
+    pub fn recorder_backlog(&self) -> Option<usize> {
+        self.recorder
+            .as_ref()
+            .map(|tx| tx.max_capacity().saturating_sub(tx.capacity()))
+    }
+
+    /// A read-only view of the recorder's queue for metrics. It holds no sender, so it does not keep the
+    /// recorder running after the server has gone.
+    pub fn recorder_gauge(&self) -> RecorderGauge {
+        RecorderGauge {
+            queue: self.recorder.as_ref().map(|tx| tx.downgrade()),
+            dropped: self.recorder_dropped.clone(),
+        }
+    }
+}
+
+/// The recorder queue's figures, readable without keeping the queue open.
+#[derive(Clone)]
+pub struct RecorderGauge {
+    queue: Option<mpsc::WeakSender<Arc<TickRecord>>>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl RecorderGauge {
+    /// Whether the feed has a recorder attached.
+    pub fn attached(&self) -> bool {
+        self.queue.is_some()
+    }
+
+    /// Records queued and not yet taken by the recorder (0 once the feed is gone).
+    pub fn backlog(&self) -> usize {
+        self.queue
+            .as_ref()
+            .and_then(|weak| weak.upgrade())
+            .map_or(0, |tx| tx.max_capacity().saturating_sub(tx.capacity()))
+    }
+
+    /// Records the recorder could not take because its queue was full.
+    pub fn dropped(&self) -> u64 {
+        self.dropped.load(Ordering::Relaxed)
+    }
 }
 
 impl Default for TickFeed {
     fn default() -> Self {
         Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pavlov::control::Mode;
+
+    fn record(seq: u64) -> Arc<TickRecord> {
+        Arc::new(TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Reactive))
+    }
+
+    #[test]
+    fn the_backlog_counts_records_queued_and_not_yet_taken() {
+        let (tx, mut rx) = mpsc::channel(4);
+        let feed = TickFeed::new().with_recorder(tx);
+        let gauge = feed.recorder_gauge();
+        assert!(gauge.attached());
+        for seq in 0..6 {
+            feed.publish(record(seq));
+        }
+        assert_eq!(feed.recorder_backlog(), Some(4));
+        assert_eq!(gauge.backlog(), 4);
+        assert_eq!(gauge.dropped(), 2);
+        assert!(rx.try_recv().is_ok());
+        assert_eq!(gauge.backlog(), 3);
+        // The gauge keeps no sender: the recorder sees the end of the feed.
+        drop(feed);
+        while rx.try_recv().is_ok() {}
+        assert!(rx.is_closed());
+        assert_eq!(gauge.backlog(), 0);
+    }
+
+    #[test]
+    fn without_a_recorder_there_is_no_backlog() {
+        let feed = TickFeed::new();
+        assert_eq!(feed.recorder_backlog(), None);
+        assert!(!feed.recorder_gauge().attached());
+        assert_eq!(feed.recorder_gauge().backlog(), 0);
     }
 }

@@ -3,12 +3,15 @@
 //! Each websocket client has one [`OutQueue`] between the producers (the hub's tick/status stream and the
 //! client's own command replies) and the task that writes to the socket. Telemetry is bounded and lossy:
 //! when a client falls behind, the oldest telemetry is dropped and counted, so a stalled client costs a
-//! fixed amount of memory and never slows anyone else. Replies are never dropped; a client that lets more
-//! than the reply capacity pile up is disconnected instead (see [`QueueFull`]).
+//! fixed amount of memory and never slows anyone else. Replies are never dropped: when the reply capacity
+//! is reached, the connection's reader waits for room ([`OutQueue::push_control_waiting`]), which stops it
+//! reading the socket and so pushes back on the client; a client that leaves its replies unread for the
+//! whole wait is disconnected (see [`QueueFull`]).
 
 use std::collections::VecDeque;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
 
 use tokio::sync::Notify;
 
@@ -30,6 +33,7 @@ struct QueueState<T> {
 pub struct OutQueue<T> {
     state: Mutex<QueueState<T>>,
     ready: Notify,
+    room: Notify,
     telemetry_capacity: usize,
     dropped: AtomicU64,
 }
@@ -44,6 +48,7 @@ impl<T> OutQueue<T> {
                 closed: false,
             }),
             ready: Notify::new(),
+            room: Notify::new(),
             telemetry_capacity: telemetry_capacity.max(1),
             dropped: AtomicU64::new(0),
         }
@@ -84,39 +89,73 @@ impl<T> OutQueue<T> {
         self.dropped.fetch_add(n, Ordering::Relaxed);
     }
 
-    /// Queues a reply; it goes out before any queued telemetry.
-    pub fn push_control(&self, msg: T) -> Result<(), QueueFull> {
+    /// Queues a reply; it goes out before any queued telemetry. Gives the reply back when the queue
+    /// already holds [`CONTROL_CAPACITY`] replies.
+    fn try_push_control(&self, msg: T) -> Result<(), T> {
         let pushed = self.with_state(|s| {
             if s.control.len() >= CONTROL_CAPACITY {
-                return false;
+                return Err(msg);
             }
             if !s.closed {
                 s.control.push_back(msg);
             }
-            true
+            Ok(())
         });
         self.ready.notify_one();
-        if pushed { Ok(()) } else { Err(QueueFull) }
+        pushed
+    }
+
+    /// Queues a reply; it goes out before any queued telemetry.
+    pub fn push_control(&self, msg: T) -> Result<(), QueueFull> {
+        self.try_push_control(msg).map_err(|_| QueueFull)
+    }
+
+    /// Queues a reply, waiting up to `patience` for room when [`CONTROL_CAPACITY`] replies are unread.
+    pub async fn push_control_waiting(&self, msg: T, patience: Duration) -> Result<(), QueueFull> {
+        let deadline = tokio::time::Instant::now() + patience;
+        let mut msg = msg;
+        loop {
+            match self.try_push_control(msg) {
+                Ok(()) => return Ok(()),
+                Err(back) => msg = back,
+            }
+            // `notify_one` leaves a permit when nobody waits, so a pop between the try and here is not lost.
+            if tokio::time::timeout_at(deadline, self.room.notified())
+                .await
+                .is_err()
+            {
+                return Err(QueueFull);
+            }
+        }
+    }
+
+    fn pop_now(&self) -> Option<T> {
+        let (next, was_reply) = self.with_state(|s| match s.control.pop_front() {
+            Some(reply) => (Some(reply), true),
+            None => (s.telemetry.pop_front(), false),
+        });
+        if was_reply {
+            self.room.notify_one();
+        }
+        next
     }
 
     /// Takes the next message without waiting: replies first, then telemetry, oldest first.
     pub fn try_pop(&self) -> Option<T> {
-        self.with_state(|s| s.control.pop_front().or_else(|| s.telemetry.pop_front()))
+        self.pop_now()
     }
 
     /// Waits for the next message; `None` once the queue is closed and empty of replies.
     pub async fn pop(&self) -> Option<T> {
         loop {
-            let (next, closed) = self.with_state(|s| {
-                let next = s.control.pop_front().or_else(|| {
-                    if s.closed {
-                        None
-                    } else {
-                        s.telemetry.pop_front()
-                    }
-                });
-                (next, s.closed)
+            let (next, was_reply, closed) = self.with_state(|s| match s.control.pop_front() {
+                Some(reply) => (Some(reply), true, s.closed),
+                None if s.closed => (None, false, true),
+                None => (s.telemetry.pop_front(), false, false),
             });
+            if was_reply {
+                self.room.notify_one();
+            }
             if next.is_some() {
                 return next;
             }
@@ -244,6 +283,30 @@ mod tests {
         assert_eq!(q.push_control(999), Err(QueueFull));
         assert_eq!(q.try_pop(), Some(0));
         assert!(q.push_control(1000).is_ok());
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_full_reply_queue_makes_the_sender_wait_for_room_then_gives_up() {
+        let q = std::sync::Arc::new(OutQueue::new(4));
+        for i in 0..CONTROL_CAPACITY {
+            q.push_control(i).unwrap();
+        }
+        let waiting = {
+            let q = q.clone();
+            tokio::spawn(async move { q.push_control_waiting(999, Duration::from_secs(5)).await })
+        };
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        assert!(!waiting.is_finished());
+        assert_eq!(q.try_pop(), Some(0));
+        assert_eq!(waiting.await.unwrap(), Ok(()));
+        assert_eq!(q.len(), CONTROL_CAPACITY);
+        // Nobody reads: the wait ends after the patience.
+        let t0 = tokio::time::Instant::now();
+        assert_eq!(
+            q.push_control_waiting(1000, Duration::from_secs(5)).await,
+            Err(QueueFull)
+        );
+        assert_eq!(t0.elapsed(), Duration::from_secs(5));
     }
 
     #[test]

@@ -1,5 +1,5 @@
-//! The HTTP side of the dashboard endpoint: the page and its assets, `/healthz`, and the `/ws` handshake
-//! (origin, token and client-count checks before the upgrade).
+//! The HTTP side of the dashboard endpoint: the page and its assets, `/healthz`, `/metrics`, and the `/ws`
+//! handshake (origin, token and client-count checks before the upgrade).
 //!
 //! The page, its script and its style sheet are compiled into the binary. uPlot is not: it is an npm
 //! dependency, served from `<web dir>/node_modules/uplot/dist/` at run time; when it is missing the
@@ -19,12 +19,16 @@ use serde::Deserialize;
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 
+use super::DashboardStats;
 use super::auth::{AccessPolicy, presented_token};
-use super::hub::{HubCounters, HubHandle};
+use super::hub::{HealthSources, HubCounters, HubHandle};
 use super::messages::{Hello, Limits, Signals};
+use super::metrics::{HistogramSample, MetricsSnapshot, RecorderFigures, TICK_BUCKETS_US};
 use super::protocol::SUBPROTOCOL;
+use super::rate::RateLimit;
 use super::session::{Session, SessionCounters};
 use crate::command::ControlRequest;
+use crate::feed::RecorderGauge;
 
 const INDEX_HTML: &str = include_str!("../../../web/index.html");
 const APP_JS: &str = include_str!("../../../web/app.js");
@@ -60,6 +64,12 @@ pub struct AppState {
     pub client_queue: usize,
     /// Most clients at once.
     pub max_clients: usize,
+    /// Each connection's message rate limit.
+    pub rate: RateLimit,
+    /// Tick, writer and actuation figures (for `/metrics`).
+    pub sources: HealthSources,
+    /// The recorder's queue (for `/metrics`).
+    pub recorder: RecorderGauge,
     /// Where `node_modules/uplot` lives.
     pub web_dir: PathBuf,
     /// Connected clients (shared with the hub's status).
@@ -72,6 +82,69 @@ pub struct AppState {
     pub rejected: AtomicU64,
     /// Fires on shut-down.
     pub cancel: CancellationToken,
+}
+
+impl AppState {
+    /// The endpoint's counters now.
+    pub fn stats(&self) -> DashboardStats {
+        let c = &self.session_counters;
+        let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        DashboardStats {
+            clients: self.hub_counters.clients.load(Ordering::Relaxed),
+            connections: load(&self.connections),
+            rejected: load(&self.rejected),
+            telemetry_dropped: load(&c.telemetry_dropped),
+            commands: load(&c.commands),
+            errors: load(&c.errors),
+            rate_limited: load(&c.rate_limited),
+            closed_oversize: load(&c.closed_oversize),
+            closed_unread: load(&c.closed_unread),
+            closed_write_stall: load(&c.closed_write_stall),
+            records_missed: load(&self.hub_counters.records_missed),
+        }
+    }
+
+    /// Everything `/metrics` reports, now. The histograms are copied under their locks and read outside.
+    pub fn metrics(&self) -> MetricsSnapshot {
+        let mut s = MetricsSnapshot {
+            ws: self.stats(),
+            actuation: *self.sources.actuation.borrow(),
+            link: self.hub_counters.latest_link(),
+            recorder: self.recorder.attached().then(|| RecorderFigures {
+                backlog: self.recorder.backlog() as u64,
+                dropped: self.recorder.dropped(),
+            }),
+            ..MetricsSnapshot::default()
+        };
+        let ticks = self.sources.ticks.lock().ok().map(|t| {
+            s.ticks_fired = t.fired;
+            s.ticks_skipped = t.skipped;
+            t.lateness.clone()
+        });
+        let writer = self.sources.writer.lock().ok().map(|w| {
+            s.write_errors = w.errors;
+            w.tick_to_command.clone()
+        });
+        if let Some(h) = ticks {
+            s.tick_lateness = HistogramSample::from_histogram(&h, &TICK_BUCKETS_US);
+        }
+        if let Some(h) = writer {
+            s.tick_to_command = HistogramSample::from_histogram(&h, &TICK_BUCKETS_US);
+        }
+        s
+    }
+}
+
+async fn metrics(State(state): State<Arc<AppState>>) -> Response {
+    let text = super::metrics::render(&state.metrics());
+    let mut r = text.into_response();
+    r.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static(super::metrics::CONTENT_TYPE),
+    );
+    r.headers_mut()
+        .insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    r
 }
 
 /// The router of the endpoint.
@@ -96,6 +169,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/vendor/uplot.iife.min.js", get(uplot_js))
         .route("/vendor/uplot.min.css", get(uplot_css))
         .route("/healthz", get(|| async { "ok" }))
+        .route("/metrics", get(metrics))
         .route("/ws", get(ws_handler))
         .fallback(|| async { (StatusCode::NOT_FOUND, "not found\n") })
         .with_state(state)
@@ -235,6 +309,7 @@ async fn ws_handler(
         Limits {
             max_message_bytes: state.max_message_bytes,
             client_queue: state.client_queue,
+            rate: state.rate,
         },
         state.config.clone(),
     )
@@ -246,6 +321,7 @@ async fn ws_handler(
         hello,
         queue: state.client_queue,
         tick_hz: 1000.0 / state.tick_period_ms.max(1) as f64,
+        rate: state.rate,
         counters: state.session_counters.clone(),
         cancel: state.cancel.clone(),
     };

@@ -3,16 +3,17 @@
 //!
 //! Serialising once per tick (not once per client) keeps the cost of 50 clients near that of one: a client
 //! gets a cheap clone of the same bytes. The hub reads the tick feed's broadcast, so it never slows the
-//! tick either; if it ever lagged, the records it missed are counted and logged.
+//! tick either; if it ever lagged, the records it missed are counted and logged. It also keeps the newest
+//! record's link summary for `/metrics`.
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 
 use axum::extract::ws::Utf8Bytes;
 use pavlov::interaction_metrics::live::LiveInteraction;
 use pavlov::interaction_metrics::live_aligned::LiveAligned;
 use pavlov::metrics::RunMetrics;
-use pavlov::record::TickRecord;
+use pavlov::record::{LinkSummary, TickRecord};
 use tokio::sync::{broadcast, watch};
 use tokio_util::sync::CancellationToken;
 
@@ -82,6 +83,27 @@ pub struct HubCounters {
     pub clients: AtomicUsize,
     /// Tick records the hub itself missed (it lagged behind the feed).
     pub records_missed: AtomicU64,
+    /// The robot link as the newest record saw it.
+    link: Mutex<Option<LinkSummary>>,
+}
+
+impl HubCounters {
+    /// Keeps `link` as the newest link summary.
+    pub fn set_latest_link(&self, link: &LinkSummary) {
+        let mut guard = match self.link.lock() {
+            Ok(g) => g,
+            Err(poisoned) => poisoned.into_inner(),
+        };
+        *guard = Some(*link);
+    }
+
+    /// The link summary of the newest record (`None` before the first).
+    pub fn latest_link(&self) -> Option<LinkSummary> {
+        match self.link.lock() {
+            Ok(g) => *g,
+            Err(poisoned) => *poisoned.into_inner(),
+        }
+    }
 }
 
 /// The hub's output side: clients subscribe here.
@@ -177,6 +199,7 @@ pub async fn run(
         };
         match next {
             Ok(record) => {
+                counters.set_latest_link(&record.link);
                 let clients = counters.clients.load(Ordering::Relaxed);
                 hub.on_record(&record, || sources.health(), clients);
             }

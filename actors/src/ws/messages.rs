@@ -210,6 +210,8 @@ pub struct Limits {
     pub max_message_bytes: usize,
     /// Ticks queued for this client before the oldest are dropped.
     pub client_queue: usize,
+    /// The message rate limit (`{"burst":…,"per_second":…}`); messages beyond it get `rate_limited`.
+    pub rate: super::rate::RateLimit,
 }
 
 impl Hello {

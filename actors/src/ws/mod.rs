@@ -1,11 +1,14 @@
 //! The dashboard endpoint: one HTTP port that serves the browser dashboard (`/`), a health check
-//! (`/healthz`) and the websocket (`/ws`) that streams every tick and takes commands.
+//! (`/healthz`), Prometheus metrics (`/metrics`) and the websocket (`/ws`) that streams every tick and
+//! takes commands.
 //!
 //! - [`protocol`]: the client commands (see `web/PROTOCOL.md`), parsed with precise errors, and the replies;
 //! - [`messages`]: the server's `hello`, `tick` and `status` messages;
 //! - [`hub`]: serialises each tick once and fans it out, and keeps the run counters;
 //! - [`client`]: each client's bounded, drop-oldest queue and its tick-rate decimation;
 //! - [`session`]: one connection's reader, writer and forwarder;
+//! - [`rate`]: the per-connection message rate limit;
+//! - [`metrics`]: the `/metrics` text, and [`metrics_check`], a strict reader of it for tests;
 //! - [`auth`]: the handshake's Origin and token checks;
 //! - [`http`]: routes, static files and the handshake;
 //! - [`load`]: the websocket load behind `pavlov bench --ws-clients`.
@@ -20,13 +23,16 @@ pub mod http;
 pub mod hub;
 pub mod load;
 pub mod messages;
+pub mod metrics;
+pub mod metrics_check;
 pub mod protocol;
+pub mod rate;
 pub mod session;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::AtomicU64;
 use std::time::Duration;
 
 use axum::serve::ListenerExt;
@@ -72,8 +78,16 @@ pub struct DashboardStats {
     pub telemetry_dropped: u64,
     /// Commands forwarded to the server.
     pub commands: u64,
-    /// Error replies sent.
+    /// Error replies sent (including `rate_limited`).
     pub errors: u64,
+    /// Messages refused with `rate_limited`.
+    pub rate_limited: u64,
+    /// Connections closed with 1009 for an over-size message.
+    pub closed_oversize: u64,
+    /// Connections dropped because their replies piled up unread.
+    pub closed_unread: u64,
+    /// Connections dropped because their socket accepted nothing for [`session::WRITE_STALL`].
+    pub closed_write_stall: u64,
     /// Tick records the hub missed.
     pub records_missed: u64,
 }
@@ -144,6 +158,11 @@ impl Dashboard {
         );
         let (hub, hub_handle) = Hub::new(period_ms as f64, gesture_commands);
         let hub_counters = Arc::new(HubCounters::default());
+        let sources = HealthSources {
+            ticks: server.tick_stats.clone(),
+            writer: server.writer_stats.clone(),
+            actuation: server.actuation_stats.clone(),
+        };
         let state = Arc::new(http::AppState {
             policy: AccessPolicy::new(cfg, addr),
             hub: hub_handle,
@@ -163,6 +182,9 @@ impl Dashboard {
             max_message_bytes: cfg.max_message_bytes,
             client_queue: cfg.client_queue,
             max_clients: cfg.max_clients,
+            rate: rate::DEFAULT_RATE_LIMIT,
+            sources: sources.clone(),
+            recorder: server.feed.recorder_gauge(),
             web_dir,
             hub_counters: hub_counters.clone(),
             session_counters: Arc::new(SessionCounters::default()),
@@ -173,11 +195,7 @@ impl Dashboard {
         let hub = runtime.spawn(hub::run(
             hub,
             server.feed.subscribe(),
-            HealthSources {
-                ticks: server.tick_stats.clone(),
-                writer: server.writer_stats.clone(),
-                actuation: server.actuation_stats.clone(),
-            },
+            sources,
             hub_counters,
             cancel.clone(),
         ));
@@ -225,16 +243,12 @@ impl Dashboard {
 
     /// The endpoint's counters now.
     pub fn stats(&self) -> DashboardStats {
-        let s = &self.state;
-        DashboardStats {
-            clients: s.hub_counters.clients.load(Ordering::Relaxed),
-            connections: s.connections.load(Ordering::Relaxed),
-            rejected: s.rejected.load(Ordering::Relaxed),
-            telemetry_dropped: s.session_counters.telemetry_dropped.load(Ordering::Relaxed),
-            commands: s.session_counters.commands.load(Ordering::Relaxed),
-            errors: s.session_counters.errors.load(Ordering::Relaxed),
-            records_missed: s.hub_counters.records_missed.load(Ordering::Relaxed),
-        }
+        self.state.stats()
+    }
+
+    /// Everything `/metrics` reports, now.
+    pub fn metrics(&self) -> metrics::MetricsSnapshot {
+        self.state.metrics()
     }
 
     /// Closes every connection (code 1001) and stops listening.

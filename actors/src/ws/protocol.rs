@@ -22,9 +22,10 @@ pub const TOKEN_PROTOCOL_PREFIX: &str = "token.";
 pub const STATUS_EVERY_TICKS: u64 = 10;
 
 /// Commands that change the robot or the learner, forwarded to the server's command router.
-pub const CONTROL_COMMANDS: [&str; 10] = [
+pub const CONTROL_COMMANDS: [&str; 11] = [
     "set_mode",
     "estop",
+    "rearm",
     "release",
     "teleop",
     "human_request",
@@ -247,6 +248,26 @@ struct ErrorReply<'a> {
     message: &'a str,
 }
 
+/// The `id` of a message that will not be processed (over the rate limit), if it is a JSON object with a
+/// string or number `id`; nothing else of the message is kept.
+pub fn peek_id(text: &str) -> Option<Value> {
+    #[derive(serde::Deserialize)]
+    struct IdOnly {
+        #[serde(default)]
+        id: Option<Value>,
+    }
+    // A derived struct would also accept an array (its first element as the id).
+    if !text.trim_start().starts_with('{') {
+        return None;
+    }
+    match serde_json::from_str::<IdOnly>(text) {
+        Ok(IdOnly {
+            id: Some(id @ (Value::String(_) | Value::Number(_))),
+        }) => Some(id),
+        _ => None,
+    }
+}
+
 /// `{"type":"ack","id":…,"cmd":…,"result":…}`.
 pub fn ack_json(id: &Option<Value>, cmd: &str, result: &Value) -> String {
     let ack = Ack {
@@ -274,6 +295,16 @@ mod tests {
     use super::*;
     use pavlov::control::Mode;
     use serde_json::json;
+
+    #[test]
+    fn the_id_of_an_unprocessed_message_is_recovered_when_it_can_be() {
+        assert_eq!(peek_id(r#"{"cmd":"ping","id":7}"#), Some(json!(7)));
+        assert_eq!(peek_id(r#" {"id":"a","x":[1,{"y":2}]}"#), Some(json!("a")));
+        assert_eq!(peek_id(r#"{"id":{"a":1}}"#), None);
+        assert_eq!(peek_id(r#"{"cmd":"ping"}"#), None);
+        assert_eq!(peek_id("[7]"), None);
+        assert_eq!(peek_id("{not json"), None);
+    }
 
     fn rejected(text: &str) -> Rejection {
         parse_request(text).unwrap_err()

@@ -4,7 +4,11 @@
 //! The forwarder never waits on the socket: when the client falls behind, its queue drops the oldest
 //! telemetry. The writer gives up on a client whose socket accepts nothing for [`WRITE_STALL`]. Bad
 //! messages get an error reply and the connection stays open; only an over-size message (which the
-//! websocket layer cannot resynchronise after) closes it, with code 1009.
+//! websocket layer cannot resynchronise after) closes it, with code 1009. Every message draws on the
+//! connection's [`TokenBucket`]: one over the limit is answered `rate_limited` and not processed. When
+//! [`super::client::CONTROL_CAPACITY`] replies are waiting, the reader stops reading (so a fast client is
+//! slowed by TCP, not by memory) for up to [`UNREAD_PATIENCE`], then disconnects the client. Each way a
+//! connection can be closed for misbehaving is counted in [`SessionCounters`].
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -20,12 +24,15 @@ use super::auth::Access;
 use super::client::{Decimator, OutQueue};
 use super::hub::{HubHandle, Outgoing};
 use super::protocol::{
-    ClientCommand, ClientRequest, SessionCommand, ack_json, error_json, parse_request,
+    ClientCommand, ClientRequest, SessionCommand, ack_json, error_json, parse_request, peek_id,
 };
+use super::rate::{RateLimit, TokenBucket};
 use crate::command::ControlRequest;
 
 /// A client whose socket accepts nothing for this long is disconnected.
 pub const WRITE_STALL: Duration = Duration::from_secs(10);
+/// How long a full reply queue may stay full before the client is disconnected.
+pub const UNREAD_PATIENCE: Duration = Duration::from_secs(5);
 /// How long a command may wait for room in the router's inbox.
 const ROUTER_SEND_TIMEOUT: Duration = Duration::from_secs(1);
 /// How long a command may take to be applied before the client is told it timed out.
@@ -40,8 +47,16 @@ pub struct SessionCounters {
     pub telemetry_dropped: AtomicU64,
     /// Commands forwarded to the server.
     pub commands: AtomicU64,
-    /// Error replies sent.
+    /// Error replies sent (including `rate_limited`).
     pub errors: AtomicU64,
+    /// Messages refused with `rate_limited`.
+    pub rate_limited: AtomicU64,
+    /// Connections closed with 1009 for an over-size message.
+    pub closed_oversize: AtomicU64,
+    /// Connections dropped because their replies piled up unread.
+    pub closed_unread: AtomicU64,
+    /// Connections dropped because their socket accepted nothing for [`WRITE_STALL`].
+    pub closed_write_stall: AtomicU64,
 }
 
 /// Everything a session needs.
@@ -58,6 +73,8 @@ pub struct Session {
     pub queue: usize,
     /// The tick rate, Hz.
     pub tick_hz: f64,
+    /// The message rate limit.
+    pub rate: RateLimit,
     /// Shared counters.
     pub counters: Arc<SessionCounters>,
     /// Fires when the endpoint shuts down.
@@ -82,7 +99,7 @@ impl Session {
             stride.clone(),
             self.counters.clone(),
         ));
-        let writer = write(sink, queue.clone());
+        let writer = write(sink, queue.clone(), self.counters.clone());
         tokio::pin!(writer);
         tokio::select! {
             _ = &mut writer => {}
@@ -105,8 +122,13 @@ impl Session {
         queue: &OutQueue<Out>,
         stride: &AtomicU64,
     ) {
+        let mut bucket = TokenBucket::new(self.rate, std::time::Instant::now());
         while let Some(msg) = stream.next().await {
+            let over_limit = matches!(msg, Ok(Message::Text(_) | Message::Binary(_)))
+                && !bucket.try_take(std::time::Instant::now());
             let reply = match msg {
+                Ok(Message::Text(text)) if over_limit => self.rate_limited(peek_id(&text)),
+                Ok(Message::Binary(_)) if over_limit => self.rate_limited(None),
                 Ok(Message::Text(text)) => self.handle(&text, stride).await,
                 Ok(Message::Binary(_)) => {
                     let e = super::protocol::ProtocolError::Binary;
@@ -117,6 +139,9 @@ impl Session {
                 Err(e) => {
                     if is_capacity_error(&e) {
                         tracing::info!("websocket client sent an over-size message: {e}");
+                        self.counters
+                            .closed_oversize
+                            .fetch_add(1, Ordering::Relaxed);
                         let _ = queue.push_control(Out::Close(close_code::SIZE, "message too big"));
                     } else {
                         tracing::debug!("websocket read error: {e}");
@@ -124,11 +149,28 @@ impl Session {
                     return;
                 }
             };
-            if queue.push_control(Out::Text(reply.into())).is_err() {
+            if queue
+                .push_control_waiting(Out::Text(reply.into()), UNREAD_PATIENCE)
+                .await
+                .is_err()
+            {
                 tracing::warn!("websocket client does not read its replies; disconnecting it");
+                self.counters.closed_unread.fetch_add(1, Ordering::Relaxed);
                 return;
             }
         }
+    }
+
+    fn rate_limited(&self, id: Option<Value>) -> String {
+        self.counters.rate_limited.fetch_add(1, Ordering::Relaxed);
+        let RateLimit { burst, per_second } = self.rate;
+        self.error(
+            &id,
+            "rate_limited",
+            &format!(
+                "too many messages: at most {per_second} per second in bursts of {burst}; this one was not processed"
+            ),
+        )
     }
 
     fn error(&self, id: &Option<Value>, code: &str, message: &str) -> String {
@@ -239,6 +281,7 @@ async fn forward(
 async fn write(
     mut sink: futures_util::stream::SplitSink<WebSocket, Message>,
     queue: Arc<OutQueue<Out>>,
+    counters: Arc<SessionCounters>,
 ) {
     while let Some(out) = queue.pop().await {
         let (msg, last) = match out {
@@ -259,6 +302,7 @@ async fn write(
                 return;
             }
             Err(_) => {
+                counters.closed_write_stall.fetch_add(1, Ordering::Relaxed);
                 tracing::warn!(
                     "a websocket client accepted nothing for {} s; disconnecting it",
                     WRITE_STALL.as_secs()
