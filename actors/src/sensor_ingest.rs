@@ -80,6 +80,10 @@ pub async fn run(
                 }
                 let Some(tick) = *ticks.borrow_and_update() else { continue };
                 supervisor.on_tick();
+                if supervisor.reopening() {
+                    // The old port is being closed and reopened; its reader goes with it.
+                    reader = None;
+                }
                 let age_ticks = newest.as_ref().map(|(_, at)| {
                     let age = tick.deadline.saturating_duration_since(*at);
                     (age.as_micros() / period.as_micros().max(1)) as u32

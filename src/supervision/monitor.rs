@@ -82,8 +82,13 @@ pub struct LinkMonitor {
     reopen_attempt: u32,
     reopen_pending: bool,
     grace_until_ms: u64,
+    passive_frames: u32,
     counters: MonitorCounters,
 }
+
+/// Consecutive frames that must show Passive before a trip is declared: a single frame that slipped past
+/// the checksum with a wrong mode byte must not stop the robot until the operator comes.
+pub const TRIP_CONFIRM_FRAMES: u32 = 2;
 
 /// What the monitor has counted.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -123,6 +128,7 @@ impl LinkMonitor {
             reopen_attempt: 0,
             reopen_pending: false,
             grace_until_ms: now_ms + cfg.mode_grace_ms,
+            passive_frames: 0,
             counters: MonitorCounters::default(),
         }
     }
@@ -168,8 +174,13 @@ impl LinkMonitor {
             self.mode = self.modes.read(raw, self.commanded);
         }
         let in_grace = now_ms < self.grace_until_ms;
+        if self.mode == Some(code::PASSIVE) && !in_grace {
+            self.passive_frames = self.passive_frames.saturating_add(1);
+        } else {
+            self.passive_frames = 0;
+        }
         match (self.mode, self.trip) {
-            (Some(code::PASSIVE), None) if !in_grace => {
+            (Some(code::PASSIVE), None) if self.passive_frames >= TRIP_CONFIRM_FRAMES => {
                 let cause = trip_cause(values);
                 self.trip = Some(cause);
                 self.counters.trips += 1;

@@ -128,6 +128,12 @@ fn a_trip_to_passive_is_reported_with_its_cause_and_not_overridden() {
     let mut tripped = frame(1);
     tripped.set(id::BUMPS_WHEEL_DROPS, 0b0_1100);
     m.on_frame(300, &tripped);
+    assert_eq!(
+        m.state(),
+        LinkState::Up,
+        "one Passive frame is not yet a trip"
+    );
+    m.on_frame(315, &tripped);
     assert_eq!(m.state(), LinkState::Tripped);
     assert_eq!(m.trip(), Some(TripCause::WheelDrop));
     assert_eq!(m.counters().trips, 1);
@@ -171,7 +177,18 @@ fn passive_right_after_a_mode_command_is_not_a_trip() {
     assert_eq!(m.state(), LinkState::Up);
     assert_eq!(m.counters().trips, 0);
     m.on_frame(300, &frame(1));
+    m.on_frame(315, &frame(1));
     assert_eq!(m.state(), LinkState::Tripped);
+}
+
+#[test]
+fn a_single_odd_frame_is_not_a_trip() {
+    let mut m = LinkMonitor::new(cfg(), code::SAFE, ModeQuirk::Auto, 0);
+    run(&mut m, 0, 300, true, 2);
+    m.on_frame(300, &frame(1));
+    run(&mut m, 301, 600, true, 2);
+    assert_eq!(m.state(), LinkState::Up);
+    assert_eq!(m.counters().trips, 0);
 }
 
 #[test]
@@ -184,5 +201,6 @@ fn the_quirk_does_not_hide_a_trip() {
     assert_eq!(m.state(), LinkState::Up);
     // Passive reported as 2.
     m.on_frame(300, &frame(2));
+    m.on_frame(315, &frame(2));
     assert_eq!(m.state(), LinkState::Tripped);
 }

@@ -27,6 +27,9 @@ pub enum LinkCommand {
     Rearm(oneshot::Sender<CommandResult>),
 }
 
+/// How long a reopen waits for the writer to close the old port.
+const CLOSE_WAIT: std::time::Duration = std::time::Duration::from_millis(500);
+
 type Reopen = JoinHandle<Result<(LinkReader, LinkWriter), LinkError>>;
 
 /// Link supervision for one server run.
@@ -107,7 +110,15 @@ impl Supervisor {
             Some(LinkAction::Reopen) => match self.opener.as_mut() {
                 Some(opener) => {
                     tracing::info!("reopening {}", opener.describe());
-                    self.reopening = Some(tokio::spawn(opener.open()));
+                    // Close the old port first: a serial device is held exclusively.
+                    let (closed_tx, closed) = oneshot::channel();
+                    let open = opener.open();
+                    let close = WriterControl::Close(closed_tx);
+                    self.send(close);
+                    self.reopening = Some(tokio::spawn(async move {
+                        let _ = tokio::time::timeout(CLOSE_WAIT, closed).await;
+                        open.await
+                    }));
                 }
                 None => {
                     // Nothing to reopen: send the whole start-up sequence again, with backoff.
@@ -128,7 +139,7 @@ impl Supervisor {
         self.reopening.is_some()
     }
 
-    /// Waits for the running reopen; on success hands the new port's writer (with the start-up sequence)
+    /// Waits for the running reopen (the caller has dropped the old reader); on success hands the new port's writer (with the start-up sequence)
     /// to the writer and returns the reader. Pending forever when no reopen runs.
     pub async fn reopen_finished(&mut self) -> Option<LinkReader> {
         let Some(task) = self.reopening.as_mut() else {

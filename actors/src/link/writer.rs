@@ -33,6 +33,9 @@ pub const WRITE_TIMEOUT: Duration = Duration::from_millis(200);
 pub enum WriterControl {
     /// Send these bytes now (Start and Stream again, or the mode after a re-arm).
     Send(Vec<u8>),
+    /// Close the port now (a serial device is opened exclusively, so it must be closed before it can be
+    /// reopened); writes go nowhere until [`WriterControl::Replace`]. The sender learns when it is closed.
+    Close(tokio::sync::oneshot::Sender<()>),
     /// Switch to a reopened port and send `startup` on it; the old port is closed.
     Replace {
         /// The new port's host-to-robot half.
@@ -76,6 +79,10 @@ pub async fn run(
                 Some(WriterControl::Send(bytes)) => {
                     let res = write_bounded(&mut link, &bytes).await;
                     count(&stats, &res, bytes.len(), None, Instant::now());
+                }
+                Some(WriterControl::Close(done)) => {
+                    link = Box::new(tokio::io::sink());
+                    let _ = done.send(());
                 }
                 Some(WriterControl::Replace { link: fresh, startup }) => {
                     // Dropping the old half closes it; a port that has hung is simply abandoned.
