@@ -7,6 +7,7 @@
 //! - [`command`]: host-to-robot commands, encoded and parsed per model.
 //! - [`frame`]: stream frames (header 19, length, id/data pairs, checksum).
 //! - [`parser`]: the incremental, resynchronising stream parser.
+//! - [`plausible`]: the documented value ranges that reveal a damaged frame with a valid checksum.
 //!
 //! Facts: `../shared/reference/create_oi.md` (the two OI specifications, cited there as [C1] and [C2]).
 
@@ -16,6 +17,7 @@ pub mod frame;
 pub mod model;
 pub mod packets;
 pub mod parser;
+pub mod plausible;
 pub mod sensors;
 
 pub use error::OiError;

@@ -8,20 +8,63 @@
 //! frame, because a real frame may start inside a false one; text the Create 2 firmware prints between
 //! frames (banners, `bat: …` lines) is skipped the same way. Values are committed only after the
 //! checksum holds. Memory is bounded: at most one frame's worth of bytes is kept between calls.
+//!
+//! An 8-bit sum lets about one damaged frame in 256 through (two flips that cancel, a frame shifted
+//! by a dropped or duplicated byte). A parser told its robot's model ([`StreamParser::with_model`])
+//! also rejects a frame whose values no Create can report ([`super::plausible`]): it counts as a bad
+//! frame (and as implausible) and the search resumes one byte after its header, like any bad frame.
+//! Distance and angle are bounded only in a frame that starts exactly where the previous accepted
+//! frame ended (nothing skipped in between): the first frame after a start, [`StreamParser::reset`]
+//! or skipped bytes may carry motion accumulated over any time. After resuming a paused stream
+//! (opcode 150), call [`StreamParser::reset`] so its first frame is not held to 15 ms of motion.
 
 use super::frame::{STREAM_HEADER, byte_sum, stream_payload_len};
 use super::packets::{group_members, spec};
-use super::{OiError, SensorValues};
+use super::plausible::{FrameContext, Implausible, implausible};
+use super::{Model, OiError, SensorValues};
 
 /// Counters of what the parser has seen since it was created.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct ParserStats {
     /// Frames that passed every check and were handed over.
     pub good_frames: u64,
-    /// Header + expected length that then failed the id or checksum check.
+    /// Header + expected length that then failed the id, checksum or plausibility check.
     pub bad_frames: u64,
+    /// Of `bad_frames`, those whose ids and checksum held but whose values no Create can report
+    /// (only with a model, [`StreamParser::with_model`]).
+    pub implausible_frames: u64,
     /// Bytes not part of any good frame (garbage, text, false headers).
     pub skipped_bytes: u64,
+}
+
+/// The parser's running state that scanning updates: counters, plausibility settings and results.
+#[derive(Debug, Clone, Default)]
+struct ScanState {
+    stats: ParserStats,
+    /// The robot model whose plausible values are enforced; `None`: no plausibility checks.
+    model: Option<Model>,
+    /// `stats.skipped_bytes` when the last frame was accepted; `None` before the first one (or after
+    /// a reset). A frame follows the previous one directly iff nothing was skipped since.
+    skipped_at_accept: Option<u64>,
+    /// Why the most recent implausible frame was rejected.
+    last_implausible: Option<Implausible>,
+}
+
+impl ScanState {
+    fn skip(&mut self, bytes: usize) {
+        self.stats.skipped_bytes += bytes as u64;
+    }
+
+    /// Why `values` cannot be a frame from the robot, if plausibility is checked.
+    fn reject(&self, values: &SensorValues) -> Option<Implausible> {
+        let model = self.model?;
+        let context = if self.skipped_at_accept == Some(self.stats.skipped_bytes) {
+            FrameContext::FollowsFrame
+        } else {
+            FrameContext::First
+        };
+        implausible(values, model, context)
+    }
 }
 
 /// Where one single packet's value sits in a frame.
@@ -135,7 +178,7 @@ impl Layout {
     /// that needs bytes beyond the end of `data`.
     fn scan(
         &self,
-        stats: &mut ParserStats,
+        state: &mut ScanState,
         data: &[u8],
         start_limit: usize,
         on_frame: &mut impl FnMut(SensorValues),
@@ -145,11 +188,11 @@ impl Layout {
             let searched = data.get(i..start_limit).unwrap_or_default();
             match searched.iter().position(|&b| b == STREAM_HEADER) {
                 None => {
-                    stats.skipped_bytes += searched.len() as u64;
+                    state.skip(searched.len());
                     return start_limit;
                 }
                 Some(k) => {
-                    stats.skipped_bytes += k as u64;
+                    state.skip(k);
                     i += k;
                 }
             }
@@ -157,18 +200,28 @@ impl Layout {
             match self.judge(window) {
                 Verdict::NeedMore => return i,
                 Verdict::NotACandidate => {
-                    stats.skipped_bytes += 1;
+                    state.skip(1);
                     i += 1;
                 }
                 Verdict::Bad => {
-                    stats.bad_frames += 1;
-                    stats.skipped_bytes += 1;
+                    state.stats.bad_frames += 1;
+                    state.skip(1);
                     i += 1;
                 }
                 Verdict::Good => {
-                    on_frame(self.decode(window));
-                    stats.good_frames += 1;
-                    i += self.frame_len;
+                    let values = self.decode(window);
+                    if let Some(why) = state.reject(&values) {
+                        state.stats.bad_frames += 1;
+                        state.stats.implausible_frames += 1;
+                        state.last_implausible = Some(why);
+                        state.skip(1);
+                        i += 1;
+                    } else {
+                        on_frame(values);
+                        state.stats.good_frames += 1;
+                        state.skipped_at_accept = Some(state.stats.skipped_bytes);
+                        i += self.frame_len;
+                    }
                 }
             }
         }
@@ -183,20 +236,37 @@ pub struct StreamParser {
     layout: Layout,
     /// Bytes kept between calls: a possible frame start and what followed it (< one frame).
     pending: Vec<u8>,
-    stats: ParserStats,
+    state: ScanState,
 }
 
 impl StreamParser {
     /// A parser for the frames answering a Stream request for `requested` (single packets and/or groups,
-    /// in the order they were sent).
+    /// in the order they were sent). It checks structure only; see [`StreamParser::with_model`].
     pub fn new(requested: &[u8]) -> Result<Self, OiError> {
         let layout = Layout::new(requested)?;
         Ok(StreamParser {
             requested: requested.to_vec(),
             pending: Vec::with_capacity(2 * layout.frame_len),
             layout,
-            stats: ParserStats::default(),
+            state: ScanState::default(),
         })
+    }
+
+    /// The same parser, also rejecting frames whose values a `model` Create cannot report
+    /// ([`super::plausible`]); they count in [`ParserStats::implausible_frames`] and `bad_frames`.
+    pub fn with_model(mut self, model: Model) -> Self {
+        self.state.model = Some(model);
+        self
+    }
+
+    /// The model whose plausible values are enforced, if any.
+    pub fn model(&self) -> Option<Model> {
+        self.state.model
+    }
+
+    /// Why the most recent implausible frame was rejected (for a log line), if any was.
+    pub fn last_implausible(&self) -> Option<Implausible> {
+        self.state.last_implausible
     }
 
     /// Parses the next `chunk` of the byte stream, calling `on_frame` once per valid frame, in order.
@@ -206,7 +276,7 @@ impl StreamParser {
             if self.pending.is_empty() {
                 let stop = self
                     .layout
-                    .scan(&mut self.stats, rest, rest.len(), &mut on_frame);
+                    .scan(&mut self.state, rest, rest.len(), &mut on_frame);
                 self.pending
                     .extend_from_slice(rest.get(stop..).unwrap_or_default());
                 return;
@@ -220,7 +290,7 @@ impl StreamParser {
             self.pending.extend_from_slice(head);
             let stop = self
                 .layout
-                .scan(&mut self.stats, &self.pending, kept, &mut on_frame);
+                .scan(&mut self.state, &self.pending, kept, &mut on_frame);
             if stop < kept {
                 // Still waiting for the rest of a candidate (then `tail` is empty).
                 self.pending.drain(..stop);
@@ -242,12 +312,15 @@ impl StreamParser {
 
     /// Counters since creation (kept across [`StreamParser::reset`]).
     pub fn stats(&self) -> ParserStats {
-        self.stats
+        self.state.stats
     }
 
-    /// Drops any buffered partial frame (e.g. after a reconnect); keeps the counters.
+    /// Drops any buffered partial frame (e.g. after a reconnect or before resuming a paused stream);
+    /// keeps the counters. The next frame is treated as a first frame: its distance and angle may hold
+    /// motion accumulated over any time.
     pub fn reset(&mut self) {
         self.pending.clear();
+        self.state.skipped_at_accept = None;
     }
 
     /// The packet list this parser expects.
@@ -341,6 +414,7 @@ mod tests {
             ParserStats {
                 good_frames: 1,
                 bad_frames: 0,
+                implausible_frames: 0,
                 skipped_bytes: 0
             }
         );
@@ -375,6 +449,7 @@ mod tests {
             ParserStats {
                 good_frames: 1,
                 bad_frames: 1,
+                implausible_frames: 0,
                 skipped_bytes: 6
             }
         );
