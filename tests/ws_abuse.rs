@@ -494,3 +494,28 @@ async fn a_client_over_the_rate_limit_is_told_and_served_again_once_tokens_retur
     dash.shutdown().await;
     let _ = tokio::time::timeout(Duration::from_secs(5), server.shutdown()).await;
 }
+
+/// The abuse benchmark (`pavlov bench --ws-clients N --ws-abuse`) through its library API, for when the
+/// flag is not wired: `cargo test --release -p pavlov-actors --test ws_abuse -- --ignored --nocapture`.
+#[tokio::test(flavor = "multi_thread")]
+#[ignore = "a benchmark: prints figures, asserts nothing about them"]
+async fn bench_tick_lateness_with_and_without_abuse() {
+    let cfg = Config::from_toml(STALL_CONFIG).unwrap();
+    let seconds = std::env::var("PAVLOV_ABUSE_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(10);
+    let report = pavlov_actors::ws::load::run_abuse_comparison(
+        cfg,
+        Duration::from_secs(seconds),
+        PathBuf::from("web"),
+        pavlov_actors::ws::load::Load {
+            clients: 4,
+            stalled: false,
+        },
+        pavlov_actors::ws::abuse::Abuse::default(),
+    )
+    .await
+    .unwrap();
+    println!("{report}");
+}

@@ -11,12 +11,13 @@
 //! - [`metrics`]: the `/metrics` text, and [`metrics_check`], a strict reader of it for tests;
 //! - [`auth`]: the handshake's Origin and token checks;
 //! - [`http`]: routes, static files and the handshake;
-//! - [`load`]: the websocket load behind `pavlov bench --ws-clients`.
+//! - [`load`]: the websocket load behind `pavlov bench --ws-clients`, and [`abuse`], its abusive clients.
 //!
 //! Nothing here can delay the tick: the hub reads the tick feed's lossy broadcast, every client reads the
 //! hub's lossy broadcast into its own bounded queue, and only the client's own writer waits on its socket.
 //! All of it runs on a separate single-worker runtime, so it never occupies the control actors' workers.
 
+pub mod abuse;
 pub mod auth;
 pub mod client;
 pub mod http;

@@ -331,6 +331,7 @@ mod tests {
         let samples = [
             json!({"cmd":"set_mode","mode":"reactive"}),
             json!({"cmd":"estop"}),
+            json!({"cmd":"rearm"}),
             json!({"cmd":"release"}),
             json!({"cmd":"teleop","left_mm_s":100,"right_mm_s":-100}),
             json!({"cmd":"human_request"}),
