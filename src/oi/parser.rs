@@ -518,6 +518,78 @@ mod tests {
         assert_eq!(StreamParser::new(&[29, 13]).unwrap().requested(), &[29, 13]);
     }
 
+    #[test]
+    fn an_implausible_frame_is_counted_and_a_real_frame_inside_it_is_found() {
+        // A frame for [35, 37] whose checksum holds but whose OI mode (138) and song-playing flag (19)
+        // are impossible; the real frame starts at its song-playing byte, inside it.
+        let fake = [19, 4, 35, 138, 37, 19, 4];
+        assert_eq!(byte_sum(&fake), 0);
+        let real = [19, 4, 35, 2, 37, 0];
+        assert_eq!(&fake[5..], &real[..2]);
+        let mut stream = fake.to_vec();
+        stream.extend(&real[2..]);
+        stream.push(checksum_for(&real));
+
+        let mut plain = StreamParser::new(&[35, 37]).unwrap();
+        let got = collect(&mut plain, &stream);
+        assert_eq!(got.len(), 1, "without a model the fake frame is committed");
+        assert_eq!(got[0].get(35), Some(138));
+
+        let mut checked = StreamParser::new(&[35, 37])
+            .unwrap()
+            .with_model(Model::Create2);
+        assert_eq!(checked.model(), Some(Model::Create2));
+        let got = collect(&mut checked, &stream);
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].get(35), Some(2));
+        assert_eq!(
+            checked.stats(),
+            ParserStats {
+                good_frames: 1,
+                bad_frames: 1,
+                implausible_frames: 1,
+                skipped_bytes: 5
+            }
+        );
+        let why = checked.last_implausible().unwrap();
+        assert_eq!((why.id, why.value, why.max), (35, 138, 4));
+    }
+
+    #[test]
+    fn odometry_is_bounded_only_in_a_frame_that_directly_follows_an_accepted_one() {
+        let frame = |distance: i32| {
+            let mut v = SensorValues::new();
+            v.set(19, distance);
+            v.set(35, 2);
+            encode_stream_frame(&[19, 35], &v).unwrap()
+        };
+        let mut p = StreamParser::new(&[19, 35])
+            .unwrap()
+            .with_model(Model::Create1);
+        // First frame: a long accumulation is plausible.
+        assert_eq!(collect(&mut p, &frame(3000)).len(), 1);
+        // Directly after it: 3 m in 15 ms is not; 7 mm is.
+        assert!(collect(&mut p, &frame(3000)).is_empty());
+        assert_eq!(p.stats().implausible_frames, 1);
+        assert_eq!(collect(&mut p, &frame(7)).len(), 1);
+        assert_eq!(collect(&mut p, &frame(-501)).len(), 0);
+        // The rejected frame's bytes were skipped: the next one is a first frame.
+        assert_eq!(collect(&mut p, &frame(-3000)).len(), 1);
+        assert_eq!(
+            collect(&mut p, &frame(-500)).len(),
+            1,
+            "−500 mm is the bound"
+        );
+        // After skipped bytes or a reset, the next frame is a first frame again.
+        let mut after_text = BAT_LINE.to_vec();
+        after_text.extend(frame(-3000));
+        assert_eq!(collect(&mut p, &after_text).len(), 1);
+        p.reset();
+        assert_eq!(collect(&mut p, &frame(3000)).len(), 1);
+        assert_eq!(p.stats().implausible_frames, 2);
+        assert_eq!(p.stats().good_frames, 6);
+    }
+
     /// Requested lists: 1–4 single packets and/or groups whose frame fits the length byte.
     fn requested() -> impl Strategy<Value = Vec<u8>> {
         let ids: Vec<u8> = (0..=58).chain([100, 101, 106, 107]).collect();
@@ -638,6 +710,35 @@ mod tests {
             }
             prop_assert_eq!(&one_by_one, &expected);
             prop_assert_eq!(bytewise.stats(), whole.stats());
+        }
+
+        #[test]
+        fn plausibility_checks_do_not_depend_on_chunking((req, stream, _, _) in stream_case(),
+                                                         chunk in 1usize..100,
+                                                         create1 in any::<bool>()) {
+            let model = if create1 { Model::Create1 } else { Model::Create2 };
+            let parser = || StreamParser::new(&req).unwrap().with_model(model);
+            let mut whole = parser();
+            let expected = collect(&mut whole, &stream);
+            let mut plain = StreamParser::new(&req).unwrap();
+            let unchecked = collect(&mut plain, &stream);
+            let mut chunked = parser();
+            let mut got = Vec::new();
+            for c in stream.chunks(chunk) {
+                chunked.feed(c, |v| got.push(v));
+            }
+            prop_assert_eq!(&got, &expected);
+            prop_assert_eq!(chunked.stats(), whole.stats());
+            check_accounting(&whole, stream.len());
+            let st = whole.stats();
+            prop_assert!(st.implausible_frames <= st.bad_frames);
+            // Every committed frame is plausible, and no check ever rejects what it commits.
+            for v in &expected {
+                prop_assert_eq!(crate::oi::plausible::implausible(v, model, crate::oi::plausible::FrameContext::First), None);
+            }
+            if st.implausible_frames == 0 {
+                prop_assert_eq!(&expected, &unchecked);
+            }
         }
 
         #[test]

@@ -208,3 +208,276 @@ pub fn implausible(
         })
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::oi::command::{Command, Radius, last_song_number};
+    use crate::oi::frame::{STREAM_HEADER, byte_sum, encode_stream_frame};
+    use crate::oi::packets::{bits, spec};
+    use crate::oi::parser::{ParserStats, StreamParser};
+    use crate::rng::Rng;
+    use crate::sim::faults::{FaultInjector, FaultSpec};
+    use crate::sim::params::SimParams;
+    use crate::sim::robot::SimRobot;
+    use crate::sim::world::{LEFT, RIGHT};
+
+    const MODELS: [Model; 2] = [Model::Create1, Model::Create2];
+
+    fn robot(model: Model, seed: u64) -> SimRobot {
+        SimRobot::new(model, SimParams::for_model(model), seed)
+    }
+
+    fn send(robot: &mut SimRobot, command: Command) {
+        let bytes = command.encode(robot.model()).unwrap();
+        robot.receive(&bytes);
+    }
+
+    fn checked(list: &[u8], model: Model) -> StreamParser {
+        StreamParser::new(list).unwrap().with_model(model)
+    }
+
+    /// Every packet of `model` with an idle simulated robot's values.
+    fn idle_values(model: Model) -> SensorValues {
+        let mut r = robot(model, 1);
+        r.step();
+        r.sensors()
+    }
+
+    #[test]
+    fn every_bound_rejects_a_frame_with_a_valid_checksum_and_accepts_its_limits() {
+        for model in MODELS {
+            let group = model.all_sensors_group();
+            let base = idle_values(model);
+            assert_eq!(implausible(&base, model, FrameContext::FollowsFrame), None);
+            let first = encode_stream_frame(&[group], &base).unwrap();
+            for bound in bounds(model).iter().chain(odometry_bounds()) {
+                let (lo, hi) = spec(bound.id).unwrap().wire_range();
+                assert!(lo <= bound.min && bound.max <= hi, "{bound:?}");
+                let outside = [bound.min - 1, bound.max + 1];
+                let wire_outside: Vec<i32> = outside
+                    .into_iter()
+                    .filter(|v| (lo..=hi).contains(v))
+                    .collect();
+                assert!(
+                    !wire_outside.is_empty(),
+                    "{bound:?} rejects nothing the wire can carry"
+                );
+                for (value, plausible) in [(bound.min, true), (bound.max, true)]
+                    .into_iter()
+                    .chain(wire_outside.iter().map(|&v| (v, false)))
+                {
+                    let mut v = base.clone();
+                    v.set(bound.id, value);
+                    let frame = encode_stream_frame(&[group], &v).unwrap();
+                    assert_eq!(byte_sum(&frame), 0);
+                    let mut stream = first.clone();
+                    stream.extend(&frame);
+                    let mut plain = StreamParser::new(&[group]).unwrap();
+                    let mut p = checked(&[group], model);
+                    let (mut n_plain, mut got) = (0, Vec::new());
+                    plain.feed(&stream, |_| n_plain += 1);
+                    p.feed(&stream, |f| got.push(f));
+                    assert_eq!(n_plain, 2, "the checksum holds");
+                    let what = format!("{model} packet {} = {value}", bound.id);
+                    if plausible {
+                        assert_eq!(got.len(), 2, "{what}");
+                        assert_eq!(got[1].get(bound.id), Some(value), "{what}");
+                    } else {
+                        assert_eq!(got.len(), 1, "{what}");
+                        assert_eq!(p.stats().implausible_frames, 1, "{what}");
+                        assert_eq!(p.stats().bad_frames, 1, "{what}");
+                        let why = p.last_implausible().unwrap();
+                        assert_eq!((why.id, why.value), (bound.id, value), "{what}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn models_differ_where_the_specifications_do() {
+        let mut v = SensorValues::new();
+        v.set(id::BUMPS_WHEEL_DROPS, bits::WHEEL_DROP_CASTER);
+        assert_eq!(implausible(&v, Model::Create1, FrameContext::First), None);
+        assert_eq!(
+            implausible(&v, Model::Create2, FrameContext::First).map(|w| w.max),
+            Some(15)
+        );
+        let mut v = SensorValues::new();
+        v.set(id::WALL_SIGNAL, 2000);
+        v.set(id::DIRT_DETECT, 200);
+        assert!(implausible(&v, Model::Create1, FrameContext::First).is_some());
+        assert_eq!(
+            implausible(&v, Model::Create2, FrameContext::First).map(|w| w.id),
+            Some(id::WALL_SIGNAL)
+        );
+        v.set(id::WALL_SIGNAL, 1023);
+        assert_eq!(implausible(&v, Model::Create2, FrameContext::First), None);
+        assert!(implausible(&v, Model::Create1, FrameContext::First).is_some());
+        // Absent packets are not checked; the mode+1 quirk is plausible.
+        assert_eq!(
+            implausible(
+                &SensorValues::new(),
+                Model::Create1,
+                FrameContext::FollowsFrame
+            ),
+            None
+        );
+        let mut v = SensorValues::new();
+        v.set(id::OI_MODE, 4);
+        assert_eq!(implausible(&v, Model::Create2, FrameContext::First), None);
+        v.set(id::OI_MODE, 5);
+        let why = implausible(&v, Model::Create2, FrameContext::First).unwrap();
+        assert_eq!(
+            why.to_string(),
+            "packet 35 = 5 is outside 0..=4, impossible for a Create"
+        );
+    }
+
+    /// What a scenario run went through, so a test can tell it reached the situations it claims.
+    #[derive(Debug, Default)]
+    struct Seen {
+        frames: u64,
+        stalled_steps: u64,
+        overcurrent_frames: u64,
+        bump_frames: u64,
+        drop_frames: u64,
+        cliff_frames: u64,
+        quirk_frames: u64,
+        song_frames: u64,
+        passive_frames: u64,
+        max_abs_distance: i32,
+        max_abs_angle: i32,
+    }
+
+    impl Seen {
+        fn note(&mut self, v: &SensorValues) {
+            self.frames += 1;
+            let has = |id, mask| v.get(id).is_some_and(|x| x & mask != 0);
+            self.overcurrent_frames += u64::from(has(id::OVERCURRENTS, 0x18));
+            self.bump_frames += u64::from(has(id::BUMPS_WHEEL_DROPS, 0x03));
+            self.drop_frames += u64::from(has(id::BUMPS_WHEEL_DROPS, 0x0C));
+            let cliff = [9, 10, 11, 12].iter().any(|&c| v.get(c) == Some(1));
+            self.cliff_frames += u64::from(cliff);
+            self.quirk_frames += u64::from(v.get(id::OI_MODE) == Some(4));
+            self.passive_frames += u64::from(v.get(id::OI_MODE) == Some(1));
+            self.song_frames += u64::from(v.get(id::SONG_PLAYING) == Some(1));
+            let d = v.get_or_zero(id::DISTANCE).abs();
+            let a = v.get_or_zero(id::ANGLE).abs();
+            self.max_abs_distance = self.max_abs_distance.max(d);
+            self.max_abs_angle = self.max_abs_angle.max(a);
+        }
+    }
+
+    /// A random valid host command that moves the robot (as the host's encoder allows them).
+    fn random_motion(rng: &mut Rng) -> Command {
+        let speed = |rng: &mut Rng| rng.uniform(-500.0, 500.0).round() as i16;
+        match rng.below(5) {
+            0 => Command::DriveDirect {
+                right: 500,
+                left: 500,
+            },
+            1 => Command::DriveDirect {
+                right: 500,
+                left: -500,
+            },
+            2 => Command::DriveDirect {
+                right: speed(rng),
+                left: speed(rng),
+            },
+            _ => {
+                let radius = match rng.below(4) {
+                    0 => Radius::Straight,
+                    1 => Radius::TurnInPlaceClockwise,
+                    2 => Radius::TurnInPlaceCounterClockwise,
+                    _ => {
+                        let r = rng.uniform(2.0, 2000.0).round() as i16;
+                        Radius::Mm(if rng.chance(0.5) { r } else { -r })
+                    }
+                };
+                Command::Drive {
+                    velocity: speed(rng),
+                    radius,
+                }
+            }
+        }
+    }
+
+    /// Runs a streaming simulated robot of `model` for `steps` steps through driving, wall stalls, lifts,
+    /// cliffs, mode changes and trips, the mode+1 quirk and songs, parsing every frame with plausibility
+    /// checks.
+    fn scenario(model: Model, list: &[u8], steps: u64, seed: u64) -> (ParserStats, u64, Seen) {
+        let mut rng = Rng::new(seed);
+        let mut r = robot(model, seed);
+        let mut parser = checked(list, model);
+        let mut seen = Seen::default();
+        send(&mut r, Command::Start);
+        send(&mut r, Command::Full);
+        let top_song = last_song_number(model);
+        send(
+            &mut r,
+            Command::Song {
+                number: top_song,
+                notes: vec![(60, 32), (64, 32)],
+            },
+        );
+        send(&mut r, Command::Stream(list.to_vec()));
+        for step in 0..steps {
+            if step % 60 == 0 {
+                send(&mut r, random_motion(&mut rng));
+                // Lifts and cliffs last one period.
+                r.world_mut().set_lifted(false);
+                (0..4).for_each(|i| r.world_mut().set_cliff(i, false));
+                match rng.below(12) {
+                    0 => send(&mut r, Command::Safe),
+                    1 => send(&mut r, Command::Full),
+                    2 => send(&mut r, Command::Start),
+                    3 => r.world_mut().set_lifted(true),
+                    4 => {
+                        let i = rng.below(4) as usize;
+                        r.world_mut().set_cliff(i, true);
+                    }
+                    5 => r.set_mode_quirk(!r.mode_quirk()),
+                    6 => send(&mut r, Command::Play(top_song)),
+                    7 if r.oi_mode().code() == 1 => send(&mut r, Command::Full),
+                    _ => {}
+                }
+                // Keep the robot mostly driving.
+                if r.oi_mode().code() <= 1 && rng.chance(0.5) {
+                    send(&mut r, Command::Full);
+                    send(&mut r, random_motion(&mut rng));
+                }
+            }
+            r.step();
+            seen.stalled_steps += u64::from(r.world().stalled(LEFT) || r.world().stalled(RIGHT));
+            parser.feed(&r.take_output(), |v| seen.note(&v));
+        }
+        (parser.stats(), r.counters().frames_sent, seen)
+    }
+
+    #[test]
+    fn the_simulated_robot_never_sends_an_implausible_frame() {
+        for model in MODELS {
+            let group = model.all_sensors_group();
+            for (list, seed) in [(vec![group], 11), (vec![19, 20, 35, 41, 42], 12)] {
+                let (stats, sent, seen) = scenario(model, &list, 8000, seed);
+                let what = format!("{model} {list:?}: {stats:?} {seen:?}");
+                println!("{what}");
+                assert_eq!(stats.implausible_frames, 0, "{what}");
+                assert_eq!(stats.bad_frames, 0, "{what}");
+                assert_eq!(stats.good_frames, sent, "{what}");
+                assert_eq!(seen.frames, 8000, "{what}");
+                assert!(seen.max_abs_angle >= 3, "spun at full speed: {what}");
+                assert!(seen.quirk_frames > 0 && seen.passive_frames > 0, "{what}");
+                if list == [group] {
+                    assert!(seen.stalled_steps > 50, "{what}");
+                    assert!(seen.overcurrent_frames > 10, "{what}");
+                    assert!(seen.bump_frames > 10, "{what}");
+                    assert!(seen.drop_frames > 10 && seen.cliff_frames > 10, "{what}");
+                    assert!(seen.song_frames > 10, "{what}");
+                }
+            }
+        }
+    }
+}
