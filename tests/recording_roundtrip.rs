@@ -10,8 +10,18 @@ use pavlov_actors::replay;
 use pavlov_actors::server::{RobotTarget, Server};
 
 fn record_run(mode: Mode, ticks: usize, dir: &std::path::Path) -> Vec<pavlov::record::TickRecord> {
+    record_run_with(mode, ticks, dir, "none")
+}
+
+fn record_run_with(
+    mode: Mode,
+    ticks: usize,
+    dir: &std::path::Path,
+    faults: &str,
+) -> Vec<pavlov::record::TickRecord> {
     let mut cfg = common::stall_config();
     cfg.control.mode = mode;
+    cfg.sim.faults = faults.into();
     cfg.sim.seed = 11;
     let recorder = Recorder::spawn(
         RecordingHeader::new(&cfg, "roundtrip"),
@@ -69,6 +79,23 @@ fn a_recording_equals_the_stream_and_replays_exactly() {
         }
         let _ = std::fs::remove_dir_all(&dir);
     }
+}
+
+#[test]
+fn a_run_with_link_faults_replays_exactly() {
+    // Stale streams, reconnects and trips: ticks the learning actor skipped (stale observation, link not
+    // up) must be skipped by the replay too.
+    let dir = std::env::temp_dir().join(format!("pavlov-rt-faults-{}", std::process::id()));
+    let streamed = record_run_with(Mode::Pavlovian, 6000, &dir, "all");
+    let rec = recording::load(&dir).expect("reads back");
+    let not_up = streamed
+        .iter()
+        .filter(|r| r.link.state != pavlov::supervision::LinkState::Up)
+        .count();
+    assert!(not_up > 20, "only {not_up} ticks without an up link");
+    let report = replay::replay(&rec).expect("replay");
+    assert!(report.exact(), "{}", replay::describe(&report));
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

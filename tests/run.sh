@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The one test command (README "Test"): installs what the tests need, then runs the format check, clippy
-# with -D warnings, and every test of the workspace (unit tests next to the code, end-to-end tests in tests/).
+# with -D warnings, every test of the workspace (unit tests next to the code, end-to-end tests in tests/), and
+# the 24-simulated-hour soak (tests/soak.rs) in release.
 #
 # It installs Debian's chromium (the dashboard's browser test drives it with playwright-core) when it is
 # missing, and the dashboard's npm packages from web/package-lock.json. Nothing downloads a browser of its own.
@@ -32,3 +33,6 @@ cargo clippy --workspace --all-targets -- -D warnings
 
 step "cargo test (unit and end-to-end)"
 cargo test --workspace --all-targets
+
+step "soak: 24 simulated hours of the whole server with faults injected (release build, ~1 min)"
+cargo test --release -p pavlov-actors --test soak -- --nocapture

@@ -43,6 +43,10 @@ pub struct Learning {
     autosave: Option<Autosave>,
     /// Ticks learned before this run (from a resumed checkpoint): checkpoints count lifelong ticks.
     tick_offset: u64,
+    /// Observations older than this many ticks are not learned from.
+    max_obs_age_ticks: u32,
+    /// Ticks not learned from because the observation was stale or the link not up.
+    skipped_stale: u64,
 }
 
 /// Periodic and final checkpoints of the learned state.
@@ -78,6 +82,8 @@ impl Learning {
             checkpoint_dir: config.checkpoint.dir.clone().into(),
             autosave: None,
             tick_offset: 0,
+            max_obs_age_ticks: config.safety.max_obs_age_ticks,
+            skipped_stale: 0,
         })
     }
 
@@ -124,6 +130,12 @@ impl Learning {
 
     /// Writes the final checkpoint and waits until every checkpoint is on disk.
     async fn finish(mut self, seq: u64) {
+        if self.skipped_stale > 0 {
+            tracing::info!(
+                ticks = self.skipped_stale,
+                "ticks not learned from: stale observation or link not up"
+            );
+        }
         let Some(a) = self.autosave.take() else {
             return;
         };
@@ -221,6 +233,7 @@ pub async fn run(
                     elbow,
                     forced_stimulus,
                 });
+                let (p_age, p_link) = (obs.age_ticks, obs.link.state);
                 let p = Prediction {
                     sensors: summary::summarize(obs.values.as_ref(), obs.distance_mm, obs.angle_deg),
                     t_ms: since.as_secs_f64() * 1000.0,
@@ -231,8 +244,16 @@ pub async fn run(
                 if out.try_send(p).is_err() {
                     tracing::debug!("gating is behind; a prediction was dropped");
                 }
-                if let Err(e) = learning.stage.learn() {
-                    tracing::error!("learning step failed: {e}");
+                if LearningStage::observation_is_fresh(
+                    p_age,
+                    p_link,
+                    learning.max_obs_age_ticks,
+                ) {
+                    if let Err(e) = learning.stage.learn() {
+                        tracing::error!("learning step failed: {e}");
+                    }
+                } else {
+                    learning.skipped_stale += 1;
                 }
                 learning.autosave_if_due(seq);
             }

@@ -117,7 +117,13 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
             elbow,
             forced_stimulus: inputs.forced_stimulus,
         });
-        if let Err(e) = learning.learn() {
+        // The same rule as the learning actor: a stale observation is acted on but not learned from.
+        if LearningStage::observation_is_fresh(
+            r.obs_age_ticks,
+            r.link.state,
+            config.safety.max_obs_age_ticks,
+        ) && let Err(e) = learning.learn()
+        {
             return Err(ReplayError::Config(e.to_string()));
         }
         report.ticks += 1;

@@ -188,6 +188,18 @@ impl LearningStage {
         self.set.learn(&[stimulus]).map(|_| ())
     }
 
+    /// Whether a tick's observation may be learned from: a frame older than `max_age_ticks`, or one seen
+    /// while the link is not up (stale, reconnecting, tripped), is a repeat of the past, not this tick's
+    /// state. Such a tick is predicted (for acting) but not learned from; the next learned tick starts a
+    /// fresh chain, so no credit crosses the gap (see `PredictionSet`).
+    pub fn observation_is_fresh(
+        age_ticks: Option<u32>,
+        link: crate::supervision::LinkState,
+        max_age_ticks: u32,
+    ) -> bool {
+        link == crate::supervision::LinkState::Up && age_ticks.is_some_and(|a| a <= max_age_ticks)
+    }
+
     /// Forgets the previous tick (after a gap in the sensor stream): credit is not carried across it.
     pub fn break_chain(&mut self) {
         self.set.break_chain();

@@ -69,6 +69,12 @@ try {
   summary.chart_points = after;
   await page.waitForFunction(() => document.getElementById('h-lateness').textContent.includes('µs'), null, { timeout: 5000 });
   await page.waitForFunction(() => document.getElementById('conn').dataset.state === 'live', null, { timeout: 5000 });
+  // The robot link's state and OI mode, from the tick stream.
+  await page.waitForFunction(() => document.getElementById('h-mode').textContent === 'Safe', null, { timeout: 5000 });
+  const linkText = await page.locator('#h-link').textContent();
+  if (!linkText.startsWith('up')) fail(`link shown as "${linkText}"`);
+  if (!(await page.locator('#trip-banner').isHidden())) fail('the trip banner shows on a healthy link');
+  summary.link = { text: linkText, mode: await page.locator('#h-mode').textContent() };
   if (ticks.length === 0) fail('no tick frames observed on the websocket');
   summary.moving_before_estop = ticks.some((t) => t.command.left !== 0 || t.command.right !== 0);
 
