@@ -180,7 +180,10 @@ impl Server {
         link_writer.flush().await.map_err(LinkError::Io)?;
         let link_up_at = Instant::now();
         tracing::info!(%model, ?stream, "robot link up: start-up sequence sent");
-        let parser = StreamParser::new(&stream).map_err(LinkError::from)?;
+        // Frames no Create could send (values out of range) are rejected like a bad checksum.
+        let parser = StreamParser::new(&stream)
+            .map_err(LinkError::from)?
+            .with_model(model);
 
         let obs_names = learning.obs_names();
         let gating = GatingStage::new(
