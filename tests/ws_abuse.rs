@@ -34,9 +34,9 @@ use abuse::{FloodOutcome, PATIENCE};
 const STALL_CONFIG: &str = include_str!("../config/stall.toml");
 const MAX_CLIENTS: usize = 12;
 const MAX_MESSAGE_BYTES: usize = 4096;
-const MALFORMED: u64 = 5000;
-const FLOODERS: usize = 3;
-const VALID_PER_FLOODER: u64 = 10_000;
+const MALFORMED: u64 = 3000;
+const FLOODERS: usize = 4;
+const VALID_PER_FLOODER: u64 = 3000;
 const STORM: usize = 40;
 const OVERSIZE: usize = 10;
 const PINGERS: usize = 2;
@@ -127,8 +127,9 @@ async fn abusers(addr: SocketAddr, phase_two: tokio::sync::oneshot::Sender<()>) 
         .map(|_| {
             tokio::spawn(abuse::never_reading_pinger(
                 addr,
-                Duration::from_secs(3),
-                150,
+                // Long enough for the unread ticks to fill the socket buffers (about 50 kB/s).
+                Duration::from_secs(4),
+                400,
                 UNREAD_PATIENCE + Duration::from_secs(2),
             ))
         })

@@ -5,7 +5,8 @@
 //! telemetry. The writer gives up on a client whose socket accepts nothing for [`WRITE_STALL`]. Bad
 //! messages get an error reply and the connection stays open; only an over-size message (which the
 //! websocket layer cannot resynchronise after) closes it, with code 1009. Every message draws on the
-//! connection's [`TokenBucket`]: one over the limit is answered `rate_limited` and not processed. When
+//! connection's [`TokenBucket`]: one over the limit is answered `rate_limited` and not processed, and a
+//! connection over its limit is read at most [`OVER_LIMIT_READS_PER_SECOND`] messages a second. When
 //! [`super::client::CONTROL_CAPACITY`] replies are waiting, the reader stops reading (so a fast client is
 //! slowed by TCP, not by memory) for up to [`UNREAD_PATIENCE`], then disconnects the client. Each way a
 //! connection can be closed for misbehaving is counted in [`SessionCounters`].
@@ -33,6 +34,11 @@ use crate::command::ControlRequest;
 pub const WRITE_STALL: Duration = Duration::from_secs(10);
 /// How long a full reply queue may stay full before the client is disconnected.
 pub const UNREAD_PATIENCE: Duration = Duration::from_secs(5);
+/// While a connection is over its rate limit, the server reads at most this many of its messages a second;
+/// the rest wait in TCP buffers, so a flood costs the server little CPU and no memory.
+pub const OVER_LIMIT_READS_PER_SECOND: u32 = 1000;
+/// Messages over the limit between two pauses of the reader.
+const PACE_BATCH: u32 = 10;
 /// How long a command may wait for room in the router's inbox.
 const ROUTER_SEND_TIMEOUT: Duration = Duration::from_secs(1);
 /// How long a command may take to be applied before the client is told it timed out.
@@ -123,12 +129,19 @@ impl Session {
         stride: &AtomicU64,
     ) {
         let mut bucket = TokenBucket::new(self.rate, std::time::Instant::now());
+        let mut pace = Pacer::default();
         while let Some(msg) = stream.next().await {
-            let over_limit = matches!(msg, Ok(Message::Text(_) | Message::Binary(_)))
-                && !bucket.try_take(std::time::Instant::now());
+            let over_limit = matches!(
+                msg,
+                Ok(Message::Text(_) | Message::Binary(_) | Message::Ping(_) | Message::Pong(_))
+            ) && !bucket.try_take(std::time::Instant::now());
             let reply = match msg {
                 Ok(Message::Text(text)) if over_limit => self.rate_limited(peek_id(&text)),
                 Ok(Message::Binary(_)) if over_limit => self.rate_limited(None),
+                Ok(Message::Ping(_) | Message::Pong(_)) if over_limit => {
+                    pace.over_limit().await;
+                    continue;
+                }
                 Ok(Message::Text(text)) => self.handle(&text, stride).await,
                 Ok(Message::Binary(_)) => {
                     let e = super::protocol::ProtocolError::Binary;
@@ -157,6 +170,9 @@ impl Session {
                 tracing::warn!("websocket client does not read its replies; disconnecting it");
                 self.counters.closed_unread.fetch_add(1, Ordering::Relaxed);
                 return;
+            }
+            if over_limit {
+                pace.over_limit().await;
             }
         }
     }
@@ -225,6 +241,23 @@ impl Session {
                     Err(_) => self.error(&id, "timeout", "the command was not answered in time"),
                 }
             }
+        }
+    }
+}
+
+/// Slows the reader of a connection that is over its rate limit: a pause after every [`PACE_BATCH`]
+/// messages over the limit, so it reads at most [`OVER_LIMIT_READS_PER_SECOND`] of them a second.
+#[derive(Default)]
+struct Pacer {
+    over: u32,
+}
+
+impl Pacer {
+    async fn over_limit(&mut self) {
+        self.over = self.over.wrapping_add(1);
+        if self.over % PACE_BATCH == 0 {
+            tokio::time::sleep(Duration::from_secs(1) * PACE_BATCH / OVER_LIMIT_READS_PER_SECOND)
+                .await;
         }
     }
 }
