@@ -17,10 +17,12 @@
 //! frame ended (nothing skipped in between): the first frame after a start, [`StreamParser::reset`]
 //! or skipped bytes may carry motion accumulated over any time. After resuming a paused stream
 //! (opcode 150), call [`StreamParser::reset`] so its first frame is not held to 15 ms of motion.
+//! A packet that breaks its bound in [`WAIVE_AFTER`] frames in a row (none accepted between) is taken
+//! as genuine and no longer checked ([`StreamParser::waived`]): damage is isolated, a real value persists.
 
 use super::frame::{STREAM_HEADER, byte_sum, stream_payload_len};
 use super::packets::{group_members, spec};
-use super::plausible::{FrameContext, Implausible, implausible};
+use super::plausible::{FrameContext, Implausible, WAIVE_AFTER, Waived, implausible_except};
 use super::{Model, OiError, SensorValues};
 
 /// Counters of what the parser has seen since it was created.
@@ -48,6 +50,10 @@ struct ScanState {
     skipped_at_accept: Option<u64>,
     /// Why the most recent implausible frame was rejected.
     last_implausible: Option<Implausible>,
+    /// The packet the latest run of implausible frames broke, and how many in a row (none accepted).
+    streak: Option<(u8, u32)>,
+    /// Packets whose bound a run of [`WAIVE_AFTER`] frames proved wrong for this robot.
+    waived: Waived,
 }
 
 impl ScanState {
@@ -63,7 +69,30 @@ impl ScanState {
         } else {
             FrameContext::First
         };
-        implausible(values, model, context)
+        implausible_except(values, model, context, self.waived)
+    }
+
+    /// Counts a frame rejected for `why`; a long enough run for one packet waives its bound.
+    fn rejected(&mut self, why: Implausible) {
+        self.stats.bad_frames += 1;
+        self.stats.implausible_frames += 1;
+        self.last_implausible = Some(why);
+        let run = match self.streak {
+            Some((id, n)) if id == why.id => n + 1,
+            _ => 1,
+        };
+        self.streak = Some((why.id, run));
+        if run >= WAIVE_AFTER {
+            self.waived.insert(why.id);
+            self.streak = None;
+        }
+    }
+
+    /// Counts an accepted frame.
+    fn accepted(&mut self) {
+        self.stats.good_frames += 1;
+        self.skipped_at_accept = Some(self.stats.skipped_bytes);
+        self.streak = None;
     }
 }
 
@@ -211,15 +240,12 @@ impl Layout {
                 Verdict::Good => {
                     let values = self.decode(window);
                     if let Some(why) = state.reject(&values) {
-                        state.stats.bad_frames += 1;
-                        state.stats.implausible_frames += 1;
-                        state.last_implausible = Some(why);
+                        state.rejected(why);
                         state.skip(1);
                         i += 1;
                     } else {
                         on_frame(values);
-                        state.stats.good_frames += 1;
-                        state.skipped_at_accept = Some(state.stats.skipped_bytes);
+                        state.accepted();
                         i += self.frame_len;
                     }
                 }
@@ -267,6 +293,12 @@ impl StreamParser {
     /// Why the most recent implausible frame was rejected (for a log line), if any was.
     pub fn last_implausible(&self) -> Option<Implausible> {
         self.state.last_implausible
+    }
+
+    /// Packets no longer checked because [`WAIVE_AFTER`] frames in a row broke their bound (worth a
+    /// warning: the robot reports values its documents rule out).
+    pub fn waived(&self) -> Waived {
+        self.state.waived
     }
 
     /// Parses the next `chunk` of the byte stream, calling `on_frame` once per valid frame, in order.
@@ -321,6 +353,7 @@ impl StreamParser {
     pub fn reset(&mut self) {
         self.pending.clear();
         self.state.skipped_at_accept = None;
+        self.state.streak = None;
     }
 
     /// The packet list this parser expects.
@@ -588,6 +621,45 @@ mod tests {
         assert_eq!(collect(&mut p, &frame(3000)).len(), 1);
         assert_eq!(p.stats().implausible_frames, 2);
         assert_eq!(p.stats().good_frames, 6);
+    }
+
+    #[test]
+    fn a_bound_broken_frame_after_frame_is_waived_as_genuine() {
+        let frame = |velocity: i32, mode: i32| {
+            let mut v = SensorValues::new();
+            v.set(39, velocity);
+            v.set(35, mode);
+            encode_stream_frame(&[39, 35], &v).unwrap()
+        };
+        let mut p = StreamParser::new(&[39, 35])
+            .unwrap()
+            .with_model(Model::Create2);
+        // Isolated implausible frames between good ones never add up to a waiver.
+        for _ in 0..3 * WAIVE_AFTER {
+            assert!(collect(&mut p, &frame(900, 2)).is_empty());
+            assert_eq!(collect(&mut p, &frame(100, 2)).len(), 1);
+        }
+        assert_eq!(p.waived(), Waived::NONE);
+        // A run broken by another packet's implausible frame starts afresh.
+        for _ in 1..WAIVE_AFTER {
+            assert!(collect(&mut p, &frame(900, 2)).is_empty());
+        }
+        assert!(collect(&mut p, &frame(0, 9)).is_empty());
+        for _ in 1..WAIVE_AFTER {
+            assert!(collect(&mut p, &frame(900, 2)).is_empty());
+        }
+        assert_eq!(p.waived(), Waived::NONE);
+        // The run's last frame waives 39; the mode is still checked.
+        assert!(collect(&mut p, &frame(900, 2)).is_empty());
+        assert_eq!(p.waived().ids().collect::<Vec<_>>(), vec![39]);
+        assert_eq!(collect(&mut p, &frame(900, 2)).len(), 1);
+        assert!(collect(&mut p, &frame(900, 9)).is_empty());
+        let st = p.stats();
+        assert_eq!(
+            st.implausible_frames,
+            u64::from(3 * WAIVE_AFTER + 2 * WAIVE_AFTER + 1)
+        );
+        assert_eq!(st.good_frames, u64::from(3 * WAIVE_AFTER + 1));
     }
 
     /// Requested lists: 1–4 single packets and/or groups whose frame fits the length byte.

@@ -32,19 +32,27 @@
 //! | 36 song number | 0–15 | 0–15 | C1 0–15; C2 table 0–4 but its text says 0–15 |
 //! | 37 song playing | 0–1 | 0–1 | boolean |
 //! | 38 stream packet count | 0–43 | 0–108 | [C1 p21; C2 p29] |
+//! | 39 requested velocity | ±500 | ±500 | mm/s [C1 p21; C2 p30] (see the note on waivers) |
 //! | 41, 42 requested right / left velocity | ±500 | ±500 | mm/s [C1 p21; C2 p30] |
 //! | 45 light bumper | — | 0–127 | [C2 p38] |
 //! | 46–51 light-bump signals | — | 0–4095 | [C2 p38] |
+//! | 54–57 wheel / brush motor currents | — | ±10 000 mA | no documented range: drivers rated ≤ 1.45 A [BATT], wheels limited at 1 A [C1 p10]; 10 A is several times any motor's stall current |
 //! | 58 stasis | — | 0–3 | bits 0–1 [C2 p32, p38] |
 //! | 19 distance (frame after a frame) | ±500 mm | ±500 mm | 15 ms at 500 mm/s is 7.5 mm; see below |
 //! | 20 angle (frame after a frame) | ±360° | ±360° | 15 ms at 4.3 rad/s is 3.7° (×3.1 on C2 fw ≤ 3.4.0) |
 //!
-//! Not checked, on purpose: 17/52/53 IR codes, 18 buttons (unused bits not stated to be 0), 23 current,
-//! 24 temperature, 25/26 battery charge and capacity (no documented limit; charge vs capacity is an
-//! estimate the firmware may get wrong), 43/44 encoders (wrap), 54–57 motor currents, 40 requested
-//! radius (any value is echoed; C2 firmware < 3.3.0 reports it wrong), and 39 requested velocity:
-//! documented as ±500 mm/s, but the simulator echoes a Drive velocity unclamped and the firmware's
-//! behaviour for an out-of-range Drive is undocumented.
+//! Not checked, on purpose: 17/52/53 IR codes, 18 buttons (unused bits not stated to be 0), 23 battery
+//! current (charger transients undocumented), 24 temperature, 25/26 battery charge and capacity (no
+//! documented limit; charge vs capacity is an estimate the firmware may get wrong), 43/44 encoders
+//! (wrap), 40 requested radius (any value is echoed; C2 firmware < 3.3.0 reports it wrong).
+//!
+//! **Waivers.** A damaged frame is an isolated event: the frames around it are good. A value that
+//! breaks its bound in many frames in a row is therefore genuine, whatever the documents say (a
+//! firmware that echoes an out-of-range Drive velocity in 39, a pack above 25 V). The parser waives a
+//! packet's bound after [`WAIVE_AFTER`] consecutive frames rejected for that packet with no frame
+//! accepted between them, so a wrong bound costs a fraction of a second of frames, not the link.
+//! (The simulator, for one, echoes a Drive velocity in 39 without clamping it to ±500 mm/s; the host
+//! never sends one out of range.)
 //!
 //! Distance (19) and angle (20) are what accumulated **since the last report** [C1 p18–19; C2 p27]:
 //! in a running stream that is 15 ms, but the first frame after a pause, a new stream request or a
@@ -98,6 +106,11 @@ const fn b(id: u8, min: i32, max: i32) -> Bound {
 
 /// The largest plausible battery voltage, mV (see the module table).
 pub const MAX_VOLTAGE_MV: i32 = 25_000;
+/// The largest plausible motor current (packets 54–57), mA, either sign.
+pub const MAX_MOTOR_CURRENT_MA: i32 = 10_000;
+/// Consecutive frames rejected for the same packet, none accepted between, after which the parser
+/// takes the value as genuine and stops checking that packet.
+pub const WAIVE_AFTER: u32 = 16;
 /// The largest plausible distance in a frame that follows a frame, mm.
 pub const MAX_FRAME_DISTANCE_MM: i32 = 500;
 /// The largest plausible angle in a frame that follows a frame, degrees.
@@ -129,6 +142,7 @@ static CREATE1: &[Bound] = &[
     b(id::SONG_NUMBER, 0, 15),
     b(id::SONG_PLAYING, 0, 1),
     b(id::STREAM_PACKET_COUNT, 0, 43),
+    b(id::REQUESTED_VELOCITY, -500, 500),
     b(id::REQUESTED_RIGHT_VELOCITY, -500, 500),
     b(id::REQUESTED_LEFT_VELOCITY, -500, 500),
 ];
@@ -156,6 +170,7 @@ static CREATE2: &[Bound] = &[
     b(id::SONG_NUMBER, 0, 15),
     b(id::SONG_PLAYING, 0, 1),
     b(id::STREAM_PACKET_COUNT, 0, 108),
+    b(id::REQUESTED_VELOCITY, -500, 500),
     b(id::REQUESTED_RIGHT_VELOCITY, -500, 500),
     b(id::REQUESTED_LEFT_VELOCITY, -500, 500),
     b(id::LIGHT_BUMPER, 0, 127),
@@ -165,6 +180,26 @@ static CREATE2: &[Bound] = &[
     b(id::LIGHT_BUMP_CENTER_RIGHT_SIGNAL, 0, 4095),
     b(id::LIGHT_BUMP_FRONT_RIGHT_SIGNAL, 0, 4095),
     b(id::LIGHT_BUMP_RIGHT_SIGNAL, 0, 4095),
+    b(
+        id::LEFT_MOTOR_CURRENT,
+        -MAX_MOTOR_CURRENT_MA,
+        MAX_MOTOR_CURRENT_MA,
+    ),
+    b(
+        id::RIGHT_MOTOR_CURRENT,
+        -MAX_MOTOR_CURRENT_MA,
+        MAX_MOTOR_CURRENT_MA,
+    ),
+    b(
+        id::MAIN_BRUSH_CURRENT,
+        -MAX_MOTOR_CURRENT_MA,
+        MAX_MOTOR_CURRENT_MA,
+    ),
+    b(
+        id::SIDE_BRUSH_CURRENT,
+        -MAX_MOTOR_CURRENT_MA,
+        MAX_MOTOR_CURRENT_MA,
+    ),
     b(id::STASIS, 0, 3),
 ];
 
@@ -194,11 +229,50 @@ pub fn implausible(
     model: Model,
     context: FrameContext,
 ) -> Option<Implausible> {
+    implausible_except(values, model, context, Waived::NONE)
+}
+
+/// A set of packets whose bounds are not checked (ids 0–63).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Waived(u64);
+
+impl Waived {
+    /// No packet waived.
+    pub const NONE: Waived = Waived(0);
+
+    /// Adds packet `id` (ids above 63 are ignored: there are none).
+    pub fn insert(&mut self, id: u8) {
+        if id < 64 {
+            self.0 |= 1 << id;
+        }
+    }
+
+    /// Whether packet `id`'s bound is waived.
+    pub fn contains(self, id: u8) -> bool {
+        id < 64 && self.0 & (1 << id) != 0
+    }
+
+    /// The waived packet ids, in increasing order.
+    pub fn ids(self) -> impl Iterator<Item = u8> {
+        (0..64u8).filter(move |&id| self.contains(id))
+    }
+}
+
+/// Like [`implausible`], but not checking the packets in `waived`.
+pub fn implausible_except(
+    values: &SensorValues,
+    model: Model,
+    context: FrameContext,
+    waived: Waived,
+) -> Option<Implausible> {
     let odometry = match context {
         FrameContext::FollowsFrame => ODOMETRY,
         FrameContext::First => &[],
     };
     bounds(model).iter().chain(odometry).find_map(|bound| {
+        if waived.contains(bound.id) {
+            return None;
+        }
         let value = values.get(bound.id)?;
         (!(bound.min..=bound.max).contains(&value)).then_some(Implausible {
             id: bound.id,
@@ -479,5 +553,286 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_paused_stream_resumes_with_a_first_frame_after_a_reset() {
+        for model in MODELS {
+            let list = [20, 35];
+            let mut r = robot(model, 21);
+            send(&mut r, Command::Start);
+            send(&mut r, Command::Full);
+            send(
+                &mut r,
+                Command::DriveDirect {
+                    right: 500,
+                    left: -500,
+                },
+            );
+            send(&mut r, Command::Stream(list.to_vec()));
+            let mut parser = checked(&list, model);
+            for _ in 0..100 {
+                r.step();
+                parser.feed(&r.take_output(), |_| {});
+            }
+            // Two seconds spinning at full speed while paused: the first frame holds ~500°.
+            send(&mut r, Command::PauseStream);
+            (0..135).for_each(|_| r.step());
+            send(&mut r, Command::ResumeStream);
+            r.step();
+            let resumed = r.take_output();
+            let mut without_reset = parser.clone();
+            assert_eq!(without_reset.feed_newest(&resumed), None, "{model}");
+            assert_eq!(
+                without_reset.last_implausible().map(|w| w.id),
+                Some(id::ANGLE)
+            );
+            parser.reset();
+            let angle = parser.feed_newest(&resumed).and_then(|v| v.get(id::ANGLE));
+            assert!(
+                angle.is_some_and(|a| a.abs() > MAX_FRAME_ANGLE_DEG),
+                "{model}: {angle:?}"
+            );
+            assert_eq!(parser.stats().implausible_frames, 0);
+        }
+    }
+
+    /// Committed frames of a faulted stream, judged against what the robot sent: `(genuine, wrong)`.
+    /// A committed frame that is nowhere in the sent ones is silently wrong.
+    fn judge(sent: &[SensorValues], committed: &[SensorValues]) -> (usize, usize) {
+        let mut next = 0;
+        let mut wrong = 0;
+        for frame in committed {
+            match sent
+                .get(next..)
+                .and_then(|rest| rest.iter().position(|s| s == frame))
+            {
+                Some(k) => next += k + 1,
+                None => wrong += 1,
+            }
+        }
+        (committed.len() - wrong, wrong)
+    }
+
+    /// A `model` robot in Full mode streaming its all-sensors group through `faults` for `steps`
+    /// steps, parsed with and without plausibility checks: `((genuine, wrong) without, with, stats with)`.
+    /// With `wander` false the robot only turns in place at 100 mm/s, exactly as in `sim::faults`' test.
+    fn faulted_run(
+        model: Model,
+        faults: &str,
+        steps: usize,
+        seed: u64,
+        wander: bool,
+    ) -> ((usize, usize), (usize, usize), ParserStats) {
+        let group = model.all_sensors_group();
+        let spec: FaultSpec = faults.parse().unwrap();
+        let mut r = robot(model, seed);
+        let mut injector = FaultInjector::new(spec, seed);
+        injector.configure(&mut r);
+        let mut rng = Rng::new(seed);
+        send(&mut r, Command::Start);
+        send(&mut r, Command::Full);
+        let spin = Command::Drive {
+            velocity: 100,
+            radius: Radius::TurnInPlaceCounterClockwise,
+        };
+        send(&mut r, spin);
+        send(&mut r, Command::Stream(vec![group]));
+        let mut reference = StreamParser::new(&[group]).unwrap();
+        let mut plain = StreamParser::new(&[group]).unwrap();
+        let mut with = checked(&[group], model);
+        let (mut sent, mut by_plain, mut by_checked) = (Vec::new(), Vec::new(), Vec::new());
+        for step in 0..steps {
+            if wander && step % 100 == 0 {
+                send(&mut r, random_motion(&mut rng));
+            }
+            r.step();
+            let clean = r.take_output();
+            reference.feed(&clean, |v| sent.push(v));
+            let outcome = injector.after_step(&mut r, clean);
+            plain.feed(&outcome.bytes, |v| by_plain.push(v));
+            with.feed(&outcome.bytes, |v| by_checked.push(v));
+        }
+        assert_eq!(sent.len(), steps);
+        (
+            judge(&sent, &by_plain),
+            judge(&sent, &by_checked),
+            with.stats(),
+        )
+    }
+
+    /// The fault mix of `sim::faults`' silently-wrong-frames test.
+    const FAULTS: &str =
+        "drop=1e-3,flip=1e-3,dup=1e-3,text=0.02,inside=0.02,burst=0.02,burst_steps=6";
+
+    #[test]
+    fn plausibility_checks_cut_the_silently_wrong_frames_of_a_faulted_stream() {
+        // The first case is the stream of `sim::faults`' test, byte for byte.
+        let cases = [
+            (Model::Create2, 3, false),
+            (Model::Create2, 4, true),
+            (Model::Create1, 3, false),
+            (Model::Create1, 4, true),
+        ];
+        for (model, seed, wander) in cases {
+            let steps = 20_000;
+            let ((genuine_plain, wrong_plain), (genuine_checked, wrong_checked), stats) =
+                faulted_run(model, FAULTS, steps, seed, wander);
+            println!(
+                "{model} seed {seed} wander {wander}: {steps} frames sent; without checks {genuine_plain} genuine + {wrong_plain} \
+                 silently wrong committed; with checks {genuine_checked} genuine + {wrong_checked} \
+                 wrong, {} implausible rejected",
+                stats.implausible_frames
+            );
+            assert!(
+                wrong_plain > 0,
+                "{model}: the 8-bit sum let damaged frames through"
+            );
+            assert!(wrong_checked < wrong_plain, "{model}");
+            assert!(
+                wrong_checked * 4 <= wrong_plain,
+                "{model}: checks catch most"
+            );
+            assert!(stats.implausible_frames as usize >= wrong_plain - wrong_checked);
+            // No genuine frame was given up for it.
+            assert!(genuine_checked >= genuine_plain, "{model}");
+        }
+    }
+
+    /// Ways of damaging one frame that an 8-bit sum may miss.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    enum Damage {
+        /// The same bit flipped up in one data byte and down in another: the sum always holds.
+        CompensatingFlips,
+        /// One data or checksum byte lost: the frame claims the next frame's header.
+        DroppedByte,
+        /// One data or checksum byte received twice.
+        DuplicatedByte,
+    }
+
+    /// `frame` damaged by `damage` at places drawn from `rng` (never header, length or id bytes).
+    fn damage(frame: &[u8], damage: Damage, rng: &mut Rng) -> Vec<u8> {
+        let data = 3..frame.len();
+        let pick = |rng: &mut Rng| data.start + rng.below(data.len() as u64) as usize;
+        let mut out = frame.to_vec();
+        match damage {
+            Damage::DroppedByte => {
+                out.remove(pick(rng));
+            }
+            Damage::DuplicatedByte => {
+                let at = pick(rng);
+                out.insert(at, frame[at]);
+            }
+            Damage::CompensatingFlips => loop {
+                let (a, b, bit) = (pick(rng), pick(rng), 1u8 << rng.below(8));
+                if a != b && frame[a] & bit == 0 && frame[b] & bit != 0 {
+                    out[a] |= bit;
+                    out[b] &= !bit;
+                    break;
+                }
+            },
+        }
+        out
+    }
+
+    /// Consecutive clean all-sensors frames of a `model` robot driving about, with their values.
+    fn clean_frames(model: Model, n: usize, seed: u64) -> Vec<(Vec<u8>, SensorValues)> {
+        let group = model.all_sensors_group();
+        let mut rng = Rng::new(seed);
+        let mut r = robot(model, seed);
+        send(&mut r, Command::Start);
+        send(&mut r, Command::Full);
+        send(&mut r, Command::Stream(vec![group]));
+        let mut reference = StreamParser::new(&[group]).unwrap();
+        (0..n)
+            .map(|step| {
+                if step % 50 == 0 {
+                    send(&mut r, random_motion(&mut rng));
+                }
+                r.step();
+                let bytes = r.take_output();
+                let values = reference.feed_newest(&bytes).unwrap();
+                (bytes, values)
+            })
+            .collect()
+    }
+
+    /// `trials` times: a clean frame, a damaged one, a clean one; how many frames that are none of the
+    /// three each parser commits: `(without checks, with checks)`.
+    fn wrong_frames(model: Model, kind: Damage, trials: usize, seed: u64) -> (usize, usize) {
+        let frames = clean_frames(model, 600, seed);
+        let group = model.all_sensors_group();
+        let mut rng = Rng::new(seed ^ 0x5eed);
+        let (mut wrong_plain, mut wrong_checked) = (0, 0);
+        for _ in 0..trials {
+            let k = 1 + rng.below(frames.len() as u64 - 2) as usize;
+            let around = &frames[k - 1..=k + 1];
+            let mut stream = around[0].0.clone();
+            stream.extend(damage(&around[1].0, kind, &mut rng));
+            stream.extend(&around[2].0);
+            assert_eq!(stream.first(), Some(&STREAM_HEADER));
+            let is_wrong = |v: &SensorValues| around.iter().all(|(_, g)| g != v);
+            let mut plain = StreamParser::new(&[group]).unwrap();
+            plain.feed(&stream, |v| wrong_plain += usize::from(is_wrong(&v)));
+            let mut with = checked(&[group], model);
+            with.feed(&stream, |v| wrong_checked += usize::from(is_wrong(&v)));
+        }
+        (wrong_plain, wrong_checked)
+    }
+
+    #[test]
+    fn damage_the_checksum_misses_is_mostly_caught_by_the_ranges() {
+        for model in MODELS {
+            let (flips_plain, flips_checked) =
+                wrong_frames(model, Damage::CompensatingFlips, 4000, 31);
+            let (drop_plain, drop_checked) = wrong_frames(model, Damage::DroppedByte, 12_000, 32);
+            let (dup_plain, dup_checked) = wrong_frames(model, Damage::DuplicatedByte, 12_000, 33);
+            println!(
+                "{model}: compensating flips {flips_plain} → {flips_checked} of 4000; dropped byte \
+                 {drop_plain} → {drop_checked} of 12000; duplicated byte {dup_plain} → {dup_checked} \
+                 of 12000 (silently wrong frames without → with checks)"
+            );
+            // Every compensating pair passes the sum (unless it flipped a pair back to the same
+            // values, which cannot happen: the bits differ).
+            assert_eq!(flips_plain, 4000, "{model}");
+            // A flip pair inside a low byte or an unchecked packet is invisible; the rest is caught.
+            assert!(flips_checked * 3 < flips_plain * 2, "{model}");
+            // A frame shifted by a lost byte passes the sum when that byte was 19 (the next header
+            // takes the checksum's place); by a repeated one, when it equals the checksum. Its shifted
+            // values then rarely fit the ranges (a shift within the last, unchecked packets does).
+            assert!(drop_plain + dup_plain >= 10, "{model}");
+            assert!(
+                (drop_checked + dup_checked) * 4 <= drop_plain + dup_plain,
+                "{model}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_robot_that_persistently_breaks_a_bound_loses_only_a_few_frames() {
+        // The simulator echoes an out-of-range Drive velocity (which the host's encoder never sends)
+        // in packet 39; a real firmware might too. The run of rejections waives the bound.
+        let mut r = robot(Model::Create2, 41);
+        send(&mut r, Command::Start);
+        send(&mut r, Command::Full);
+        r.receive(&[137, 0x03, 0x84, 0x80, 0x00]); // Drive 900 mm/s straight, raw bytes
+        send(&mut r, Command::Stream(vec![100]));
+        let mut parser = checked(&[100], Model::Create2);
+        let mut accepted = Vec::new();
+        for _ in 0..200 {
+            r.step();
+            parser.feed(&r.take_output(), |v| accepted.push(v));
+        }
+        assert_eq!(parser.stats().implausible_frames, u64::from(WAIVE_AFTER));
+        assert_eq!(accepted.len(), 200 - WAIVE_AFTER as usize);
+        assert!(
+            accepted
+                .iter()
+                .all(|v| v.get(id::REQUESTED_VELOCITY) == Some(900))
+        );
+        assert_eq!(
+            parser.waived().ids().collect::<Vec<_>>(),
+            vec![id::REQUESTED_VELOCITY]
+        );
     }
 }
