@@ -5,12 +5,11 @@
 //! so the format is tested without a server; [`super::http`] takes the snapshot and serves the text with
 //! [`CONTENT_TYPE`]. Every metric is listed in the README's "Metrics" section.
 
-use std::fmt::Write as _;
-
 use pavlov::record::LinkSummary;
 use pavlov::supervision::{LinkState, TripCause};
 
 use super::DashboardStats;
+use super::exposition::Exposition;
 use crate::actuation::ActuationStats;
 use crate::histogram::LatencyHistogram;
 
@@ -107,75 +106,6 @@ fn actuation_help(field: &str) -> String {
         "stale_observations" => "Stops forced because the observation was too old.".into(),
         "writer_full" => "Motor commands the serial writer's queue could not take.".into(),
         other => format!("Actuation counter `{other}`."),
-    }
-}
-
-/// Builds the text, one metric family at a time.
-struct Exposition {
-    out: String,
-}
-
-impl Exposition {
-    fn family(&mut self, name: &str, kind: &str, help: &str) {
-        let help = help.replace('\\', "\\\\").replace('\n', "\\n");
-        let _ = writeln!(self.out, "# HELP {name} {help}");
-        let _ = writeln!(self.out, "# TYPE {name} {kind}");
-    }
-
-    fn sample(&mut self, name: &str, labels: &[(&str, &str)], value: f64) {
-        self.out.push_str(name);
-        if !labels.is_empty() {
-            self.out.push('{');
-            for (i, (k, v)) in labels.iter().enumerate() {
-                if i > 0 {
-                    self.out.push(',');
-                }
-                let v = v
-                    .replace('\\', "\\\\")
-                    .replace('"', "\\\"")
-                    .replace('\n', "\\n");
-                let _ = write!(self.out, "{k}=\"{v}\"");
-            }
-            self.out.push('}');
-        }
-        let _ = writeln!(self.out, " {}", format_value(value));
-    }
-
-    fn counter(&mut self, name: &str, help: &str, value: u64) {
-        self.family(name, "counter", help);
-        self.sample(name, &[], value as f64);
-    }
-
-    fn gauge(&mut self, name: &str, help: &str, value: f64) {
-        self.family(name, "gauge", help);
-        self.sample(name, &[], value);
-    }
-
-    fn histogram(&mut self, name: &str, help: &str, h: &HistogramSample) {
-        self.family(name, "histogram", help);
-        let bucket = format!("{name}_bucket");
-        let mut running = 0;
-        for &(le, count) in &h.buckets {
-            // Cumulative counts never decrease and never exceed the total.
-            running = count.max(running).min(h.count);
-            self.sample(&bucket, &[("le", &format_value(le))], running as f64);
-        }
-        self.sample(&bucket, &[("le", "+Inf")], h.count as f64);
-        self.sample(&format!("{name}_sum"), &[], h.sum_seconds);
-        self.sample(&format!("{name}_count"), &[], h.count as f64);
-    }
-}
-
-/// A sample value as the format writes it (`+Inf`, `-Inf`, `NaN` for the special values).
-pub fn format_value(v: f64) -> String {
-    if v.is_nan() {
-        "NaN".into()
-    } else if v == f64::INFINITY {
-        "+Inf".into()
-    } else if v == f64::NEG_INFINITY {
-        "-Inf".into()
-    } else {
-        format!("{v}")
     }
 }
 
@@ -314,9 +244,7 @@ fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
 
 /// The exposition text of `s`.
 pub fn render(s: &MetricsSnapshot) -> String {
-    let mut e = Exposition {
-        out: String::with_capacity(8 * 1024),
-    };
+    let mut e = Exposition::default();
     e.histogram(
         "pavlov_tick_lateness_seconds",
         "How late each tick fired after its deadline.",
@@ -362,7 +290,7 @@ pub fn render(s: &MetricsSnapshot) -> String {
             }
         }
     }
-    e.out
+    e.into_text()
 }
 
 #[cfg(test)]
@@ -502,21 +430,5 @@ mod tests {
         assert!(families.contains_key("pavlov_ws_clients"));
         let h = &families["pavlov_tick_to_command_seconds"];
         assert!(h.samples.iter().all(|s| s.value == 0.0));
-    }
-
-    #[test]
-    fn special_values_and_label_escapes_follow_the_format() {
-        assert_eq!(format_value(f64::NAN), "NaN");
-        assert_eq!(format_value(f64::INFINITY), "+Inf");
-        assert_eq!(format_value(0.25), "0.25");
-        assert_eq!(format_value(3.0), "3");
-        let mut e = Exposition { out: String::new() };
-        e.family("x_total", "counter", "a\nb");
-        e.sample("x_total", &[("l", "q\"\\\n")], 1.0);
-        assert_eq!(
-            e.out,
-            "# HELP x_total a\\nb\n# TYPE x_total counter\nx_total{l=\"q\\\"\\\\\\n\"} 1\n"
-        );
-        assert!(parse(&e.out).is_ok(), "{}", e.out);
     }
 }

@@ -8,7 +8,8 @@
 //! - [`client`]: each client's bounded, drop-oldest queue and its tick-rate decimation;
 //! - [`session`]: one connection's reader, writer and forwarder;
 //! - [`rate`]: the per-connection message rate limit;
-//! - [`metrics`]: the `/metrics` text, and [`metrics_check`], a strict reader of it for tests;
+//! - [`metrics`]: the `/metrics` text (written with [`exposition`]), and [`metrics_check`], a strict reader
+//!   of it for tests;
 //! - [`auth`]: the handshake's Origin and token checks;
 //! - [`http`]: routes, static files and the handshake;
 //! - [`load`]: the websocket load behind `pavlov bench --ws-clients`, and [`abuse`], its abusive clients.
@@ -20,6 +21,7 @@
 pub mod abuse;
 pub mod auth;
 pub mod client;
+pub mod exposition;
 pub mod http;
 pub mod hub;
 pub mod load;
