@@ -20,7 +20,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 const STALL_CONFIG: &str = include_str!("../config/stall.toml");
 
 /// Every family `/metrics` serves once the first tick is out (the README lists the same).
-const FAMILIES: [(&str, &str); 29] = [
+const FAMILIES: [(&str, &str); 30] = [
     ("pavlov_tick_lateness_seconds", "histogram"),
     ("pavlov_ticks_fired_total", "counter"),
     ("pavlov_ticks_skipped_total", "counter"),
@@ -42,6 +42,7 @@ const FAMILIES: [(&str, &str); 29] = [
     ("pavlov_ws_commands_total", "counter"),
     ("pavlov_ws_error_replies_total", "counter"),
     ("pavlov_ws_rate_limited_total", "counter"),
+    ("pavlov_ws_tcp_refused_total", "counter"),
     ("pavlov_ws_hub_records_missed_total", "counter"),
     ("pavlov_ws_closed_total", "counter"),
     ("pavlov_recorder_backlog", "gauge"),

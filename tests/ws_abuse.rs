@@ -520,3 +520,66 @@ async fn bench_tick_lateness_with_and_without_abuse() {
     .unwrap();
     println!("{report}");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn idle_tcp_connections_are_bounded_and_closed_while_a_websocket_keeps_streaming() {
+    use pavlov_actors::ws::guard::{EXTRA_CONNECTIONS, PRE_UPGRADE_LIMIT};
+    let mut cfg = Config::from_toml(STALL_CONFIG).unwrap();
+    cfg.dashboard.bind = "127.0.0.1:0".into();
+    cfg.dashboard.max_clients = 2;
+    let server = Server::start(cfg, RobotTarget::Simulated).await.unwrap();
+    let dash = Dashboard::start(&server, PathBuf::from("web"))
+        .await
+        .unwrap();
+    let addr = dash.local_addr();
+    let mut ws = abuse::connect(addr).await.unwrap();
+    // Fill every TCP slot (one is the websocket's) and five more, sending nothing.
+    let limit = 2 + EXTRA_CONNECTIONS;
+    let mut idle = Vec::new();
+    for _ in 0..limit + 4 {
+        idle.push(tokio::net::TcpStream::connect(addr).await.unwrap());
+    }
+    let deadline = Instant::now() + PRE_UPGRADE_LIMIT + Duration::from_secs(5);
+    let mut last_seq = None;
+    let mut ticks = 0u64;
+    // The websocket keeps streaming while the idle connections run out their time.
+    while dash.stats().closed_no_upgrade < (limit - 1) as u64 {
+        assert!(Instant::now() < deadline, "{:?}", dash.stats());
+        let msg = tokio::time::timeout(Duration::from_secs(5), ws.next())
+            .await
+            .expect("a message within 5 s")
+            .expect("the websocket is open")
+            .expect("no websocket error");
+        if let Message::Text(t) = msg {
+            let v: Value = serde_json::from_str(&t).unwrap();
+            if v["type"] == "tick" {
+                let seq = v["seq"].as_u64().unwrap();
+                if let Some(last) = last_seq {
+                    assert_eq!(seq, last + 1, "the websocket lost ticks");
+                }
+                last_seq = Some(seq);
+                ticks += 1;
+            }
+        }
+    }
+    let stats = dash.stats();
+    assert_eq!(stats.tcp_refused, 5, "{stats:?}");
+    assert_eq!(stats.closed_no_upgrade, (limit - 1) as u64, "{stats:?}");
+    assert!(
+        ticks as f64 >= PRE_UPGRADE_LIMIT.as_secs_f64() * 50.0 * 0.5,
+        "{ticks}"
+    );
+    // Every idle connection has been closed by the server.
+    for mut s in idle {
+        let mut buf = [0u8; 16];
+        let n = tokio::time::timeout(Duration::from_secs(5), s.read(&mut buf))
+            .await
+            .expect("closed")
+            .unwrap_or(0);
+        assert_eq!(n, 0);
+    }
+    // The port serves again.
+    assert!(abuse::connect(addr).await.is_ok());
+    dash.shutdown().await;
+    let _ = tokio::time::timeout(Duration::from_secs(5), server.shutdown()).await;
+}

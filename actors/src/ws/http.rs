@@ -76,6 +76,8 @@ pub struct AppState {
     pub hub_counters: Arc<HubCounters>,
     /// Session counters.
     pub session_counters: Arc<SessionCounters>,
+    /// What the TCP guard refused.
+    pub guard_counters: Arc<super::guard::GuardCounters>,
     /// Handshakes accepted.
     pub connections: AtomicU64,
     /// Handshakes refused (origin, token, too many clients).
@@ -101,6 +103,8 @@ impl AppState {
             closed_unread: load(&c.closed_unread),
             closed_write_stall: load(&c.closed_write_stall),
             records_missed: load(&self.hub_counters.records_missed),
+            tcp_refused: load(&self.guard_counters.refused),
+            closed_no_upgrade: load(&self.guard_counters.timed_out),
         }
     }
 

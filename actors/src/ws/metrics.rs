@@ -184,7 +184,7 @@ fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
         "Websocket clients connected now.",
         ws.clients as f64,
     );
-    let counters: [(&str, &str, u64); 7] = [
+    let counters: [(&str, &str, u64); 8] = [
         (
             "pavlov_ws_connections_total",
             "Websocket connections accepted.",
@@ -216,6 +216,11 @@ fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
             ws.rate_limited,
         ),
         (
+            "pavlov_ws_tcp_refused_total",
+            "TCP connections to the dashboard port closed at once because too many were open.",
+            ws.tcp_refused,
+        ),
+        (
             "pavlov_ws_hub_records_missed_total",
             "Tick records the dashboard hub missed because it fell behind the tick feed.",
             ws.records_missed,
@@ -227,12 +232,13 @@ fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
     e.family(
         "pavlov_ws_closed_total",
         "counter",
-        "Websocket connections the server closed for misbehaving: oversize (1009), unread_replies, write_stall.",
+        "Connections the server closed for misbehaving: oversize (1009), unread_replies, write_stall, no_upgrade (plain HTTP too long).",
     );
     for (reason, value) in [
         ("oversize", ws.closed_oversize),
         ("unread_replies", ws.closed_unread),
         ("write_stall", ws.closed_write_stall),
+        ("no_upgrade", ws.closed_no_upgrade),
     ] {
         e.sample(
             "pavlov_ws_closed_total",

@@ -11,6 +11,7 @@
 //! - [`metrics`]: the `/metrics` text (written with [`exposition`]), and [`metrics_check`], a strict reader
 //!   of it for tests;
 //! - [`auth`]: the handshake's Origin and token checks;
+//! - [`guard`]: the TCP connection limit and the deadline to become a websocket;
 //! - [`http`]: routes, static files and the handshake;
 //! - [`load`]: the websocket load behind `pavlov bench --ws-clients`, and [`abuse`], its abusive clients.
 //!
@@ -22,6 +23,7 @@ pub mod abuse;
 pub mod auth;
 pub mod client;
 pub mod exposition;
+pub mod guard;
 pub mod http;
 pub mod hub;
 pub mod load;
@@ -93,6 +95,10 @@ pub struct DashboardStats {
     pub closed_write_stall: u64,
     /// Tick records the hub missed.
     pub records_missed: u64,
+    /// TCP connections closed at once because [`guard::EXTRA_CONNECTIONS`] + `max_clients` were open.
+    pub tcp_refused: u64,
+    /// Connections closed because they stayed plain HTTP longer than [`guard::PRE_UPGRADE_LIMIT`].
+    pub closed_no_upgrade: u64,
 }
 
 /// The running endpoint. It runs on its own single-worker tokio runtime (thread `dashboard`), so that
@@ -161,6 +167,7 @@ impl Dashboard {
         );
         let (hub, hub_handle) = Hub::new(period_ms as f64, gesture_commands);
         let hub_counters = Arc::new(HubCounters::default());
+        let guard_counters = Arc::new(guard::GuardCounters::default());
         let sources = HealthSources {
             ticks: server.tick_stats.clone(),
             writer: server.writer_stats.clone(),
@@ -191,6 +198,7 @@ impl Dashboard {
             web_dir,
             hub_counters: hub_counters.clone(),
             session_counters: Arc::new(SessionCounters::default()),
+            guard_counters: guard_counters.clone(),
             connections: AtomicU64::new(0),
             rejected: AtomicU64::new(0),
             cancel: cancel.clone(),
@@ -206,6 +214,12 @@ impl Dashboard {
             let _ = tcp.set_nodelay(true);
             let _ = socket2::SockRef::from(&*tcp).set_send_buffer_size(CLIENT_SEND_BUFFER);
         });
+        let listener = guard::GuardedListener::new(
+            listener,
+            cfg.max_clients.saturating_add(guard::EXTRA_CONNECTIONS),
+            guard::PRE_UPGRADE_LIMIT,
+            guard_counters,
+        );
         let app = http::router(state.clone());
         let shutdown = cancel.clone();
         let http = runtime.spawn(async move {
