@@ -137,8 +137,6 @@ enum Command {
         #[arg(long, default_value = "none", value_name = "SPEC")]
         faults: String,
     },
-    /// Benchmark: run the server on the simulator in real time and print tick lateness and
-    /// tick-to-command latency percentiles.
     /// Run the simulated human operator and stream its skeleton as OSC over UDP (what a depth sensor with
     /// OSCeleton or KinectV2-OSC would send), e.g. to a `pavlov serve` running the interaction experiment.
     Human {
@@ -161,6 +159,8 @@ enum Command {
         #[arg(long, value_name = "N")]
         frames: Option<u64>,
     },
+    /// Benchmark: run the server on the simulator in real time and print tick lateness and
+    /// tick-to-command latency percentiles, optionally with websocket clients and abusers attached.
     Bench {
         #[command(flatten)]
         config: ConfigArgs,
@@ -173,6 +173,10 @@ enum Command {
         /// With --ws-clients: add one websocket client that never reads.
         #[arg(long)]
         stalled_client: bool,
+        /// Run the websocket load twice, without and with abusers (command and malformed-message floods,
+        /// over-size messages, connection storms, clients that never read), and compare tick lateness.
+        #[arg(long)]
+        ws_abuse: bool,
     },
 }
 
@@ -467,9 +471,27 @@ fn main() -> Result<()> {
                 seconds,
                 ws_clients,
                 stalled_client,
+                ws_abuse,
             } => {
                 let cfg = load_config(&config)?;
                 let duration = Duration::from_secs(seconds);
+                if ws_abuse {
+                    let load = Load {
+                        clients: ws_clients.max(1),
+                        stalled: stalled_client,
+                    };
+                    let web_dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../web"));
+                    let report = pavlov_actors::ws::load::run_abuse_comparison(
+                        cfg,
+                        duration,
+                        web_dir,
+                        load,
+                        pavlov_actors::ws::abuse::Abuse::default(),
+                    )
+                    .await?;
+                    println!("{report}");
+                    return Ok(());
+                }
                 let report = bench::run_realtime(cfg.clone(), duration).await?;
                 println!("{report}");
                 if ws_clients > 0 || stalled_client {
