@@ -252,8 +252,10 @@ impl Drop for ClientSlot {
 }
 
 fn refuse(state: &AppState, status: StatusCode, why: String) -> Response {
-    state.rejected.fetch_add(1, Ordering::Relaxed);
-    tracing::info!(%status, "websocket handshake refused: {why}");
+    let n = state.rejected.fetch_add(1, Ordering::Relaxed) + 1;
+    if super::session::worth_logging(n) {
+        tracing::info!(%status, total = n, "websocket handshake refused: {why}");
+    }
     (status, format!("{why}\n")).into_response()
 }
 

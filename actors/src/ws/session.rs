@@ -46,6 +46,12 @@ const COMMAND_TIMEOUT: Duration = Duration::from_secs(3);
 /// How long a closing connection may take to flush its last replies.
 const CLOSE_GRACE: Duration = Duration::from_secs(1);
 
+/// Whether the `n`-th occurrence of an abuse event is worth a log line: the first three, then every power of
+/// two, so a flood is visible in the log without the log becoming the flood (the counters have every one).
+pub fn worth_logging(n: u64) -> bool {
+    n <= 3 || n.is_power_of_two()
+}
+
 /// Endpoint-wide counters the sessions update.
 #[derive(Debug, Default)]
 pub struct SessionCounters {
@@ -151,10 +157,17 @@ impl Session {
                 Ok(Message::Close(_)) => return,
                 Err(e) => {
                     if is_capacity_error(&e) {
-                        tracing::info!("websocket client sent an over-size message: {e}");
-                        self.counters
+                        let n = self
+                            .counters
                             .closed_oversize
-                            .fetch_add(1, Ordering::Relaxed);
+                            .fetch_add(1, Ordering::Relaxed)
+                            + 1;
+                        if worth_logging(n) {
+                            tracing::info!(
+                                total = n,
+                                "websocket client sent an over-size message: {e}"
+                            );
+                        }
                         let _ = queue.push_control(Out::Close(close_code::SIZE, "message too big"));
                     } else {
                         tracing::debug!("websocket read error: {e}");
@@ -167,8 +180,13 @@ impl Session {
                 .await
                 .is_err()
             {
-                tracing::warn!("websocket client does not read its replies; disconnecting it");
-                self.counters.closed_unread.fetch_add(1, Ordering::Relaxed);
+                let n = self.counters.closed_unread.fetch_add(1, Ordering::Relaxed) + 1;
+                if worth_logging(n) {
+                    tracing::warn!(
+                        total = n,
+                        "websocket client does not read its replies; disconnecting it"
+                    );
+                }
                 return;
             }
             if over_limit {
