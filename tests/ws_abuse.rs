@@ -496,31 +496,6 @@ async fn a_client_over_the_rate_limit_is_told_and_served_again_once_tokens_retur
     let _ = tokio::time::timeout(Duration::from_secs(5), server.shutdown()).await;
 }
 
-/// The abuse benchmark (`pavlov bench --ws-clients N --ws-abuse`) through its library API, for when the
-/// flag is not wired: `cargo test --release -p pavlov-actors --test ws_abuse -- --ignored --nocapture`.
-#[tokio::test(flavor = "multi_thread")]
-#[ignore = "a benchmark: prints figures, asserts nothing about them"]
-async fn bench_tick_lateness_with_and_without_abuse() {
-    let cfg = Config::from_toml(STALL_CONFIG).unwrap();
-    let seconds = std::env::var("PAVLOV_ABUSE_SECONDS")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(10);
-    let report = pavlov_actors::ws::load::run_abuse_comparison(
-        cfg,
-        Duration::from_secs(seconds),
-        PathBuf::from("web"),
-        pavlov_actors::ws::load::Load {
-            clients: 4,
-            stalled: false,
-        },
-        pavlov_actors::ws::abuse::Abuse::default(),
-    )
-    .await
-    .unwrap();
-    println!("{report}");
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn idle_tcp_connections_are_bounded_and_closed_while_a_websocket_keeps_streaming() {
     use pavlov_actors::ws::guard::{EXTRA_CONNECTIONS, PRE_UPGRADE_LIMIT};
