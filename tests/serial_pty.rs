@@ -31,19 +31,24 @@ fn wait_with_timeout(child: &mut Child, limit: Duration) -> std::process::ExitSt
     }
 }
 
+/// SIGTERMs `serve`, checks it exits successfully, and returns its log.
+fn stop_serve(serve: &mut Child) -> String {
+    terminate(serve);
+    let status = wait_with_timeout(serve, Duration::from_secs(10));
+    let mut log = String::new();
+    serve
+        .stderr
+        .take()
+        .expect("serve stderr")
+        .read_to_string(&mut log)
+        .expect("read serve log");
+    assert!(status.success(), "serve failed: {status}\n{log}");
+    log
+}
+
 #[test]
 fn serve_drives_the_simulated_create_over_a_pty_and_stops_it_on_sigterm() {
-    let mut sim = Command::new(PAVLOV)
-        .args(["sim", "--pty", "--model", "create1", "--seed", "3"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("start pavlov sim");
-    let mut sim_out = BufReader::new(sim.stdout.take().expect("sim stdout"));
-    let mut path = String::new();
-    sim_out.read_line(&mut path).expect("read the PTY path");
-    let path = path.trim().to_string();
-    assert!(path.starts_with("/dev/"), "unexpected PTY path `{path}`");
+    let (mut sim, mut sim_out, path) = start_sim("none");
 
     // A free loopback port for the dashboard, so this test never collides with another server.
     let port = std::net::TcpListener::bind("127.0.0.1:0")
@@ -66,16 +71,7 @@ fn serve_drives_the_simulated_create_over_a_pty_and_stops_it_on_sigterm() {
         serve.try_wait().expect("poll").is_none(),
         "serve exited early"
     );
-    terminate(&serve);
-    let status = wait_with_timeout(&mut serve, Duration::from_secs(10));
-    let mut log = String::new();
-    serve
-        .stderr
-        .take()
-        .expect("serve stderr")
-        .read_to_string(&mut log)
-        .expect("read serve log");
-    assert!(status.success(), "serve failed: {status}\n{log}");
+    let log = stop_serve(&mut serve);
     assert!(log.contains("robot link up"), "{log}");
     assert!(
         log.contains("robot stopped, stream paused, OI back in Passive"),
@@ -146,16 +142,7 @@ fn a_frozen_robot_is_detected_and_its_serial_port_reopened() {
     kill(sim_pid, Signal::SIGCONT).expect("SIGCONT");
     std::thread::sleep(Duration::from_secs(3));
     assert!(serve.try_wait().expect("poll").is_none(), "serve exited");
-    terminate(&serve);
-    let status = wait_with_timeout(&mut serve, Duration::from_secs(10));
-    let mut log = String::new();
-    serve
-        .stderr
-        .take()
-        .expect("serve stderr")
-        .read_to_string(&mut log)
-        .expect("read serve log");
-    assert!(status.success(), "serve failed: {status}\n{log}");
+    let log = stop_serve(&mut serve);
     for needle in [
         "robot stream stale",
         "reopening serial port",
