@@ -3,7 +3,9 @@
 //! it — the page loads, the charts update with live ticks, the mode switch and arrow-key teleop drive
 //! the wheels, the E-STOP button is pressed and the tick stream shows the robot stopped — and then
 //! checks from the server's side, with its own websocket client, that the e-stop is latched and the
-//! wheels are commanded to zero. The screenshot goes to `target/dashboard.png`.
+//! wheels are commanded to zero. The screenshot goes to `target/dashboard.png`. A second scenario
+//! (`web/tests/trip.e2e.mjs`, simulator with trips injected) checks the trip banner, its cause, that nothing
+//! re-arms by itself, and the Re-arm button (`target/dashboard-trip.png`).
 //!
 //! Needs Node, `npm ci --prefix web` and `apt-get install chromium` (the test command installs them; see
 //! `web/tests/run-browser-test.sh`). It fails, never skips, when any of them is missing.
@@ -75,9 +77,15 @@ fn preflight() {
 
 /// Starts `pavlov serve` on an ephemeral loopback port and returns it with the dashboard URL it printed.
 fn start_server() -> (Serve, String) {
+    start_server_with(&[])
+}
+
+/// [`start_server`] with extra arguments.
+fn start_server_with(extra: &[&str]) -> (Serve, String) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_pavlov"))
         .args(["serve", "--bind", "127.0.0.1:0", "--web-dir"])
         .arg(repo().join("web"))
+        .args(extra)
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
@@ -99,17 +107,14 @@ fn start_server() -> (Serve, String) {
     (serve, url)
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn the_dashboard_shows_live_ticks_and_its_estop_stops_the_robot() {
-    preflight();
-    let (_serve, url) = start_server();
-    let screenshot = target_dir().join("dashboard.png");
-    let _ = std::fs::remove_file(&screenshot);
-
+/// Runs the browser script `web/tests/<script>` against `url`, saving a screenshot to `screenshot`, and
+/// returns its JSON summary (after checking it says `ok`).
+async fn run_browser_script(script: &str, url: &str, screenshot: &std::path::Path) -> Value {
+    let _ = std::fs::remove_file(screenshot);
     let run = tokio::process::Command::new("node")
-        .arg(repo().join("web/tests/dashboard.e2e.mjs"))
-        .arg(&url)
-        .arg(&screenshot)
+        .arg(repo().join("web/tests").join(script))
+        .arg(url)
+        .arg(screenshot)
         .current_dir(repo().join("web"))
         .kill_on_drop(true)
         .output();
@@ -121,14 +126,34 @@ async fn the_dashboard_shows_live_ticks_and_its_estop_stops_the_robot() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
         out.status.success(),
-        "browser test failed:\n{stdout}\n{stderr}"
+        "browser test {script} failed:\n{stdout}\n{stderr}"
     );
     let summary: Value = stdout
         .lines()
         .rev()
         .find_map(|l| serde_json::from_str(l).ok())
-        .unwrap_or_else(|| panic!("no JSON summary from the browser test:\n{stdout}"));
+        .unwrap_or_else(|| panic!("no JSON summary from {script}:\n{stdout}"));
     assert_eq!(summary["ok"], true, "{summary}");
+    summary
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_robot_trip_shows_its_cause_and_the_re_arm_button_resumes_control() {
+    preflight();
+    // Trips (wheel drops and cliffs of 0.2 s) about every 3 s of simulated time.
+    let (_serve, url) = start_server_with(&["--faults", "trip=0.005,trip_ms=200"]);
+    let screenshot = target_dir().join("dashboard-trip.png");
+    let summary = run_browser_script("trip.e2e.mjs", &url, &screenshot).await;
+    assert_eq!(summary["rearmed"], true, "{summary}");
+    assert!(std::fs::metadata(&screenshot).is_ok_and(|m| m.len() > 20_000));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_dashboard_shows_live_ticks_and_its_estop_stops_the_robot() {
+    preflight();
+    let (_serve, url) = start_server();
+    let screenshot = target_dir().join("dashboard.png");
+    let summary = run_browser_script("dashboard.e2e.mjs", &url, &screenshot).await;
     assert_eq!(
         summary["moving_before_estop"], true,
         "the robot never moved before the e-stop: {summary}"

@@ -1,0 +1,88 @@
+// The robot-trip path of the dashboard in headless Debian Chromium, driven by playwright-core.
+//
+//   node web/tests/trip.e2e.mjs <dashboard URL> <screenshot.png>
+//
+// The server runs the simulated Create with trips injected (`--faults trip=…`). The page must show the
+// trip banner with its cause while the tick stream says `tripped` and commands a stop, keep it (nothing
+// re-arms behind the operator's back), and after a click on Re-arm the server acks `rearm` and the link
+// comes back up. Saves a screenshot of the banner, prints a JSON summary, exits non-zero on any failure.
+
+import { existsSync } from 'node:fs';
+import { chromium } from 'playwright-core';
+
+const [url, screenshot] = process.argv.slice(2);
+const executablePath = process.env.CHROMIUM || '/usr/bin/chromium';
+
+function fail(message) {
+  console.error(`trip e2e: FAIL: ${message}`);
+  process.exit(1);
+}
+
+if (!url || !screenshot) fail('usage: node trip.e2e.mjs <dashboard URL> <screenshot.png>');
+if (!existsSync(executablePath)) fail(`no Chromium at ${executablePath}: run \`apt-get install -y chromium\``);
+
+const ARGS = [
+  '--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+  '--disable-background-networking', '--disable-component-update', '--disable-sync',
+];
+
+async function until(what, predicate, timeoutMs) {
+  const end = Date.now() + timeoutMs;
+  while (Date.now() < end) {
+    if (predicate()) return;
+    await new Promise((r) => setTimeout(r, 50));
+  }
+  fail(`timed out after ${timeoutMs} ms waiting for ${what}`);
+}
+
+const browser = await chromium.launch({ executablePath, args: ARGS, headless: true });
+const summary = {};
+try {
+  const page = await browser.newPage({ viewport: { width: 1440, height: 1050 } });
+  const problems = [];
+  page.on('pageerror', (e) => problems.push(`page error: ${e.message}`));
+  const ticks = [];
+  const acks = [];
+  const socketOpened = page.waitForEvent('websocket', { timeout: 15000 });
+  await page.goto(url, { waitUntil: 'load' });
+  const ws = await socketOpened;
+  ws.on('framereceived', (f) => {
+    let m;
+    try { m = JSON.parse(String(f.payload)); } catch { return; }
+    if (m.type === 'tick') ticks.push({ seq: m.seq, link: m.link, command: m.command, safety: m.safety_stop });
+    if (m.type === 'ack' || m.type === 'error') acks.push(m);
+  });
+
+  // A trip arrives: the banner shows its cause, the stream says tripped and commands a stop.
+  await until('a tick with the link tripped', () => ticks.some((t) => t.link.state === 'tripped'), 60000);
+  await page.waitForSelector('#trip-banner:not([hidden])', { timeout: 3000 });
+  const cause = await page.locator('#trip-cause').textContent();
+  const first = ticks.find((t) => t.link.state === 'tripped');
+  if (!['wheel drop', 'cliff'].includes(cause)) fail(`trip cause shown as "${cause}"`);
+  if (cause !== first.link.trip.replace(/_/g, ' ')) fail(`banner says ${cause}, stream says ${first.link.trip}`);
+  summary.cause = cause;
+
+  // It stays tripped for two seconds: nothing re-enters Safe behind the operator's back.
+  const from = ticks.indexOf(first);
+  await page.waitForTimeout(2000);
+  const held = ticks.slice(from);
+  if (held.length < 50) fail(`only ${held.length} ticks in 2 s`);
+  const bad = held.find((t) => t.link.state !== 'tripped' || t.command.left !== 0 || t.command.right !== 0 || t.safety !== 'robot_tripped');
+  if (bad) fail(`while tripped: ${JSON.stringify(bad)}`);
+  if ((await page.locator('#h-mode').textContent()) !== 'Passive') fail('OI mode not shown as Passive');
+  await page.screenshot({ path: screenshot, fullPage: true });
+
+  // Re-arm: acked, and the link comes back up with Safe.
+  const at = ticks.length;
+  await page.click('#rearm');
+  await until('the rearm ack', () => acks.some((a) => a.type === 'ack' && a.cmd === 'rearm'), 5000);
+  await until('the link up in Safe after the re-arm', () => ticks.slice(at).some((t) => t.link.state === 'up' && t.link.mode === 2), 5000);
+  summary.rearmed = true;
+  if (problems.length) fail(problems.join('; '));
+  summary.ok = true;
+  console.log(JSON.stringify(summary));
+} catch (e) {
+  fail(e && e.stack ? e.stack : String(e));
+} finally {
+  await browser.close();
+}
