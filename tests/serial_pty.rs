@@ -212,4 +212,12 @@ fn a_bad_fault_spec_is_refused_with_the_key() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("sim.faults") && err.contains("drop"), "{err}");
+    // Faults are for the simulator: asking for them on a real serial device is refused, not ignored.
+    let out = Command::new(PAVLOV)
+        .args(["serve", "--robot", "/dev/null", "--faults", "all"])
+        .output()
+        .expect("run pavlov serve");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("simulated Create"), "{err}");
 }

@@ -274,6 +274,12 @@ async fn serve(
         Some(path) => RobotTarget::Serial(path),
         None => RobotTarget::Simulated,
     };
+    if matches!(target, RobotTarget::Serial(_)) && args.faults.is_some() {
+        anyhow::bail!(
+            "--faults injects faults into the simulated Create; a real robot on --robot brings its own \
+             (to test a serial link with faults, run `pavlov sim --pty --faults …` and point --robot at it)"
+        );
+    }
     let robot_name = match &target {
         RobotTarget::Simulated => format!("a simulated {}", cfg.robot.model),
         RobotTarget::Serial(p) => format!("the {} on {p}", cfg.robot.model),
