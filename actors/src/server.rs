@@ -113,6 +113,11 @@ impl Server {
     ) -> Result<Server, ServerError> {
         let model = config.robot.model;
         let sim_cancel = CancellationToken::new();
+        // A checkpoint that cannot be resumed is refused before the robot (or the simulator) is touched.
+        if config.checkpoint.resume {
+            crate::checkpoint::load_for_resume(&config)
+                .map_err(|e| ServerError::Learning(format!("--resume: {e}")))?;
+        }
         let mut sim_status = None;
         let (link, sim) = match &target {
             RobotTarget::Simulated => {
