@@ -502,6 +502,25 @@ async fn the_server_listens_for_skeletons_and_its_ticks_see_the_elbow() {
     server.shutdown().await;
 }
 
+#[tokio::test]
+async fn a_skeleton_port_in_use_stops_the_start_up_with_a_clear_error() {
+    common::init_logging();
+    let holder = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let mut cfg = interaction_config();
+    cfg.skeleton.listen = holder.local_addr().unwrap().to_string();
+    let err = match pavlov_actors::server::Server::start(
+        cfg,
+        pavlov_actors::server::RobotTarget::Simulated,
+    )
+    .await
+    {
+        Ok(_) => panic!("the server started without its skeleton port"),
+        Err(e) => e.to_string(),
+    };
+    assert!(err.contains("skeleton ingest"), "{err}");
+    assert!(err.contains("[skeleton] listen"), "{err}");
+}
+
 #[tokio::test(start_paused = true)]
 async fn drive_pose_feeds_the_servers_ticks_under_virtual_time() {
     common::init_logging();

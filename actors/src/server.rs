@@ -51,6 +51,9 @@ pub enum ServerError {
     /// The robot link failed.
     #[error(transparent)]
     Link(#[from] LinkError),
+    /// The skeleton ingest could not start (`[skeleton] listen` taken or invalid).
+    #[error("skeleton ingest: {0}; stop whatever holds the port or change [skeleton] listen")]
+    Skeleton(crate::skeleton_ingest::IngestError),
     /// The configuration is invalid.
     #[error("configuration: {0}")]
     Config(#[from] pavlov::config::ConfigError),
@@ -291,14 +294,23 @@ impl Server {
                 cancel.clone(),
             )),
         ];
-        let skeleton =
-            crate::skeleton_ingest::start_for(&config, pose_tx.clone(), started, cancel.clone())
-                .await
-                .map(|(ingest, handle)| {
-                    actors.push(handle);
-                    ingest
-                });
-        Ok(Server {
+        // A skeleton port that cannot be opened stops the start-up: the gesture experiment would run blind.
+        let (skeleton, skeleton_error) = match crate::skeleton_ingest::start_for(
+            &config,
+            pose_tx.clone(),
+            started,
+            cancel.clone(),
+        )
+        .await
+        {
+            Ok(Some((ingest, handle))) => {
+                actors.push(handle);
+                (Some(ingest), None)
+            }
+            Ok(None) => (None, None),
+            Err(e) => (None, Some(e)),
+        };
+        let server = Server {
             feed,
             commands: cmd_tx,
             tick_stats,
@@ -316,7 +328,13 @@ impl Server {
             actors,
             writer,
             sim,
-        })
+        };
+        if let Some(e) = skeleton_error {
+            // Everything already started is stopped in order (the robot is left stopped, in Passive).
+            server.shutdown().await;
+            return Err(ServerError::Skeleton(e));
+        }
+        Ok(server)
     }
 
     /// A token that, when cancelled, stops the server's actors (the caller still awaits [`Server::shutdown`]).

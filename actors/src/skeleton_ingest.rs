@@ -282,28 +282,19 @@ fn apply_events(
 }
 
 /// Starts the ingest when `config`'s `[skeleton]` is enabled (by default: when the stimulus is `left_elbow`).
-/// A socket that cannot be opened is logged as an error and the server runs without skeletons: every elbow
-/// angle is then invalid, so the command stimulus never fires.
+/// A socket that cannot be opened is an error: without skeletons every elbow angle would be invalid and the
+/// command stimulus could never fire.
 pub async fn start_for(
     config: &pavlov::config::Config,
     pose: watch::Sender<PoseTracker>,
     started: Instant,
     cancel: CancellationToken,
-) -> Option<(SkeletonIngest, JoinHandle<()>)> {
+) -> Result<Option<(SkeletonIngest, JoinHandle<()>)>, IngestError> {
     if !config.skeleton.is_enabled(&config.control.stimulus) {
-        return None;
+        return Ok(None);
     }
-    let started_ingest = match IngestSettings::from_config(&config.skeleton) {
-        Ok(settings) => spawn(settings, pose, started, cancel).await,
-        Err(e) => Err(e),
-    };
-    match started_ingest {
-        Ok(running) => Some(running),
-        Err(e) => {
-            tracing::error!("{e}; running without skeletons (every elbow angle is invalid)");
-            None
-        }
-    }
+    let settings = IngestSettings::from_config(&config.skeleton)?;
+    spawn(settings, pose, started, cancel).await.map(Some)
 }
 
 #[cfg(test)]
