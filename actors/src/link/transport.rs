@@ -4,6 +4,10 @@
 //! tokio time, so it works identically under the paused (virtual) clock. It can sit behind an in-process
 //! duplex stream (the default for `pavlov serve`) or behind a pseudo-terminal (`pavlov sim --pty`), where
 //! any OI client, including `pavlov serve --robot <path>`, drives it over a real serial device.
+//!
+//! A [`FaultInjector`] sits between the robot and the line (`--faults`): it damages, delays and interleaves
+//! the robot's bytes, hangs or unplugs the line, and trips the robot. In process, an unplugged robot keeps
+//! running and takes the next connection from its [`SimDevice`], which is how link supervision reconnects.
 
 use std::time::Duration;
 
@@ -164,7 +168,7 @@ impl<S> Plug<S> {
     }
 }
 
-/// Counts each step's link fault and says whether bytes flow.
+/// Whether bytes flow on the line in a step with this fault.
 fn link_flows(outcome: LinkFault) -> bool {
     matches!(outcome, LinkFault::Normal)
 }
