@@ -118,6 +118,7 @@ impl AppState {
                 backlog: self.recorder.backlog() as u64,
                 dropped: self.recorder.dropped(),
             }),
+            sim_faults: self.sources.sim.as_ref().map(|s| s.borrow().faults.clone()),
             ..MetricsSnapshot::default()
         };
         let ticks = self.sources.ticks.lock().ok().map(|t| {

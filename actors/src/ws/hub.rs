@@ -53,6 +53,8 @@ pub struct HealthSources {
     pub writer: SharedWriterStats,
     /// Actuation's counters.
     pub actuation: watch::Receiver<ActuationStats>,
+    /// The in-process simulated robot's state and injected faults, when simulated.
+    pub sim: Option<watch::Receiver<crate::link::transport::SimStatus>>,
 }
 
 impl HealthSources {

@@ -79,6 +79,8 @@ pub struct MetricsSnapshot {
     pub recorder: Option<RecorderFigures>,
     /// Actuation's safety counters.
     pub actuation: ActuationStats,
+    /// What the simulated robot's fault injector has done (`None` on a real robot).
+    pub sim_faults: Option<pavlov::sim::faults::FaultCounters>,
 }
 
 /// The name of a trip cause in the `cause` label.
@@ -296,6 +298,22 @@ pub fn render(s: &MetricsSnapshot) -> String {
             }
         }
     }
+    if let Some(faults) = &s.sim_faults
+        && let Ok(serde_json::Value::Object(fields)) = serde_json::to_value(faults)
+    {
+        let name = "pavlov_sim_faults_total";
+        e.family(
+            name,
+            "counter",
+            "What the simulated Create's fault injector has done (--faults), by kind: bytes for *_bytes and \
+             host_*, events otherwise.",
+        );
+        for (kind, value) in fields {
+            if let Some(v) = value.as_u64() {
+                e.sample(name, &[("kind", &kind)], v as f64);
+            }
+        }
+    }
     e.into_text()
 }
 
@@ -354,6 +372,11 @@ mod tests {
                 pipeline_stalls: 6,
                 ..ActuationStats::default()
             },
+            sim_faults: Some(pavlov::sim::faults::FaultCounters {
+                hangs: 3,
+                flipped_bytes: 8,
+                ..Default::default()
+            }),
         }
     }
 
@@ -393,6 +416,11 @@ mod tests {
         assert_eq!(value("pavlov_recorder_backlog", &[]), 12.0);
         assert_eq!(value("pavlov_actuation_pipeline_stalls_total", &[]), 6.0);
         assert_eq!(value("pavlov_serial_write_errors_total", &[]), 1.0);
+        assert_eq!(value("pavlov_sim_faults_total", &[("kind", "hangs")]), 3.0);
+        assert_eq!(
+            value("pavlov_sim_faults_total", &[("kind", "flipped_bytes")]),
+            8.0
+        );
         let states = families["pavlov_link_state"].samples.len();
         assert_eq!(states, LinkState::ALL.len());
         assert_eq!(families["pavlov_tick_lateness_seconds"].kind, "histogram");
@@ -433,6 +461,7 @@ mod tests {
         let families = parse(&text).unwrap();
         assert!(!families.contains_key("pavlov_link_state"));
         assert!(!families.contains_key("pavlov_recorder_backlog"));
+        assert!(!families.contains_key("pavlov_sim_faults_total"));
         assert!(families.contains_key("pavlov_ws_clients"));
         let h = &families["pavlov_tick_to_command_seconds"];
         assert!(h.samples.iter().all(|s| s.value == 0.0));

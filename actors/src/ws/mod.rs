@@ -172,6 +172,7 @@ impl Dashboard {
             ticks: server.tick_stats.clone(),
             writer: server.writer_stats.clone(),
             actuation: server.actuation_stats.clone(),
+            sim: server.sim_status.clone(),
         };
         let state = Arc::new(http::AppState {
             policy: AccessPolicy::new(cfg, addr),
