@@ -20,7 +20,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 const STALL_CONFIG: &str = include_str!("../config/stall.toml");
 
 /// Every family `/metrics` serves once the first tick is out (the README lists the same).
-const FAMILIES: [(&str, &str); 30] = [
+const FAMILIES: [(&str, &str); 31] = [
     ("pavlov_tick_lateness_seconds", "histogram"),
     ("pavlov_ticks_fired_total", "counter"),
     ("pavlov_ticks_skipped_total", "counter"),
@@ -51,6 +51,7 @@ const FAMILIES: [(&str, &str); 30] = [
     ("pavlov_actuation_pipeline_stalls_total", "counter"),
     ("pavlov_actuation_stale_observations_total", "counter"),
     ("pavlov_actuation_writer_full_total", "counter"),
+    ("pavlov_sim_faults_total", "counter"),
 ];
 
 async fn scrape(addr: SocketAddr) -> (String, BTreeMap<String, Family>, String) {
