@@ -5,38 +5,12 @@
 // Opens the page served by a running `pavlov serve`, checks that live ticks arrive and the charts
 // update, switches to manual mode and drives with the arrow keys, presses the E-STOP button, and checks in the tick stream that the server stopped the robot
 // (e-stop latched, wheel command 0/0, safety stop "e_stop"). Saves a screenshot, prints a JSON summary
-// on stdout, exits non-zero on any failure. Never downloads a browser: Chromium comes from apt
-// (`apt-get install chromium`); set CHROMIUM to use another binary.
+// on stdout, exits non-zero on any failure (see browser.mjs for the browser).
 
-import { existsSync } from 'node:fs';
-import { chromium } from 'playwright-core';
+import { harness, launch } from './browser.mjs';
 
-const [url, screenshot] = process.argv.slice(2);
-const executablePath = process.env.CHROMIUM || '/usr/bin/chromium';
-
-function fail(message) {
-  console.error(`dashboard e2e: FAIL: ${message}`);
-  process.exit(1);
-}
-
-if (!url || !screenshot) fail('usage: node dashboard.e2e.mjs <dashboard URL> <screenshot.png>');
-if (!existsSync(executablePath)) fail(`no Chromium at ${executablePath}: run \`apt-get install -y chromium\``);
-
-const ARGS = [
-  '--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
-  '--disable-background-networking', '--disable-component-update', '--disable-sync',
-];
-
-async function until(what, predicate, timeoutMs) {
-  const end = Date.now() + timeoutMs;
-  while (Date.now() < end) {
-    if (predicate()) return;
-    await new Promise((r) => setTimeout(r, 50));
-  }
-  fail(`timed out after ${timeoutMs} ms waiting for ${what}`);
-}
-
-const browser = await chromium.launch({ executablePath, args: ARGS, headless: true });
+const { screenshot, url, fail, until } = harness('dashboard.e2e');
+const browser = await launch(fail);
 const summary = {};
 try {
   const page = await browser.newPage({ viewport: { width: 1440, height: 1050 } });

@@ -7,35 +7,10 @@
 // re-arms behind the operator's back), and after a click on Re-arm the server acks `rearm` and the link
 // comes back up. Saves a screenshot of the banner, prints a JSON summary, exits non-zero on any failure.
 
-import { existsSync } from 'node:fs';
-import { chromium } from 'playwright-core';
+import { harness, launch } from './browser.mjs';
 
-const [url, screenshot] = process.argv.slice(2);
-const executablePath = process.env.CHROMIUM || '/usr/bin/chromium';
-
-function fail(message) {
-  console.error(`trip e2e: FAIL: ${message}`);
-  process.exit(1);
-}
-
-if (!url || !screenshot) fail('usage: node trip.e2e.mjs <dashboard URL> <screenshot.png>');
-if (!existsSync(executablePath)) fail(`no Chromium at ${executablePath}: run \`apt-get install -y chromium\``);
-
-const ARGS = [
-  '--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
-  '--disable-background-networking', '--disable-component-update', '--disable-sync',
-];
-
-async function until(what, predicate, timeoutMs) {
-  const end = Date.now() + timeoutMs;
-  while (Date.now() < end) {
-    if (predicate()) return;
-    await new Promise((r) => setTimeout(r, 50));
-  }
-  fail(`timed out after ${timeoutMs} ms waiting for ${what}`);
-}
-
-const browser = await chromium.launch({ executablePath, args: ARGS, headless: true });
+const { screenshot, url, fail, until } = harness('trip.e2e');
+const browser = await launch(fail);
 const summary = {};
 try {
   const page = await browser.newPage({ viewport: { width: 1440, height: 1050 } });
