@@ -31,7 +31,7 @@ use crate::gating;
 use crate::learning::{self, Learning};
 use crate::link::opener::{LinkOpener, SerialOpener};
 use crate::link::supervisor::Supervisor;
-use crate::link::{LinkError, LinkReader, LinkWriter, handshake, transport, writer};
+use crate::link::{LinkError, LinkReader, LinkWriter, OpenLink, handshake, transport, writer};
 use crate::ticker::{self, SharedTickStats};
 use pavlov::agent::GatingStage;
 use pavlov::sim::faults::FaultInjector;
@@ -131,12 +131,22 @@ impl Server {
                 let l = transport::spawn_sim_with_faults(robot, injector, sim_cancel.clone());
                 let opener: Box<dyn LinkOpener> = Box::new(l.device);
                 sim_status = Some(l.status);
-                ((l.reader, l.writer, Some(opener)), Some(l.robot))
+                let link = OpenLink {
+                    reader: l.reader,
+                    writer: l.writer,
+                    opener: Some(opener),
+                };
+                (link, Some(l.robot))
             }
             RobotTarget::Serial(path) => {
                 let (r, w) = transport::open_serial(path, model)?;
                 let opener: Box<dyn LinkOpener> = Box::new(SerialOpener::new(path.clone(), model));
-                ((r, w, Some(opener)), None)
+                let link = OpenLink {
+                    reader: r,
+                    writer: w,
+                    opener: Some(opener),
+                };
+                (link, None)
             }
         };
         let mut server =
@@ -156,7 +166,11 @@ impl Server {
     ) -> Result<Server, ServerError> {
         Self::start_on_link_with_recorder(
             config,
-            (reader, link_writer, None),
+            OpenLink {
+                reader,
+                writer: link_writer,
+                opener: None,
+            },
             sim,
             sim_cancel,
             None,
@@ -167,12 +181,16 @@ impl Server {
     /// [`Server::start_on_link`] with a way to reopen the link and an optional recorder.
     pub async fn start_on_link_with_recorder(
         config: Config,
-        link: (LinkReader, LinkWriter, Option<Box<dyn LinkOpener>>),
+        link: OpenLink,
         sim: Option<JoinHandle<SimRobot>>,
         sim_cancel: CancellationToken,
         recorder: Option<crate::recorder::RecorderLink>,
     ) -> Result<Server, ServerError> {
-        let (reader, mut link_writer, opener) = link;
+        let OpenLink {
+            reader,
+            writer: mut link_writer,
+            opener,
+        } = link;
         let model = config.robot.model;
         let stream = config.robot.stream_ids();
         let period = Duration::from_millis(config.tick.period_ms);

@@ -20,6 +20,16 @@ pub type LinkReader = Box<dyn AsyncRead + Send + Unpin>;
 /// The host-to-robot half of a link.
 pub type LinkWriter = Box<dyn AsyncWrite + Send + Unpin>;
 
+/// An open link and, when it can be reopened, how.
+pub struct OpenLink {
+    /// The robot-to-host half.
+    pub reader: LinkReader,
+    /// The host-to-robot half.
+    pub writer: LinkWriter,
+    /// Reopens the link after it died (`None`: it cannot be reopened; supervision re-syncs instead).
+    pub opener: Option<Box<dyn opener::LinkOpener>>,
+}
+
 /// Errors of the robot link.
 #[derive(Debug, thiserror::Error)]
 pub enum LinkError {

@@ -42,7 +42,6 @@ pub struct Supervisor {
     stream: Vec<u8>,
     base: Instant,
     reopening: Option<Reopen>,
-    control_full: u64,
 }
 
 impl Supervisor {
@@ -69,7 +68,6 @@ impl Supervisor {
             stream: config.robot.stream_ids(),
             base,
             reopening: None,
-            control_full: 0,
         }
     }
 
@@ -224,7 +222,6 @@ impl Supervisor {
 
     fn send(&mut self, c: WriterControl) {
         if self.control.try_send(c).is_err() {
-            self.control_full += 1;
             tracing::warn!(
                 "the link writer's control queue is full; a supervision write was dropped"
             );
