@@ -1,15 +1,17 @@
 //! Actuation's safety net against a robot that goes quiet: the test plays the robot on an in-memory link,
 //! streams valid frames for one second and then stops. Within the configured 5 ticks the server must be
-//! writing nothing but stops, and say why in the tick records.
+//! writing nothing but stops, and say why in the tick records; 150 ms after the last frame it re-sends
+//! Start, Safe and Stream (the link cannot be reopened here, so it keeps re-syncing with backoff).
 
 mod common;
 
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use pavlov::oi::SensorValues;
+use pavlov::oi::command::{Command, ParsedCommand, parse_command};
 use pavlov::oi::frame::encode_stream_frame;
 use pavlov::oi::packets::id;
+use pavlov::oi::{Model, SensorValues};
 use pavlov::record::SafetyStop;
 use pavlov_actors::server::Server;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -86,16 +88,43 @@ async fn a_stale_sensor_stream_stops_the_wheels_within_five_ticks() {
         vec![128, 131, 148, 1, 6],
         "start-up sequence"
     );
-    // Drive Direct commands after the start-up sequence (the shut-down sequence ends the stream).
-    let drives: Vec<(Duration, i16, i16)> = bytes[5..]
-        .chunks(5)
-        .filter(|c| c.len() == 5 && c[0].1 == 145)
-        .map(|c| {
-            let right = i16::from_be_bytes([c[1].1, c[2].1]);
-            let left = i16::from_be_bytes([c[3].1, c[4].1]);
-            (c[0].0, left, right)
+    // Every command the server wrote, parsed as the robot would, with when it arrived.
+    let mut commands: Vec<(Duration, Command)> = Vec::new();
+    let mut at = 0;
+    while at < bytes.len() {
+        let rest: Vec<u8> = bytes[at..].iter().map(|&(_, b)| b).collect();
+        match parse_command(Model::Create1, &rest) {
+            ParsedCommand::Complete { command, consumed } => {
+                commands.push((bytes[at].0, command));
+                at += consumed;
+            }
+            other => panic!("the server wrote an unparsable command at byte {at}: {other:?}"),
+        }
+    }
+    let drives: Vec<(Duration, i16, i16)> = commands
+        .iter()
+        .filter_map(|(t, c)| match c {
+            Command::DriveDirect { right, left } => Some((*t, *left, *right)),
+            _ => None,
         })
         .collect();
+    // Once the stream is stale (150 ms), Start and Stream are sent again (with Safe: no trip was seen).
+    let resyncs: Vec<Duration> = commands
+        .windows(3)
+        .filter(|w| {
+            w[0].0 > streaming_for
+                && matches!(w[0].1, Command::Start)
+                && matches!(w[1].1, Command::Safe)
+                && matches!(&w[2].1, Command::Stream(ids) if ids == &vec![6])
+        })
+        .map(|w| w[0].0)
+        .collect();
+    assert!(!resyncs.is_empty(), "no re-sync after the stream stopped");
+    assert!(
+        resyncs[0] <= streaming_for + Duration::from_millis(150 + 20 + 15),
+        "first re-sync at {:?}",
+        resyncs[0]
+    );
     let limit = streaming_for + Duration::from_millis(20 * 6 + 15);
     let before: Vec<_> = drives.iter().filter(|d| d.0 < streaming_for).collect();
     let after: Vec<_> = drives.iter().filter(|d| d.0 > limit).collect();
