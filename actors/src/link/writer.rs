@@ -168,3 +168,64 @@ fn count(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tokio::io::AsyncReadExt;
+
+    #[tokio::test(start_paused = true)]
+    async fn a_hung_port_times_out_and_a_replacement_takes_over() {
+        // A port with a 4-byte buffer whose far end never reads: the second command cannot be written.
+        let (hung, _far_end) = tokio::io::duplex(4);
+        let (req_tx, req_rx) = mpsc::channel(16);
+        let (ctl_tx, ctl_rx) = mpsc::channel(4);
+        let stats = SharedWriterStats::default();
+        let writer = tokio::spawn(run(
+            Box::new(hung),
+            req_rx,
+            ctl_rx,
+            vec![9, 9],
+            stats.clone(),
+        ));
+        for _ in 0..2 {
+            let bytes = vec![145, 0, 0, 0, 0];
+            req_tx
+                .send(WriteRequest {
+                    bytes,
+                    tick_deadline: None,
+                })
+                .await
+                .unwrap();
+        }
+        tokio::time::sleep(WRITE_TIMEOUT * 3).await;
+        assert!(
+            stats.lock().unwrap().timeouts >= 1,
+            "the hung write did not time out"
+        );
+
+        // Supervision switches to a fresh port: the start-up sequence goes out first, then commands.
+        let (fresh, mut robot) = tokio::io::duplex(1024);
+        ctl_tx
+            .send(WriterControl::Replace {
+                link: Box::new(fresh),
+                startup: vec![128, 131],
+            })
+            .await
+            .unwrap();
+        req_tx
+            .send(WriteRequest {
+                bytes: vec![145, 0, 1, 0, 1],
+                tick_deadline: None,
+            })
+            .await
+            .unwrap();
+        drop(req_tx);
+        writer.await.unwrap();
+        let mut got = Vec::new();
+        robot.read_to_end(&mut got).await.unwrap();
+        // Start-up, the command, then the shut-down sequence.
+        assert_eq!(got, vec![128, 131, 145, 0, 1, 0, 1, 9, 9]);
+        assert_eq!(stats.lock().unwrap().replaced, 1);
+    }
+}
