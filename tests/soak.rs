@@ -35,9 +35,10 @@ fn rss_kib() -> u64 {
         .unwrap_or(0)
 }
 
-/// Root-mean-square error of the prediction against its discounted return, over one hour of ticks
-/// `(stimulus, prediction)`, skipping the last 500 ticks whose returns are truncated.
-fn prediction_rmse(hour: &[(bool, f64)], gamma: f64) -> f64 {
+/// Root-mean-square error of the prediction against its discounted return over one hour of ticks
+/// `(stimulus, prediction)`, and that of the best constant prediction (the returns' standard deviation),
+/// skipping the last 500 ticks whose returns are truncated.
+fn prediction_rmse(hour: &[(bool, f64)], gamma: f64) -> (f64, f64) {
     let mut ret = 0.0;
     let mut returns = vec![0.0; hour.len()];
     for t in (0..hour.len().saturating_sub(1)).rev() {
@@ -47,9 +48,11 @@ fn prediction_rmse(hour: &[(bool, f64)], gamma: f64) -> f64 {
         ret = r + g * ret;
         returns[t] = ret;
     }
-    let n = hour.len().saturating_sub(500);
+    let n = hour.len().saturating_sub(500).max(1);
     let sq: f64 = (0..n).map(|t| (hour[t].1 - returns[t]).powi(2)).sum();
-    (sq / n.max(1) as f64).sqrt()
+    let mean = returns[..n].iter().sum::<f64>() / n as f64;
+    let var: f64 = returns[..n].iter().map(|g| (g - mean).powi(2)).sum::<f64>() / n as f64;
+    ((sq / n as f64).sqrt(), var.sqrt())
 }
 
 /// Counts and lengths of the periods the link was not up.
@@ -185,8 +188,8 @@ async fn twenty_four_simulated_hours_with_faults() {
 
     let last = last.expect("records");
     let (base_rss, base_tasks) = baseline.expect("baseline taken after hour 1");
-    let first_rmse = prediction_rmse(&first_hour, gamma);
-    let last_rmse = prediction_rmse(&last_hour, gamma);
+    let (first_rmse, _) = prediction_rmse(&first_hour, gamma);
+    let (last_rmse, last_constant) = prediction_rmse(&last_hour, gamma);
     let mut lengths = outages.lengths_ticks.clone();
     lengths.sort_unstable();
     let pct = |q: f64| {
@@ -200,7 +203,8 @@ async fn twenty_four_simulated_hours_with_faults() {
          link: {} good / {} bad frames, {} stale events, {} reconnects, trips re-armed {rearms}\n\
          outages: {} (p50 {} ms, p90 {} ms, max {} ms); longest unattended motion {} ticks\n\
          memory: rss {base_rss} KiB after hour 1 → {} KiB at the end; tasks {base_tasks} → {}\n\
-         prediction rmse vs return: first hour {first_rmse:.4}, last hour {last_rmse:.4}",
+         prediction rmse vs return: first hour {first_rmse:.4}, last hour {last_rmse:.4} \
+         (best constant prediction: {last_constant:.4})",
         started.elapsed().as_secs_f64(),
         serde_json::to_string(&faults).unwrap_or_default(),
         last.link.good_frames,
@@ -257,6 +261,10 @@ async fn twenty_four_simulated_hours_with_faults() {
     assert!(
         last_rmse <= first_rmse * 1.05,
         "prediction error grew: {first_rmse:.4} → {last_rmse:.4}"
+    );
+    assert!(
+        last_rmse < 0.8 * last_constant,
+        "the prediction ({last_rmse:.4}) is barely better than a constant ({last_constant:.4})"
     );
     // And the robot was left stopped.
     let w = robot.world();
