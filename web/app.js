@@ -147,6 +147,10 @@ function onHello(h) {
   const model = cfg.robot ? cfg.robot.model : '';
   $('robot-name').textContent = `${h.server} · ${model ? `${model} · ` : ''}${h.tick_period_ms} ms ticks`;
   $('learn-target').textContent = h.signals.gate_prediction ? `prediction “${h.signals.gate_prediction}”` : '';
+  // The counters count stimulus onsets and time with the stimulus on: stalls, or gesture commands.
+  const stall = !(cfg.control && cfg.control.stimulus && cfg.control.stimulus.kind !== 'stall');
+  $('c-stalls-label').textContent = stall ? 'Stall events' : 'Stimulus onsets';
+  $('c-stalled-label').textContent = stall ? 'Time stalled' : 'Time with stimulus';
   $('watch-banner').hidden = h.can_command;
   document.body.classList.toggle('watch-only', !h.can_command);
   setConn('live', h.can_command ? `live · ${h.rate_hz} Hz` : `live · ${h.rate_hz} Hz · watch-only`);
