@@ -252,3 +252,35 @@ async fn a_line_too_slow_for_the_stream_never_drives() {
         "the robot is moving: {robot_wheels:?}"
     );
 }
+
+#[tokio::test(start_paused = true)]
+async fn damage_on_the_way_to_the_robot_is_survived_even_a_baud_change() {
+    // Host→robot bytes dropped or flipped at 1e-3: sooner or later a flipped Drive Direct (145) reads as
+    // Baud (129) and the robot moves to another rate; the baud rescue must bring it back.
+    let server = start("host_flip=1e-3,host_drop=1e-3", 7).await;
+    let mut rx = server.feed.subscribe();
+    let records = common::collect(&mut rx, 30_000).await; // 10 min
+    let status = server.sim_status.clone().expect("simulated");
+    let faults = status.borrow().faults.clone();
+    let report = server.shutdown().await;
+    let robot = report.sim_robot.expect("simulated robot");
+    assert!(faults.host_flipped > 50 && faults.host_dropped > 50);
+    assert_stopped_unless_up(&records);
+    let last_minute = &records[records.len() - 3000..];
+    let up = last_minute
+        .iter()
+        .filter(|r| r.link.state == LinkState::Up)
+        .count();
+    eprintln!(
+        "host faults: {} flipped, {} dropped; reconnects {}; up {up} of the last 3000 ticks; robot at {} baud",
+        faults.host_flipped,
+        faults.host_dropped,
+        records.last().unwrap().link.reconnects,
+        robot.oi_baud()
+    );
+    assert!(up > 2500, "up on only {up} of the last 3000 ticks");
+    assert!(
+        records.iter().any(|r| r.link.reconnects > 0),
+        "this seed's damage never needed a reconnect: the test proves nothing"
+    );
+}

@@ -2,6 +2,19 @@
 
 use serde::{Deserialize, Serialize};
 
+/// Baud rates of the Baud command's codes 0–11 [C1 p7; C2 p9].
+pub const BAUD_RATES: [u32; 12] = [
+    300, 600, 1200, 2400, 4800, 9600, 14_400, 19_200, 28_800, 38_400, 57_600, 115_200,
+];
+
+/// The Baud command's code for `rate`, if it is one of [`BAUD_RATES`].
+pub fn baud_code(rate: u32) -> Option<u8> {
+    BAUD_RATES
+        .iter()
+        .position(|&r| r == rate)
+        .and_then(|i| u8::try_from(i).ok())
+}
+
 /// An iRobot Create model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]

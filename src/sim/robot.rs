@@ -264,7 +264,14 @@ impl SimRobot {
         self.line_baud = baud;
     }
 
-    /// The rate the transmit buffer drains at, bits/s.
+    /// The rate the robot's UART runs at, bits/s: the model's default until a Baud command changes it. A
+    /// host at another rate cannot talk to it.
+    pub fn oi_baud(&self) -> u32 {
+        self.baud
+    }
+
+    /// The rate the transmit buffer drains at, bits/s: the line's when fault injection slowed it, else the
+    /// OI baud.
     pub fn line_rate(&self) -> u32 {
         self.line_baud.unwrap_or(self.baud)
     }

@@ -153,6 +153,11 @@ impl LinkMonitor {
         self.counters
     }
 
+    /// Reopens (successful or not) since the last valid frame.
+    pub fn reopen_attempt(&self) -> u32 {
+        self.reopen_attempt
+    }
+
     /// True when the firmware's mode-plus-one quirk is being corrected.
     pub fn quirk_active(&self) -> bool {
         self.modes.quirk_active()

@@ -27,6 +27,9 @@ pub enum LinkCommand {
     Rearm(oneshot::Sender<CommandResult>),
 }
 
+/// The first reopen attempt (counted since the last frame) that starts with a baud rescue; then every other.
+const RESCUE_FROM_ATTEMPT: u32 = 2;
+
 /// How long a reopen waits for the writer to close the old port.
 const CLOSE_WAIT: std::time::Duration = std::time::Duration::from_millis(500);
 
@@ -42,6 +45,7 @@ pub struct Supervisor {
     stream: Vec<u8>,
     base: Instant,
     reopening: Option<Reopen>,
+    baud_rescues: u64,
 }
 
 impl Supervisor {
@@ -68,6 +72,7 @@ impl Supervisor {
             stream: config.robot.stream_ids(),
             base,
             reopening: None,
+            baud_rescues: 0,
         }
     }
 
@@ -108,6 +113,17 @@ impl Supervisor {
             Some(LinkAction::Reopen) => match self.opener.as_mut() {
                 Some(opener) => {
                     tracing::info!("reopening {}", opener.describe());
+                    // Every other reopen that brought no frame, first try to bring a robot back from
+                    // another baud rate (a damaged byte can form a Baud command).
+                    let attempt = self.monitor.reopen_attempt();
+                    let rescue = (attempt >= RESCUE_FROM_ATTEMPT && attempt % 2 == 0).then(|| {
+                        self.baud_rescues += 1;
+                        tracing::warn!(
+                            rescues = self.baud_rescues,
+                            "no frame after {attempt} reopens: sending Baud at every other rate"
+                        );
+                        opener.rescue_baud()
+                    });
                     // Close the old port first: a serial device is held exclusively.
                     let (closed_tx, closed) = oneshot::channel();
                     let open = opener.open();
@@ -115,6 +131,9 @@ impl Supervisor {
                     self.send(close);
                     self.reopening = Some(tokio::spawn(async move {
                         let _ = tokio::time::timeout(CLOSE_WAIT, closed).await;
+                        if let Some(rescue) = rescue {
+                            rescue.await;
+                        }
                         open.await
                     }));
                 }

@@ -55,7 +55,7 @@ pub struct SimStatus {
     pub wheel_speed_mm_s: [f64; 2],
     /// A host connection is plugged in.
     pub connected: bool,
-    /// Bytes flow on the line this step (not hung, not unplugged).
+    /// Bytes flow on the line this step (not hung, not unplugged, host and robot at the same rate).
     pub flowing: bool,
     /// The step at which the robot last received a byte from the host.
     pub last_host_byte_step: u64,
@@ -91,8 +91,9 @@ pub fn spawn_sim_with_faults(
     cancel: CancellationToken,
 ) -> SimLink {
     faults.configure(&mut robot);
-    let (device, sockets) = SimDevice::new();
+    let (device, sockets) = SimDevice::new(robot.model());
     let (host, first) = tokio::io::duplex(SIM_LINK_BUFFER);
+    let first = (first, Some(robot.model().baud()));
     let (reader, writer) = tokio::io::split(host);
     let (status_tx, status) = watch::channel(SimStatus::default());
     let handle = tokio::spawn(drive_sim(
@@ -125,7 +126,7 @@ where
     drive_sim(
         robot,
         Plug {
-            first: Some(io),
+            first: Some((io, None)),
             more: None,
         },
         (
@@ -147,22 +148,23 @@ enum EndOfFile {
     KeepRunning,
 }
 
-/// Where the robot's connections come from.
+/// Where the robot's connections come from, each with the rate of the host's side (`None`: not modelled,
+/// e.g. a PTY, whose host side sets its rate where the simulator cannot see it).
 struct Plug<S> {
     /// The connection the robot starts on.
-    first: Option<S>,
-    /// Later connections ([`SimDevice::connect`]); `None` for a fixed stream.
-    more: Option<mpsc::Receiver<S>>,
+    first: Option<(S, Option<u32>)>,
+    /// Later connections ([`SimDevice::connect_at`]); `None` for a fixed stream.
+    more: Option<mpsc::Receiver<(S, u32)>>,
 }
 
 impl<S> Plug<S> {
     /// The next connection; `None` when no more can come.
-    async fn next(&mut self) -> Option<S> {
+    async fn next(&mut self) -> Option<(S, Option<u32>)> {
         if let Some(s) = self.first.take() {
             return Some(s);
         }
         match &mut self.more {
-            Some(rx) => rx.recv().await,
+            Some(rx) => rx.recv().await.map(|(s, baud)| (s, Some(baud))),
             None => None,
         }
     }
@@ -184,6 +186,8 @@ where
     S: AsyncRead + AsyncWrite + Unpin,
 {
     let mut conn: Option<(ReadHalf<S>, WriteHalf<S>)> = None;
+    // The host side's rate; bytes pass only when it equals the robot's (a UART at another rate sees noise).
+    let mut host_baud: Option<u32> = None;
     let mut plugged = true;
     let mut step = tokio::time::interval(SIM_STEP);
     let mut buf = vec![0u8; 4096];
@@ -195,8 +199,9 @@ where
             biased;
             _ = cancel.cancelled() => break,
             next = plug.next(), if plugged => match next {
-                Some(io) => {
+                Some((io, baud)) => {
                     conn = Some(tokio::io::split(io));
+                    host_baud = baud;
                     reading = true;
                 }
                 None => {
@@ -208,8 +213,8 @@ where
             },
             n = read_conn(&mut conn, &mut buf), if reading && conn.is_some() => match n {
                 Ok(n) if n > 0 => {
-                    // While the line hangs, what the host sends is lost.
-                    if flowing {
+                    // While the line hangs, or the rates differ, what the host sends is lost.
+                    if flowing && host_baud.is_none_or(|b| b == robot.oi_baud()) {
                         let bytes = faults.host_bytes(&buf[..n]);
                         robot.receive(&bytes);
                         last_host_byte_step = robot.elapsed_steps();
@@ -237,6 +242,7 @@ where
                 let out = robot.take_output();
                 let outcome = faults.after_step(&mut robot, out);
                 flowing = link_flows(outcome.link);
+                let baud_mismatch = host_baud.is_some_and(|b| b != robot.oi_baud());
                 if outcome.link == LinkFault::Eof {
                     // Unplug: the host reads end-of-file and must reconnect through the device. A PTY
                     // cannot signal end-of-file without destroying the device: it hangs this step instead.
@@ -248,6 +254,7 @@ where
                 // A UART transmits whether or not anyone listens: when the host is not reading and the
                 // buffer is full, the bytes are lost instead of stalling the robot's clock.
                 if flowing
+                    && !baud_mismatch
                     && !outcome.bytes.is_empty()
                     && let Some((_, tx)) = conn.as_mut()
                     && let Some(Err(e)) = tx.write(&outcome.bytes).now_or_never()
@@ -260,7 +267,7 @@ where
                     oi_mode: robot.oi_mode().code(),
                     wheel_speed_mm_s: [world.wheel_speed_mm_s(0), world.wheel_speed_mm_s(1)],
                     connected: conn.is_some(),
-                    flowing,
+                    flowing: flowing && !baud_mismatch,
                     last_host_byte_step,
                     faults: faults.counters().clone(),
                 });
@@ -306,7 +313,7 @@ pub fn spawn_sim_pty(
     let handle = tokio::spawn(drive_sim(
         robot,
         Plug {
-            first: Some(master),
+            first: Some((master, None)),
             more: None,
         },
         (faults, status_tx),

@@ -17,13 +17,10 @@ use crate::oi::command::{Command, max_packet_list_len};
 use crate::oi::packets::available_on;
 use crate::sim::world::{DriveTarget, STEP_SECONDS};
 
+use crate::oi::model::BAUD_RATES;
+
 use super::drive::{drive_wheel_speeds, pwm_target, speed_target};
 use super::{OiMode, Requested, SimRobot};
-
-/// Baud rates of the Baud command's codes 0–11 [C1 p7; C2 p9].
-const BAUD_RATES: [u32; 12] = [
-    300, 600, 1200, 2400, 4800, 9600, 14_400, 19_200, 28_800, 38_400, 57_600, 115_200,
-];
 
 impl SimRobot {
     /// Executes one complete command in the present mode.
