@@ -1,7 +1,7 @@
 //! The soak: 24 simulated hours of the whole server (every actor, the simulated Create behind the same
-//! byte link a serial port would be) under virtual time, with faults injected throughout — byte damage,
-//! ASCII text between and inside frames, bursts, a steady delay, silent hangs, end-of-file, trips to
-//! Passive with the mode-plus-one quirk. A simulated operator re-arms two seconds after each trip.
+//! byte link a serial port would be) under virtual time, with faults injected throughout — byte damage
+//! both ways, ASCII text between and inside frames, bursts, a steady delay, silent hangs, end-of-file,
+//! trips to Passive with the mode-plus-one quirk. A simulated operator re-arms two seconds after each trip.
 //!
 //! It checks, on every one of the 4.3 million ticks: the server never commands motion while the link is
 //! not up or the observation is stale, and the robot is never left moving for long while the host has no
@@ -21,9 +21,10 @@ use pavlov::supervision::LinkState;
 use pavlov_actors::command::{ControlCommand, ControlRequest};
 use pavlov_actors::server::{RobotTarget, Server};
 
-/// The soak preset (byte faults, text, bursts, delay, quirk, banner) with the link events made ~5× denser:
-/// about 5 hangs, 5 end-of-file events and 2–3 trips an hour.
-const FAULTS: &str = "soak,hang=2e-5,eof=2e-5,trip=1e-5";
+/// The soak preset (byte faults, text, bursts, delay, quirk, banner) with the link events made ~5× denser
+/// (about 5 hangs, 5 end-of-file events and 2–3 trips an hour), and damage on the way to the robot too
+/// (about 9 flipped and 9 dropped host bytes an hour; a flip can move the robot to another baud rate).
+const FAULTS: &str = "soak,hang=2e-5,eof=2e-5,trip=1e-5,host_flip=1e-5,host_drop=1e-5";
 const TICKS_PER_HOUR: usize = 3600 * 50;
 
 fn rss_kib() -> u64 {
@@ -229,6 +230,7 @@ async fn twenty_four_simulated_hours_with_faults() {
     );
     assert!(faults.dropped_bytes + faults.flipped_bytes + faults.duplicated_bytes > 0);
     assert!(faults.text_lines > 0 && faults.bursts > 0);
+    assert!(faults.host_flipped > 0 && faults.host_dropped > 0);
     assert!(
         last.link.reconnects >= faults.eofs / 2,
         "reconnects {}",
