@@ -35,3 +35,29 @@ export async function launch(fail) {
   if (!existsSync(executablePath)) fail(`no Chromium at ${executablePath}: run \`apt-get install -y chromium\``);
   return chromium.launch({ executablePath, args: ARGS, headless: true });
 }
+
+/**
+ * Opens the dashboard at `url` in a new page and follows its websocket. Returns the page, the page and
+ * console errors seen (`problems`), every tick and every ack/error received (`ticks`, `acks`, as sent
+ * by the server), and every frame the page sent (`sent`).
+ */
+export async function openDashboard(browser, url) {
+  const page = await browser.newPage({ viewport: { width: 1440, height: 1050 } });
+  const problems = [];
+  page.on('pageerror', (e) => problems.push(`page error: ${e.message}`));
+  page.on('console', (m) => { if (m.type() === 'error') problems.push(`console error: ${m.text()}`); });
+  const ticks = [];
+  const acks = [];
+  const sent = [];
+  const socketOpened = page.waitForEvent('websocket', { timeout: 15000 });
+  await page.goto(url, { waitUntil: 'load' });
+  const ws = await socketOpened;
+  ws.on('framesent', (f) => sent.push(String(f.payload)));
+  ws.on('framereceived', (f) => {
+    let m;
+    try { m = JSON.parse(String(f.payload)); } catch { return; }
+    if (m.type === 'tick') ticks.push(m);
+    if (m.type === 'ack' || m.type === 'error') acks.push(m);
+  });
+  return { page, problems, ticks, acks, sent };
+}

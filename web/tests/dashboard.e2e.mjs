@@ -7,30 +7,13 @@
 // (e-stop latched, wheel command 0/0, safety stop "e_stop"). Saves a screenshot, prints a JSON summary
 // on stdout, exits non-zero on any failure (see browser.mjs for the browser).
 
-import { harness, launch } from './browser.mjs';
+import { harness, launch, openDashboard } from './browser.mjs';
 
 const { screenshot, url, fail, until } = harness('dashboard.e2e');
 const browser = await launch(fail);
 const summary = {};
 try {
-  const page = await browser.newPage({ viewport: { width: 1440, height: 1050 } });
-  const problems = [];
-  page.on('pageerror', (e) => problems.push(`page error: ${e.message}`));
-  page.on('console', (m) => { if (m.type() === 'error') problems.push(`console error: ${m.text()}`); });
-
-  const ticks = [];
-  const acks = [];
-  const sent = [];
-  const socketOpened = page.waitForEvent('websocket', { timeout: 15000 });
-  await page.goto(url, { waitUntil: 'load' });
-  const ws = await socketOpened;
-  ws.on('framesent', (f) => sent.push(String(f.payload)));
-  ws.on('framereceived', (f) => {
-    let m;
-    try { m = JSON.parse(String(f.payload)); } catch { return; }
-    if (m.type === 'tick') ticks.push({ seq: m.seq, mode: m.mode, estop: m.estop, command: m.command, safety: m.safety_stop });
-    if (m.type === 'ack' || m.type === 'error') acks.push(m);
-  });
+  const { page, problems, ticks, acks, sent } = await openDashboard(browser, url);
 
   // Live ticks arrive and every chart grows.
   await page.waitForFunction(() => window.pavlov && window.pavlov.ticks >= 60, null, { timeout: 20000 });
@@ -79,7 +62,7 @@ try {
   await page.click('#estop');
   await until('the estop command frame', () => sent.some((p) => p.includes('"cmd":"estop"')), 3000);
   await until('the estop ack', () => acks.some((a) => a.type === 'ack' && a.cmd === 'estop'), 5000);
-  const stopped = (t) => t.estop && t.command.left === 0 && t.command.right === 0 && t.safety === 'e_stop';
+  const stopped = (t) => t.estop && t.command.left === 0 && t.command.right === 0 && t.safety_stop === 'e_stop';
   await until('25 ticks with the robot stopped by the e-stop', () => ticks.slice(pressedAt).filter(stopped).length >= 25, 5000);
   const afterStop = ticks.slice(pressedAt);
   const firstStopped = afterStop.findIndex(stopped);

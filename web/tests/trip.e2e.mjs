@@ -7,26 +7,13 @@
 // re-arms behind the operator's back), and after a click on Re-arm the server acks `rearm` and the link
 // comes back up. Saves a screenshot of the banner, prints a JSON summary, exits non-zero on any failure.
 
-import { harness, launch } from './browser.mjs';
+import { harness, launch, openDashboard } from './browser.mjs';
 
 const { screenshot, url, fail, until } = harness('trip.e2e');
 const browser = await launch(fail);
 const summary = {};
 try {
-  const page = await browser.newPage({ viewport: { width: 1440, height: 1050 } });
-  const problems = [];
-  page.on('pageerror', (e) => problems.push(`page error: ${e.message}`));
-  const ticks = [];
-  const acks = [];
-  const socketOpened = page.waitForEvent('websocket', { timeout: 15000 });
-  await page.goto(url, { waitUntil: 'load' });
-  const ws = await socketOpened;
-  ws.on('framereceived', (f) => {
-    let m;
-    try { m = JSON.parse(String(f.payload)); } catch { return; }
-    if (m.type === 'tick') ticks.push({ seq: m.seq, link: m.link, command: m.command, safety: m.safety_stop });
-    if (m.type === 'ack' || m.type === 'error') acks.push(m);
-  });
+  const { page, problems, ticks, acks } = await openDashboard(browser, url);
 
   // A trip arrives: the banner shows its cause, the stream says tripped and commands a stop.
   await until('a tick with the link tripped', () => ticks.some((t) => t.link.state === 'tripped'), 60000);
@@ -42,7 +29,7 @@ try {
   await page.waitForTimeout(2000);
   const held = ticks.slice(from);
   if (held.length < 50) fail(`only ${held.length} ticks in 2 s`);
-  const bad = held.find((t) => t.link.state !== 'tripped' || t.command.left !== 0 || t.command.right !== 0 || t.safety !== 'robot_tripped');
+  const bad = held.find((t) => t.link.state !== 'tripped' || t.command.left !== 0 || t.command.right !== 0 || t.safety_stop !== 'robot_tripped');
   if (bad) fail(`while tripped: ${JSON.stringify(bad)}`);
   if ((await page.locator('#h-mode').textContent()) !== 'Passive') fail('OI mode not shown as Passive');
   await page.screenshot({ path: screenshot, fullPage: true });
