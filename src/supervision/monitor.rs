@@ -95,8 +95,6 @@ pub const TRIP_CONFIRM_FRAMES: u32 = 2;
 pub struct MonitorCounters {
     /// Times the stream went stale.
     pub stale_events: u64,
-    /// Re-syncs sent (Start and Stream again).
-    pub resyncs: u64,
     /// Successful reopens of the port.
     pub reconnects: u64,
     /// Failed reopen attempts.
@@ -107,8 +105,6 @@ pub struct MonitorCounters {
     pub recoveries: u64,
     /// The last outage's length, from the last good frame before it to the first after it, ms.
     pub last_outage_ms: Option<u64>,
-    /// The longest outage so far, ms.
-    pub longest_outage_ms: u64,
 }
 
 impl LinkMonitor {
@@ -170,7 +166,6 @@ impl LinkMonitor {
             let length = now_ms.saturating_sub(start);
             self.counters.recoveries += 1;
             self.counters.last_outage_ms = Some(length);
-            self.counters.longest_outage_ms = self.counters.longest_outage_ms.max(length);
         }
         self.resyncs = 0;
         self.reopen_attempt = 0;
@@ -278,7 +273,6 @@ impl LinkMonitor {
 
     fn resync(&mut self, now_ms: u64) -> LinkAction {
         self.resyncs += 1;
-        self.counters.resyncs += 1;
         self.next_try_ms = now_ms + self.cfg.resync_wait_ms;
         self.grace_until_ms = now_ms + self.cfg.mode_grace_ms;
         LinkAction::Resync {

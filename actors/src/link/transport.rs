@@ -57,8 +57,6 @@ pub struct SimStatus {
     pub connected: bool,
     /// Bytes flow on the line this step (not hung, not unplugged, host and robot at the same rate).
     pub flowing: bool,
-    /// The step at which the robot last received a byte from the host.
-    pub last_host_byte_step: u64,
     /// What the fault injector has done so far.
     pub faults: FaultCounters,
 }
@@ -193,7 +191,6 @@ where
     let mut buf = vec![0u8; 4096];
     let mut reading = true;
     let mut flowing = true;
-    let mut last_host_byte_step = 0;
     loop {
         tokio::select! {
             biased;
@@ -217,7 +214,6 @@ where
                     if flowing && host_baud.is_none_or(|b| b == robot.oi_baud()) {
                         let bytes = faults.host_bytes(&buf[..n]);
                         robot.receive(&bytes);
-                        last_host_byte_step = robot.elapsed_steps();
                     }
                 }
                 other => {
@@ -268,7 +264,6 @@ where
                     wheel_speed_mm_s: [world.wheel_speed_mm_s(0), world.wheel_speed_mm_s(1)],
                     connected: conn.is_some(),
                     flowing: flowing && !baud_mismatch,
-                    last_host_byte_step,
                     faults: faults.counters().clone(),
                 });
             }
