@@ -17,16 +17,14 @@
 //! - [`rng`]: the seeded random-number generator every stochastic part of the core draws from.
 
 pub mod agent;
+pub mod analysis;
 pub mod config;
 pub mod control;
-pub mod interaction_metrics;
 pub mod learn;
-pub mod metrics;
 pub mod obs;
 pub mod oi;
 pub mod record;
 pub mod rng;
 pub mod sim;
 pub mod skeleton;
-pub mod stats;
 pub mod supervision;

@@ -15,7 +15,7 @@
 //! (0 or 1) for a bit dimension. A packet absent from the snapshot gives `NaN`, which the tile coder
 //! treats as "no feature for this tiling" (see [`crate::learn::tiles`]); it is never silently zero.
 //!
-//! Ranges come from the OI specifications (`shared/reference/create_oi.md` §3.2). Where the spec range is
+//! Ranges come from the OI specifications' packet tables [C1 pp17–21; C2 pp23–32]. Where the spec range is
 //! far wider than anything the robot reports in use (voltage 0–65535 mV, current ±32768 mA), a
 //! physical range is used instead and justified next to the entry, so that 10 tiles of width 0.1 still
 //! separate the values that occur.

@@ -67,8 +67,6 @@ pub enum SafetyStop {
     EStop,
     /// The newest observation is too old (sensor stream stale).
     StaleObservation,
-    /// No fresh action arrived from the gate in time (pipeline stalled).
-    NoFreshAction,
     /// The robot link is not up (stream stale, reconnecting, or closed).
     LinkDown,
     /// The robot tripped from Safe to Passive by itself; control resumes after the operator's `rearm`.

@@ -13,12 +13,11 @@
 //! `tests/run.sh` runs it in release (`cargo test --release -p pavlov-actors --test soak`). Set
 //! `PAVLOV_SOAK_HOURS` to run a shorter soak by hand.
 
-mod common;
-
+use pavlov::config::Config;
 use pavlov::control::{Action, Mode};
 use pavlov::record::TickRecord;
 use pavlov::supervision::LinkState;
-use pavlov_actors::command::{ControlCommand, ControlRequest};
+use pavlov_actors::command::{ControlRequest, LinkCommand};
 use pavlov_actors::server::{RobotTarget, Server};
 
 /// The soak preset (byte faults, text, bursts, delay, quirk, banner) with the link events made ~5× denser
@@ -78,13 +77,17 @@ impl Outages {
 
 #[tokio::test(start_paused = true)]
 async fn twenty_four_simulated_hours_with_faults() {
-    common::init_logging();
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_test_writer()
+        .try_init();
     let hours: usize = std::env::var("PAVLOV_SOAK_HOURS")
         .ok()
         .and_then(|h| h.parse().ok())
         .unwrap_or(24);
     assert!(hours >= 2, "the soak compares hour 1 with the last hour");
-    let mut cfg = common::stall_config();
+    let mut cfg =
+        Config::from_toml(include_str!("../config/stall.toml")).expect("valid stall config");
     cfg.sim.faults = FAULTS.into();
     cfg.sim.seed = 24;
     // A fixed policy keeps the prediction's question stationary, so convergence can be judged.
@@ -94,10 +97,11 @@ async fn twenty_four_simulated_hours_with_faults() {
     let gamma = cfg.predictions[0].continuation();
     let max_obs_age = cfg.safety.max_obs_age_ticks;
 
-    let server = Server::start(cfg, RobotTarget::Simulated)
+    let server = Server::builder(cfg, RobotTarget::Simulated)
+        .start()
         .await
         .expect("server starts");
-    let sim = server.sim_status.clone().expect("simulated robot");
+    let sim = server.health().sim_status().expect("simulated robot");
     let metrics = tokio::runtime::Handle::current().metrics();
     let mut rx = server.feed.subscribe();
 
@@ -150,7 +154,7 @@ async fn twenty_four_simulated_hours_with_faults() {
             0
         };
         if tripped_for == 100 {
-            let (req, _reply) = ControlRequest::new(ControlCommand::Rearm {});
+            let (req, _reply) = ControlRequest::new(LinkCommand::Rearm {});
             if server.commands.try_send(req).is_ok() {
                 rearms += 1;
             }

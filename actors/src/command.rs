@@ -1,36 +1,68 @@
-//! Commands injected into the running server (by the websocket, tests or experiments), and their routing.
+//! The one command vocabulary of the running server, and its router.
 //!
-//! A [`ControlRequest`] carries a [`ControlCommand`] and a one-shot reply channel. The router sends each
-//! command to the actor that owns the state it changes; that actor applies it between ticks and replies,
-//! so an `ack` means the change is in force from the next tick on. The e-stop is also latched straight into
-//! actuation, which is the only writer of motion commands, so it takes effect even if gating has stalled.
+//! Every command a client (the websocket, a test, an experiment) can send is a variant of exactly one
+//! owner's enum below, and [`ControlCommand`] is the union of those enums: the wire names (`"cmd"`) come
+//! from the variants themselves (serde and strum, snake_case), so nothing else lists them. Each owner has
+//! one narrow inbox that carries only its own commands, and applies them between ticks, so an ack means
+//! the change is in force from the next tick on:
+//!
+//! - the e-stop latch ([`LatchCommand`]) is applied by the router itself, straight into the `watch` that
+//!   actuation (the only writer of motion commands) and gating read, so it works even if they stalled;
+//! - gating ([`GatingCommand`]), learning ([`LearningCommand`]), link supervision ([`LinkCommand`]) and
+//!   the recorder ([`RecorderCommand`]) get theirs through their inboxes.
+//!
+//! The router never waits: it forwards each command with its reply channel and goes on to the next, and a
+//! full inbox is answered `busy` at once. The owner answers with a typed [`Outcome`].
+//!
+//! Adding a command: a variant in its owner's enum here, its handling in the owner, and a line in
+//! `web/PROTOCOL.md`.
 
 use pavlov::control::{Action, Mode};
-use serde::{Deserialize, Serialize};
+use pavlov::oi::mode::DriveMode;
+use pavlov::supervision::TripCause;
+use serde::{Deserialize, Deserializer, Serialize};
+use strum::VariantNames;
 use tokio::sync::{mpsc, oneshot, watch};
+use tokio_util::sync::CancellationToken;
 
-/// A command to the running server.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 // Argument-less commands are empty struct variants (`Estop {}`), so that unknown fields are rejected for
 // them too: serde ignores extra fields on unit variants of an internally tagged enum.
+
+/// Commands the router applies itself: the emergency stop.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, VariantNames)]
 #[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
-pub enum ControlCommand {
+#[strum(serialize_all = "snake_case")]
+pub enum LatchCommand {
+    /// Latch the emergency stop: the wheels stop and stay stopped until `release`.
+    Estop {},
+    /// Release a latched emergency stop.
+    Release {},
+}
+
+/// Commands gating applies.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, VariantNames)]
+#[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
+#[strum(serialize_all = "snake_case")]
+pub enum GatingCommand {
     /// Switch between reactive, Pavlovian and manual control.
     SetMode {
         /// The new mode.
         mode: Mode,
     },
-    /// Latch the emergency stop: the wheels stop and stay stopped until `release`.
-    Estop {},
-    /// Release a latched emergency stop.
-    Release {},
-    /// Drive the wheels directly (manual mode only). Expires after `teleop_hold_ms` without a refresh.
+    /// Drive the wheels directly (manual mode only). Expires after half a second without a refresh.
     Teleop {
         /// Left wheel, mm/s.
         left_mm_s: i16,
         /// Right wheel, mm/s.
         right_mm_s: i16,
     },
+}
+
+/// Commands learning applies.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, VariantNames)]
+#[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
+#[strum(serialize_all = "snake_case")]
+pub enum LearningCommand {
     /// Inject a human command request, as if the gesture had been seen, for `duration_ms`.
     HumanRequest {
         /// How long the request stays on, ms.
@@ -54,30 +86,213 @@ pub enum ControlCommand {
     },
     /// Reset every prediction's weights and traces to their initial values.
     ResetWeights {},
-    /// Save the weights to a checkpoint file.
+    /// Save the weights to a file.
     SaveWeights {
-        /// Where; default: the server's checkpoint directory.
+        /// The file's name; default: one made from the tick.
         #[serde(default)]
         path: Option<String>,
     },
-    /// Start recording ticks into a directory.
+}
+
+/// Commands link supervision applies.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, VariantNames)]
+#[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
+#[strum(serialize_all = "snake_case")]
+pub enum LinkCommand {
+    /// Resume Safe/Full control after the robot tripped to Passive (cliff, wheel drop, charger).
+    Rearm {},
+}
+
+/// Commands the recorder applies.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, VariantNames)]
+#[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
+#[strum(serialize_all = "snake_case")]
+pub enum RecorderCommand {
+    /// Start recording ticks.
     StartRecording {
-        /// The directory; default: a timestamped one under the server's recording root.
+        /// The recording's name; default: one made from the time.
         #[serde(default)]
         dir: Option<String>,
     },
     /// Stop recording.
     StopRecording {},
-    /// Resume Safe/Full control after the robot tripped to Passive (cliff, wheel drop, charger).
-    Rearm {},
 }
 
 fn default_request_ms() -> u64 {
     500
 }
 
-/// The outcome of a command: `Ok(detail)` or an error message for the sender.
-pub type CommandResult = Result<serde_json::Value, String>;
+/// A command to the running server: one owner's command.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum ControlCommand {
+    /// The e-stop latch.
+    Latch(LatchCommand),
+    /// Gating's.
+    Gating(GatingCommand),
+    /// Learning's.
+    Learning(LearningCommand),
+    /// Link supervision's.
+    Link(LinkCommand),
+    /// The recorder's.
+    Recorder(RecorderCommand),
+}
+
+impl ControlCommand {
+    /// Every command's wire name, by owner.
+    pub fn names() -> impl Iterator<Item = &'static str> {
+        [
+            LatchCommand::VARIANTS,
+            GatingCommand::VARIANTS,
+            LearningCommand::VARIANTS,
+            LinkCommand::VARIANTS,
+            RecorderCommand::VARIANTS,
+        ]
+        .into_iter()
+        .flatten()
+        .copied()
+    }
+
+    /// Whether `name` is a command's wire name.
+    pub fn is_name(name: &str) -> bool {
+        Self::names().any(|n| n == name)
+    }
+}
+
+impl<'de> Deserialize<'de> for ControlCommand {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let value = serde_json::Value::deserialize(d)?;
+        let name = value
+            .get("cmd")
+            .and_then(serde_json::Value::as_str)
+            .ok_or_else(|| D::Error::missing_field("cmd"))?
+            .to_string();
+        let name = name.as_str();
+        if !Self::is_name(name) {
+            return Err(D::Error::unknown_variant(name, &[]));
+        }
+        let parsed = if LatchCommand::VARIANTS.contains(&name) {
+            serde_json::from_value(value).map(ControlCommand::Latch)
+        } else if GatingCommand::VARIANTS.contains(&name) {
+            serde_json::from_value(value).map(ControlCommand::Gating)
+        } else if LearningCommand::VARIANTS.contains(&name) {
+            serde_json::from_value(value).map(ControlCommand::Learning)
+        } else if LinkCommand::VARIANTS.contains(&name) {
+            serde_json::from_value(value).map(ControlCommand::Link)
+        } else {
+            serde_json::from_value(value).map(ControlCommand::Recorder)
+        };
+        parsed.map_err(D::Error::custom)
+    }
+}
+
+macro_rules! into_control {
+    ($($owner:ident => $variant:ident),*) => {$(
+        impl From<$owner> for ControlCommand {
+            fn from(c: $owner) -> Self {
+                ControlCommand::$variant(c)
+            }
+        }
+    )*};
+}
+into_control!(LatchCommand => Latch, GatingCommand => Gating, LearningCommand => Learning,
+    LinkCommand => Link, RecorderCommand => Recorder);
+
+/// What a command did, as the owner reports it (the `result` of the websocket's `ack`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Applied {
+    /// The e-stop is now latched (`true`) or released.
+    Estop {
+        /// Latched.
+        estop: bool,
+    },
+    /// The mode in force.
+    Mode {
+        /// The mode.
+        mode: Mode,
+    },
+    /// The teleop command in force.
+    Teleop {
+        /// The wheel speeds.
+        teleop: Action,
+    },
+    /// The injected request lasts until this tick.
+    Request {
+        /// The first tick without the request.
+        request_until_tick: u64,
+    },
+    /// A prediction's learning parameters in force.
+    Params {
+        /// The prediction.
+        prediction: String,
+        /// Step size α.
+        alpha: f64,
+        /// Trace decay λ.
+        lambda: f64,
+        /// Gate threshold θ.
+        threshold: f64,
+    },
+    /// Every weight and trace is back at its initial value.
+    Reset {
+        /// Always true.
+        reset: bool,
+    },
+    /// The weights are being written to this file.
+    Saved {
+        /// The file.
+        path: String,
+    },
+    /// A recording is open.
+    Recording {
+        /// Its path.
+        recording: String,
+    },
+    /// The recording was closed.
+    Stopped {
+        /// Its path.
+        stopped: String,
+    },
+    /// The robot was re-armed after a trip.
+    Rearmed {
+        /// What had tripped it.
+        rearmed: TripCause,
+        /// The mode sent.
+        mode: DriveMode,
+    },
+}
+
+/// Why a command was not applied.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CommandError {
+    /// The owner refused it (a precondition or a bound); the message says which.
+    #[error("{0}")]
+    Rejected(String),
+    /// The owner's inbox is full.
+    #[error("the {0}'s command queue is full; try again")]
+    Busy(&'static str),
+    /// The owner is not running (shutting down, or not part of this server).
+    #[error("{0}")]
+    Unavailable(String),
+}
+
+impl CommandError {
+    /// The machine-readable code of the websocket's error reply.
+    pub fn code(&self) -> &'static str {
+        match self {
+            CommandError::Rejected(_) => "rejected",
+            CommandError::Busy(_) => "busy",
+            CommandError::Unavailable(_) => "unavailable",
+        }
+    }
+}
+
+/// The outcome of a command.
+pub type Outcome = Result<Applied, CommandError>;
+
+/// Where an owner sends a command's outcome.
+pub type Reply = oneshot::Sender<Outcome>;
 
 /// A command with the channel its outcome goes back on.
 #[derive(Debug)]
@@ -85,54 +300,64 @@ pub struct ControlRequest {
     /// The command.
     pub command: ControlCommand,
     /// Where the outcome goes.
-    pub reply: oneshot::Sender<CommandResult>,
+    pub reply: Reply,
 }
 
 impl ControlRequest {
     /// A request and the receiver of its reply.
-    pub fn new(command: ControlCommand) -> (Self, oneshot::Receiver<CommandResult>) {
+    pub fn new(command: impl Into<ControlCommand>) -> (Self, oneshot::Receiver<Outcome>) {
         let (reply, rx) = oneshot::channel();
-        (ControlRequest { command, reply }, rx)
+        (
+            ControlRequest {
+                command: command.into(),
+                reply,
+            },
+            rx,
+        )
     }
 }
 
-/// Commands gating applies.
+/// One owner's command with its reply channel: what an inbox carries.
 #[derive(Debug)]
-pub enum GatingCommand {
-    /// Set the mode.
-    Mode(Mode, oneshot::Sender<CommandResult>),
-    /// Latch or release the e-stop in gating's view.
-    Estop(bool),
-    /// Manual drive.
-    Teleop(Action, oneshot::Sender<CommandResult>),
+pub struct Envelope<C> {
+    /// The command.
+    pub command: C,
+    /// Where the outcome goes.
+    pub reply: Reply,
 }
 
-/// Commands learning applies.
-#[derive(Debug)]
-pub enum LearningCommand {
-    /// A command learning owns (params, reset, save, human request).
-    Apply(ControlCommand, oneshot::Sender<CommandResult>),
+impl<C> Envelope<C> {
+    /// Sends the outcome (a requester that has gone away is not an error).
+    pub fn answer(self, outcome: Outcome) {
+        let _ = self.reply.send(outcome);
+    }
 }
+
+/// An owner's inbox.
+pub type Inbox<C> = mpsc::Receiver<Envelope<C>>;
+
+/// Capacity of each owner's inbox.
+pub const INBOX_CAPACITY: usize = 16;
 
 /// Where the router sends things.
-pub struct CommandRoutes {
-    /// Gating's inbox.
-    pub gating: mpsc::Sender<GatingCommand>,
-    /// Learning's inbox.
-    pub learning: mpsc::Sender<LearningCommand>,
-    /// The e-stop latch that actuation watches.
+pub struct Routes {
+    /// The e-stop latch that actuation and gating watch.
     pub estop: watch::Sender<bool>,
-    /// Link supervision's inbox (re-arm after a trip).
-    pub link: mpsc::Sender<crate::link::supervisor::LinkCommand>,
-    /// The recorder's inbox, when recording is available.
-    pub recorder: Option<mpsc::Sender<(ControlCommand, oneshot::Sender<CommandResult>)>>,
+    /// Gating's inbox.
+    pub gating: mpsc::Sender<Envelope<GatingCommand>>,
+    /// Learning's inbox.
+    pub learning: mpsc::Sender<Envelope<LearningCommand>>,
+    /// Link supervision's inbox.
+    pub link: mpsc::Sender<Envelope<LinkCommand>>,
+    /// The recorder's inbox, when this server records.
+    pub recorder: Option<mpsc::Sender<Envelope<RecorderCommand>>>,
 }
 
 /// Routes requests until the inbox closes or `cancel` fires.
 pub async fn route(
     mut inbox: mpsc::Receiver<ControlRequest>,
-    routes: CommandRoutes,
-    cancel: tokio_util::sync::CancellationToken,
+    routes: Routes,
+    cancel: CancellationToken,
 ) {
     loop {
         let next = tokio::select! {
@@ -143,78 +368,39 @@ pub async fn route(
             break;
         };
         match command {
-            ControlCommand::SetMode { mode } => {
-                forward(&routes.gating, GatingCommand::Mode(mode, reply)).await
+            ControlCommand::Latch(c) => {
+                let on = matches!(c, LatchCommand::Estop {});
+                routes.estop.send_replace(on);
+                if on {
+                    tracing::warn!("e-stop latched");
+                } else {
+                    tracing::info!("e-stop released");
+                }
+                let _ = reply.send(Ok(Applied::Estop { estop: on }));
             }
-            ControlCommand::Estop {} => {
-                routes.estop.send_replace(true);
-                let _ = routes.gating.send(GatingCommand::Estop(true)).await;
-                tracing::warn!("e-stop latched");
-                let _ = reply.send(Ok(serde_json::json!({"estop": true})));
-            }
-            ControlCommand::Release {} => {
-                routes.estop.send_replace(false);
-                let _ = routes.gating.send(GatingCommand::Estop(false)).await;
-                tracing::info!("e-stop released");
-                let _ = reply.send(Ok(serde_json::json!({"estop": false})));
-            }
-            ControlCommand::Teleop {
-                left_mm_s,
-                right_mm_s,
-            } => {
-                if !(-500..=500).contains(&left_mm_s) || !(-500..=500).contains(&right_mm_s) {
-                    let _ = reply.send(Err(format!(
-                        "teleop wheel speeds must be within ±500 mm/s, got left {left_mm_s}, right {right_mm_s}"
+            ControlCommand::Gating(c) => forward(&routes.gating, c, reply, "gating"),
+            ControlCommand::Learning(c) => forward(&routes.learning, c, reply, "learning"),
+            ControlCommand::Link(c) => forward(&routes.link, c, reply, "robot link"),
+            ControlCommand::Recorder(c) => match &routes.recorder {
+                Some(to) => forward(to, c, reply, "recorder"),
+                None => {
+                    let _ = reply.send(Err(CommandError::Rejected(
+                        "recording is not available in this server".into(),
                     )));
-                    continue;
                 }
-                let action = Action {
-                    left_mm_s,
-                    right_mm_s,
-                };
-                forward(&routes.gating, GatingCommand::Teleop(action, reply)).await
-            }
-            c @ (ControlCommand::HumanRequest { .. }
-            | ControlCommand::SetParams { .. }
-            | ControlCommand::ResetWeights {}
-            | ControlCommand::SaveWeights { .. }) => {
-                forward(&routes.learning, LearningCommand::Apply(c, reply)).await
-            }
-            ControlCommand::Rearm {} => {
-                let (tx, rx) = oneshot::channel();
-                if routes
-                    .link
-                    .send(crate::link::supervisor::LinkCommand::Rearm(tx))
-                    .await
-                    .is_err()
-                {
-                    let _ = reply.send(Err("the robot link is not running".into()));
-                    continue;
-                }
-                let _ = reply.send(
-                    rx.await
-                        .unwrap_or_else(|_| Err("the robot link stopped".into())),
-                );
-            }
-            c @ (ControlCommand::StartRecording { .. } | ControlCommand::StopRecording {}) => {
-                match &routes.recorder {
-                    Some(tx) => {
-                        if let Err(mpsc::error::SendError((_, reply))) = tx.send((c, reply)).await {
-                            let _ = reply.send(Err("the recorder is not running".into()));
-                        }
-                    }
-                    None => {
-                        let _ = reply.send(Err("recording is not available in this server".into()));
-                    }
-                }
-            }
+            },
         }
     }
 }
 
-async fn forward<T>(to: &mpsc::Sender<T>, msg: T) {
-    if to.send(msg).await.is_err() {
-        tracing::warn!("a command arrived after its actor stopped");
+/// Hands `command` to its owner without waiting; a full or closed inbox is answered at once.
+fn forward<C>(to: &mpsc::Sender<Envelope<C>>, command: C, reply: Reply, owner: &'static str) {
+    match to.try_send(Envelope { command, reply }) {
+        Ok(()) => {}
+        Err(mpsc::error::TrySendError::Full(e)) => e.answer(Err(CommandError::Busy(owner))),
+        Err(mpsc::error::TrySendError::Closed(e)) => e.answer(Err(CommandError::Unavailable(
+            format!("the {owner} is not running"),
+        ))),
     }
 }
 
@@ -223,18 +409,75 @@ mod tests {
     use super::*;
 
     #[test]
-    fn commands_parse_from_json() {
+    fn commands_parse_from_json_into_their_owner() {
         let c: ControlCommand =
             serde_json::from_str(r#"{"cmd":"set_mode","mode":"reactive"}"#).unwrap();
         assert_eq!(
             c,
-            ControlCommand::SetMode {
+            GatingCommand::SetMode {
                 mode: Mode::Reactive
             }
+            .into()
         );
         let c: ControlCommand = serde_json::from_str(r#"{"cmd":"human_request"}"#).unwrap();
-        assert_eq!(c, ControlCommand::HumanRequest { duration_ms: 500 });
+        assert_eq!(c, LearningCommand::HumanRequest { duration_ms: 500 }.into());
+        let c: ControlCommand = serde_json::from_str(r#"{"cmd":"estop"}"#).unwrap();
+        assert_eq!(c, LatchCommand::Estop {}.into());
         assert!(serde_json::from_str::<ControlCommand>(r#"{"cmd":"fly"}"#).is_err());
         assert!(serde_json::from_str::<ControlCommand>(r#"{"cmd":"estop","x":1}"#).is_err());
+    }
+
+    #[test]
+    fn every_name_is_unique_and_round_trips() {
+        let names: Vec<&str> = ControlCommand::names().collect();
+        let mut sorted = names.clone();
+        sorted.sort_unstable();
+        sorted.dedup();
+        assert_eq!(sorted.len(), names.len(), "{names:?}");
+        assert!(names.contains(&"estop") && names.contains(&"start_recording"));
+        let c: ControlCommand = LinkCommand::Rearm {}.into();
+        assert_eq!(serde_json::to_string(&c).unwrap(), r#"{"cmd":"rearm"}"#);
+    }
+
+    #[tokio::test]
+    async fn the_router_answers_busy_at_once_instead_of_waiting_for_a_full_inbox() {
+        let (estop, _estop_rx) = watch::channel(false);
+        let (gating, _gating_rx) = mpsc::channel(1);
+        let (learning, _l) = mpsc::channel(1);
+        let (link, _k) = mpsc::channel(1);
+        let (tx, rx) = mpsc::channel(8);
+        let cancel = CancellationToken::new();
+        let router = tokio::spawn(route(
+            rx,
+            Routes {
+                estop,
+                gating,
+                learning,
+                link,
+                recorder: None,
+            },
+            cancel.clone(),
+        ));
+        let mode = || GatingCommand::SetMode { mode: Mode::Manual };
+        let (first, _first_reply) = ControlRequest::new(mode());
+        tx.send(first).await.unwrap();
+        let (second, second_reply) = ControlRequest::new(mode());
+        tx.send(second).await.unwrap();
+        assert_eq!(
+            second_reply.await.unwrap(),
+            Err(CommandError::Busy("gating"))
+        );
+        // The e-stop behind a stuck owner still latches.
+        let (stop, stop_reply) = ControlRequest::new(LatchCommand::Estop {});
+        tx.send(stop).await.unwrap();
+        assert_eq!(
+            stop_reply.await.unwrap(),
+            Ok(Applied::Estop { estop: true })
+        );
+        let (rec, rec_reply) = ControlRequest::new(RecorderCommand::StopRecording {});
+        tx.send(rec).await.unwrap();
+        assert_eq!(rec_reply.await.unwrap().unwrap_err().code(), "rejected");
+        cancel.cancel();
+        router.await.unwrap();
     }
 }

@@ -1,26 +1,26 @@
 //! # pavlov-actors — the lab server's async shell
 //!
 //! Independent tokio tasks that own their state and talk over channels, each a thin shell over the pure
-//! core in the `pavlov` crate: the [`ticker`] (20 ms), [`sensor_ingest`] (robot bytes → observation),
-//! [`skeleton_ingest`] (pose), [`learning`], [`gating`], [`actuation`] and the [`link`] writer; the
-//! [`feed`] of tick records; the [`command`] router; and [`server`], which wires them together.
+//! core in the `pavlov` crate. One folder per concern (see `ARCHITECTURE.md`):
+//!
+//! - [`server`]: starts a server run (link, pipeline, recorder, skeleton) and stops it in a safe order;
+//! - [`command`]: the command vocabulary and its router;
+//! - [`pipeline`]: the tick graph (ticker, sensor and skeleton ingest, learning, gating, actuation, feed);
+//! - [`link`]: the serial link, its writer and its supervision;
+//! - [`simulated`]: the simulated Create and the simulated human;
+//! - [`dashboard`]: HTTP, the websocket and its protocol;
+//! - [`telemetry`]: tick health, histograms, Prometheus;
+//! - [`storage`]: recordings, replay, checkpoint files;
+//! - [`experiment`]: the paper's experiments on the real runtime under virtual time;
+//! - [`bench`]: the real-time benchmark and its load and abuse clients.
 
-pub mod actuation;
 pub mod bench;
-pub mod checkpoint;
 pub mod command;
+pub mod dashboard;
 pub mod experiment;
-pub mod feed;
-pub mod gating;
-pub mod histogram;
-pub mod human_sender;
-pub mod learning;
 pub mod link;
-pub mod recorder;
-pub mod recording;
-pub mod replay;
-pub mod sensor_ingest;
+pub mod pipeline;
 pub mod server;
-pub mod skeleton_ingest;
-pub mod ticker;
-pub mod ws;
+pub mod simulated;
+pub mod storage;
+pub mod telemetry;

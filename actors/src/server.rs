@@ -1,20 +1,21 @@
-//! Wiring: starts every actor of one server run, and stops them in an order that leaves the robot safe.
+//! One server run: the robot link, the tick pipeline, the recorder and the skeleton ingest, started by one
+//! builder and stopped in an order that leaves the robot safe.
 //!
-//! ```text
-//! ticker ─Tick─► sensor ingest ─Observation─► learning ─Prediction─► gating ─Decision─► actuation ─bytes─► writer ─► robot
-//!    │                                   ▲ pose (skeleton ingest)        ▲ mode/teleop        ▲ e-stop latch
-//!    └────────────── Tick (watchdog) ─────┼─────────────────────────────────┼────────────────────┘
-//! commands ─► router ─────────────────────┴─ params/reset/save/request ───┘          TickRecord ─► feed (dashboard, recorder)
-//! ```
+//! Start-up ([`ServerBuilder::start`]): the configuration and learning (with any checkpoint to resume) are
+//! checked first; then every listening socket (the skeleton's UDP port) is bound; only then is the robot
+//! touched — the link opened (or the simulator started), the start-up sequence sent, the link writer and
+//! the [`crate::pipeline`] started. A failure after the robot was touched shuts everything down in order.
 //!
-//! Shut-down: the actors are cancelled; actuation writes a stop and drops the writer's queue; the writer then
-//! sends stop, pause-stream and Start (→ Passive) and closes the link; only then does the server return.
+//! Shut-down ([`Server::shutdown`]): the actors are cancelled; actuation writes a stop and drops the
+//! writer's queue; the writer then sends stop, pause-stream and Start (→ Passive) and closes the link;
+//! only then does the server return.
 
-use std::sync::Arc;
 use std::time::Duration;
 
 use pavlov::config::Config;
+use pavlov::oi::handshake;
 use pavlov::oi::parser::StreamParser;
+use pavlov::sim::faults::FaultInjector;
 use pavlov::sim::params::SimParams;
 use pavlov::sim::robot::SimRobot;
 use pavlov::skeleton::PoseTracker;
@@ -24,25 +25,45 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
-use crate::actuation::{self, Actuation, ActuationStats};
-use crate::command::{self, CommandRoutes, ControlRequest};
-use crate::feed::TickFeed;
-use crate::gating;
-use crate::learning::{self, Learning};
-use crate::link::opener::{LinkOpener, SerialOpener};
+use crate::command::ControlRequest;
+use crate::link::opener::LinkOpener;
+use crate::link::serial::{SerialOpener, open_serial};
 use crate::link::supervisor::Supervisor;
-use crate::link::{LinkError, LinkReader, LinkWriter, OpenLink, handshake, transport, writer};
-use crate::ticker::{self, SharedTickStats};
-use pavlov::agent::GatingStage;
-use pavlov::sim::faults::FaultInjector;
+use crate::link::{LinkError, OpenLink, writer};
+use crate::pipeline::feed::TickFeed;
+use crate::pipeline::learning::Learning;
+use crate::pipeline::sensor_ingest::IngestLink;
+use crate::pipeline::skeleton_ingest::{self, SkeletonIngest};
+use crate::pipeline::{self, PipelineParts};
+use crate::simulated::{SimStatus, robot};
+use crate::storage::checkpoint_files;
+use crate::storage::recorder::RecorderLink;
+use crate::telemetry::Health;
+use crate::telemetry::counters::SharedWriterStats;
 
 /// Where the robot is.
-#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum RobotTarget {
     /// The simulated Create, in process.
     Simulated,
     /// A serial device (a real Create, or `pavlov sim --pty`).
     Serial(String),
+    /// A link opened by the caller (tests); `sim` is the simulator task behind it, if any.
+    Link {
+        /// The open link.
+        link: OpenLink,
+        /// The simulator task, returned by [`Server::shutdown`].
+        sim: Option<JoinHandle<SimRobot>>,
+    },
+}
+
+impl std::fmt::Debug for RobotTarget {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RobotTarget::Simulated => write!(f, "Simulated"),
+            RobotTarget::Serial(path) => write!(f, "Serial({path})"),
+            RobotTarget::Link { .. } => write!(f, "Link"),
+        }
+    }
 }
 
 /// Errors starting the server.
@@ -53,7 +74,7 @@ pub enum ServerError {
     Link(#[from] LinkError),
     /// The skeleton ingest could not start (`[skeleton] listen` taken or invalid).
     #[error("skeleton ingest: {0}; stop whatever holds the port or change [skeleton] listen")]
-    Skeleton(crate::skeleton_ingest::IngestError),
+    Skeleton(skeleton_ingest::IngestError),
     /// The configuration is invalid.
     #[error("configuration: {0}")]
     Config(#[from] pavlov::config::ConfigError),
@@ -62,18 +83,215 @@ pub enum ServerError {
     Learning(String),
 }
 
+/// Builds a server: [`Server::builder`], then options, then [`ServerBuilder::start`].
+pub struct ServerBuilder {
+    config: Config,
+    target: RobotTarget,
+    recorder: Option<RecorderLink>,
+}
+
+impl ServerBuilder {
+    /// Also hands every tick record to `recorder`, and routes recording commands to it.
+    pub fn recorder(mut self, recorder: RecorderLink) -> Self {
+        self.recorder = Some(recorder);
+        self
+    }
+
+    /// Checks everything, binds the listening sockets, opens the robot link, sends the start-up sequence
+    /// and starts every actor.
+    pub async fn start(self) -> Result<Server, ServerError> {
+        let ServerBuilder {
+            config,
+            target,
+            recorder,
+        } = self;
+        config.validate()?;
+        // Learning (and any checkpoint to resume) is checked before the robot is touched.
+        let learning = build_learning(&config)?;
+        let stream = config.robot.stream_ids();
+        let model = config.robot.model;
+        let startup = handshake::startup_bytes(model, config.robot.oi_mode, &stream)
+            .map_err(LinkError::from)?;
+        let shutdown = handshake::shutdown_bytes(model).map_err(LinkError::from)?;
+        let parser = StreamParser::new(&stream)
+            .map_err(LinkError::from)?
+            .with_model(model);
+        let cancel = CancellationToken::new();
+        let period = Duration::from_millis(config.tick.period_ms);
+        let started = Instant::now() + period;
+        let (pose_tx, pose_rx) = watch::channel(PoseTracker::new(config.skeleton.max_joint_age_ms));
+        drop(pose_rx);
+        // Every listening socket is bound before a byte goes to the robot.
+        let skeleton = skeleton_ingest::bind_for(&config)
+            .await
+            .map_err(ServerError::Skeleton)?;
+
+        let sim_cancel = CancellationToken::new();
+        let (link, sim, sim_status) = open_robot(&config, target, &sim_cancel)?;
+        let OpenLink {
+            reader,
+            writer: mut link_writer,
+            opener,
+        } = link;
+        let mut stopper = Stopper {
+            sim_cancel: sim_cancel.clone(),
+            sim,
+        };
+        // Frames no Create could send (values out of range) are rejected like a bad checksum.
+        let sent = async {
+            link_writer.write_all(&startup).await?;
+            link_writer.flush().await
+        }
+        .await;
+        if let Err(e) = sent {
+            stopper.stop().await;
+            return Err(LinkError::Io(e).into());
+        }
+        let link_up_at = Instant::now();
+        tracing::info!(%model, ?stream, "robot link up: start-up sequence sent");
+
+        let (write_tx, write_rx) = mpsc::channel(16);
+        let (control_tx, control_rx) = mpsc::channel(8);
+        let writer_stats = SharedWriterStats::default();
+        let writer = tokio::spawn(writer::run(
+            link_writer,
+            write_rx,
+            control_rx,
+            shutdown,
+            writer_stats.clone(),
+        ));
+        let obs_names = learning.obs_names();
+        let (feed, recorder_commands) = match recorder {
+            Some(r) => (TickFeed::new().with_recorder(r.records), Some(r.commands)),
+            None => (TickFeed::new(), None),
+        };
+        let ingest = IngestLink {
+            reader,
+            parser,
+            supervisor: Supervisor::new(&config, opener, control_tx, link_up_at),
+        };
+        let pipeline = pipeline::spawn(
+            &config,
+            PipelineParts {
+                learning,
+                ingest,
+                writer: write_tx,
+                feed: feed.clone(),
+                recorder: recorder_commands,
+                started,
+            },
+            &cancel,
+        );
+        let mut actors = pipeline.tasks;
+        let pose = pipeline.pose;
+        // The bound skeleton socket starts publishing into the pipeline's pose channel.
+        let skeleton = skeleton.map(|bound| {
+            let (ingest, task) = bound.spawn(pose.clone(), started, cancel.clone());
+            actors.push(task);
+            ingest
+        });
+        drop(pose_tx);
+        let health = Health {
+            ticks: pipeline.ticks,
+            writer: writer_stats,
+            actuation: pipeline.actuation,
+            sim: sim_status,
+            recorder: feed.recorder_gauge(),
+            link: feed.latest_link(),
+        };
+        actors.push(tokio::spawn(crate::telemetry::health_log::run(
+            health.clone(),
+            cancel.clone(),
+        )));
+        Ok(Server {
+            feed,
+            commands: pipeline.commands,
+            pose,
+            started,
+            config,
+            obs_names,
+            skeleton,
+            health,
+            _cancel_on_drop: cancel.clone().drop_guard(),
+            cancel,
+            actors,
+            writer,
+            stopper,
+        })
+    }
+}
+
+/// An opened robot: the link, the simulator task behind it and its status (when simulated).
+type OpenedRobot = (
+    OpenLink,
+    Option<JoinHandle<SimRobot>>,
+    Option<watch::Receiver<SimStatus>>,
+);
+
+/// Opens the robot link for `target`: the simulator (with its faults) or a serial port.
+fn open_robot(
+    config: &Config,
+    target: RobotTarget,
+    sim_cancel: &CancellationToken,
+) -> Result<OpenedRobot, ServerError> {
+    let model = config.robot.model;
+    Ok(match target {
+        RobotTarget::Simulated => {
+            let robot = SimRobot::new(model, SimParams::for_model(model), config.sim.seed);
+            let faults = config.sim.fault_spec()?;
+            // The injector forks its own streams from the seed, apart from the robot's.
+            let injector = FaultInjector::new(faults, config.sim.seed);
+            let l = robot::spawn_sim_with_faults(robot, injector, sim_cancel.clone());
+            let opener: Box<dyn LinkOpener> = Box::new(l.device);
+            let link = OpenLink {
+                reader: l.reader,
+                writer: l.writer,
+                opener: Some(opener),
+            };
+            (link, Some(l.robot), Some(l.status))
+        }
+        RobotTarget::Serial(path) => {
+            let (reader, writer) = open_serial(&path, model)?;
+            let opener: Box<dyn LinkOpener> = Box::new(SerialOpener::new(path, model));
+            let link = OpenLink {
+                reader,
+                writer,
+                opener: Some(opener),
+            };
+            (link, None, None)
+        }
+        RobotTarget::Link { link, sim } => (link, sim, None),
+    })
+}
+
+/// Stops the simulator behind the link (if any) once the link is closed.
+struct Stopper {
+    sim_cancel: CancellationToken,
+    sim: Option<JoinHandle<SimRobot>>,
+}
+
+impl Stopper {
+    /// Waits up to a second for the simulator to see the link closed, then cancels it.
+    async fn stop(&mut self) -> Option<SimRobot> {
+        let handle = self.sim.take()?;
+        // The writer closed the link after the shut-down sequence; the simulator stops at end-of-file.
+        let cancel = self.sim_cancel.clone();
+        let guard = tokio::spawn(async move {
+            tokio::time::sleep(Duration::from_secs(1)).await;
+            cancel.cancel();
+        });
+        let robot = handle.await.ok();
+        guard.abort();
+        robot
+    }
+}
+
 /// A running server.
 pub struct Server {
     /// Every tick's record.
     pub feed: TickFeed,
     /// Inject commands here.
     pub commands: mpsc::Sender<ControlRequest>,
-    /// Tick lateness and skips.
-    pub tick_stats: SharedTickStats,
-    /// Tick-to-command latency and write errors.
-    pub writer_stats: writer::SharedWriterStats,
-    /// Actuation's counters.
-    pub actuation_stats: watch::Receiver<ActuationStats>,
     /// Publish skeleton poses here (the skeleton ingest actor, or a test).
     pub pose: watch::Sender<PoseTracker>,
     /// The time the first tick was due.
@@ -81,16 +299,14 @@ pub struct Server {
     /// The configuration in force at start-up.
     pub config: Config,
     /// The skeleton ingest, when `[skeleton]` is enabled and its socket opened.
-    pub skeleton: Option<crate::skeleton_ingest::SkeletonIngest>,
+    pub skeleton: Option<SkeletonIngest>,
     /// Names of the observation vector's dimensions, in record order.
     pub obs_names: Vec<String>,
-    /// The in-process simulated robot's state after each step (and the faults injected), when simulated.
-    pub sim_status: Option<watch::Receiver<transport::SimStatus>>,
+    health: Health,
     cancel: CancellationToken,
-    sim_cancel: CancellationToken,
     actors: Vec<JoinHandle<()>>,
     writer: JoinHandle<()>,
-    sim: Option<JoinHandle<SimRobot>>,
+    stopper: Stopper,
     // A server dropped without `shutdown` still stops its actors (actuation then stops the wheels).
     _cancel_on_drop: tokio_util::sync::DropGuard,
 }
@@ -102,257 +318,18 @@ pub struct ShutdownReport {
 }
 
 impl Server {
-    /// Opens the robot link, sends the start-up sequence and starts every actor.
-    pub async fn start(config: Config, target: RobotTarget) -> Result<Server, ServerError> {
-        Self::start_with_recorder(config, target, None).await
-    }
-
-    /// Like [`Server::start`], with every tick record also queued to `recorder` (and the router's
-    /// start/stop-recording commands sent to it).
-    pub async fn start_with_recorder(
-        config: Config,
-        target: RobotTarget,
-        recorder: Option<crate::recorder::RecorderLink>,
-    ) -> Result<Server, ServerError> {
-        let model = config.robot.model;
-        let sim_cancel = CancellationToken::new();
-        // A checkpoint that cannot be resumed is refused before the robot (or the simulator) is touched.
-        if config.checkpoint.resume {
-            crate::checkpoint::load_for_resume(&config)
-                .map_err(|e| ServerError::Learning(format!("--resume: {e}")))?;
-        }
-        let mut sim_status = None;
-        let (link, sim) = match &target {
-            RobotTarget::Simulated => {
-                let robot = SimRobot::new(model, SimParams::for_model(model), config.sim.seed);
-                let faults = config.sim.fault_spec()?;
-                // The injector forks its own streams from the seed, apart from the robot's.
-                let injector = FaultInjector::new(faults, config.sim.seed);
-                let l = transport::spawn_sim_with_faults(robot, injector, sim_cancel.clone());
-                let opener: Box<dyn LinkOpener> = Box::new(l.device);
-                sim_status = Some(l.status);
-                let link = OpenLink {
-                    reader: l.reader,
-                    writer: l.writer,
-                    opener: Some(opener),
-                };
-                (link, Some(l.robot))
-            }
-            RobotTarget::Serial(path) => {
-                let (r, w) = transport::open_serial(path, model)?;
-                let opener: Box<dyn LinkOpener> = Box::new(SerialOpener::new(path.clone(), model));
-                let link = OpenLink {
-                    reader: r,
-                    writer: w,
-                    opener: Some(opener),
-                };
-                (link, None)
-            }
-        };
-        let mut server =
-            Self::start_on_link_with_recorder(config, link, sim, sim_cancel, recorder).await?;
-        server.sim_status = sim_status;
-        Ok(server)
-    }
-
-    /// Starts the server on an already open link (`sim`: the simulator task behind it, if any). The link
-    /// cannot be reopened: a dead stream is re-synced with backoff instead.
-    pub async fn start_on_link(
-        config: Config,
-        reader: LinkReader,
-        link_writer: LinkWriter,
-        sim: Option<JoinHandle<SimRobot>>,
-        sim_cancel: CancellationToken,
-    ) -> Result<Server, ServerError> {
-        Self::start_on_link_with_recorder(
+    /// A builder for a server of `config` driving `target`.
+    pub fn builder(config: Config, target: RobotTarget) -> ServerBuilder {
+        ServerBuilder {
             config,
-            OpenLink {
-                reader,
-                writer: link_writer,
-                opener: None,
-            },
-            sim,
-            sim_cancel,
-            None,
-        )
-        .await
+            target,
+            recorder: None,
+        }
     }
 
-    /// [`Server::start_on_link`] with a way to reopen the link and an optional recorder.
-    pub async fn start_on_link_with_recorder(
-        config: Config,
-        link: OpenLink,
-        sim: Option<JoinHandle<SimRobot>>,
-        sim_cancel: CancellationToken,
-        recorder: Option<crate::recorder::RecorderLink>,
-    ) -> Result<Server, ServerError> {
-        let OpenLink {
-            reader,
-            writer: mut link_writer,
-            opener,
-        } = link;
-        let model = config.robot.model;
-        let stream = config.robot.stream_ids();
-        let period = Duration::from_millis(config.tick.period_ms);
-        let cancel = CancellationToken::new();
-        // Learning (and any checkpoint to resume) is checked before a byte goes to the robot.
-        let learning = build_learning(&config)?;
-        let startup = handshake::startup_bytes(model, config.robot.oi_mode, &stream)
-            .map_err(LinkError::from)?;
-        link_writer
-            .write_all(&startup)
-            .await
-            .map_err(LinkError::Io)?;
-        link_writer.flush().await.map_err(LinkError::Io)?;
-        let link_up_at = Instant::now();
-        tracing::info!(%model, ?stream, "robot link up: start-up sequence sent");
-        // Frames no Create could send (values out of range) are rejected like a bad checksum.
-        let parser = StreamParser::new(&stream)
-            .map_err(LinkError::from)?
-            .with_model(model);
-
-        let obs_names = learning.obs_names();
-        let gating = GatingStage::new(
-            config.control.mode,
-            config.control.default_policy,
-            config.control.response,
-        );
-        let actuation = Actuation::new(model, config.safety.clone());
-
-        let (tick_tx, tick_rx) = watch::channel(None);
-        let (obs_tx, obs_rx) = mpsc::channel(4);
-        let (pred_tx, pred_rx) = mpsc::channel(4);
-        let (dec_tx, dec_rx) = mpsc::channel(4);
-        let (write_tx, write_rx) = mpsc::channel(16);
-        let (control_tx, control_rx) = mpsc::channel(8);
-        let (link_cmd_tx, link_cmd_rx) = mpsc::channel(4);
-        let (cmd_tx, cmd_rx) = mpsc::channel(64);
-        let (gating_cmd_tx, gating_cmd_rx) = mpsc::channel(16);
-        let (learning_cmd_tx, learning_cmd_rx) = mpsc::channel(16);
-        let (estop_tx, estop_rx) = watch::channel(false);
-        let (act_stats_tx, act_stats_rx) = watch::channel(ActuationStats::default());
-        let (pose_tx, pose_rx) = watch::channel(PoseTracker::new(config.skeleton.max_joint_age_ms));
-        let (feed, recorder_commands) = match recorder {
-            Some(r) => (TickFeed::new().with_recorder(r.records), Some(r.commands)),
-            None => (TickFeed::new(), None),
-        };
-        let tick_stats = SharedTickStats::default();
-        let writer_stats = writer::SharedWriterStats::default();
-
-        let shutdown = handshake::shutdown_bytes(model).map_err(LinkError::from)?;
-        let writer = tokio::spawn(writer::run(
-            link_writer,
-            write_rx,
-            control_rx,
-            shutdown,
-            writer_stats.clone(),
-        ));
-        let started = Instant::now() + period;
-        let mut actors = vec![
-            tokio::spawn(ticker::run(
-                started,
-                period,
-                tick_tx,
-                tick_stats.clone(),
-                cancel.clone(),
-            )),
-            tokio::spawn(crate::sensor_ingest::run(
-                crate::sensor_ingest::IngestLink {
-                    reader,
-                    parser,
-                    supervisor: Supervisor::new(&config, opener, control_tx, link_up_at),
-                    commands: link_cmd_rx,
-                },
-                period,
-                tick_rx.clone(),
-                obs_tx,
-                cancel.clone(),
-            )),
-            tokio::spawn(learning::run(
-                learning,
-                started,
-                obs_rx,
-                pose_rx,
-                learning_cmd_rx,
-                pred_tx,
-                cancel.clone(),
-            )),
-            tokio::spawn(gating::run(
-                gating,
-                pred_rx,
-                gating_cmd_rx,
-                dec_tx,
-                cancel.clone(),
-            )),
-            tokio::spawn(actuation::run(
-                actuation,
-                actuation::ActuationChannels {
-                    decisions: dec_rx,
-                    ticks: tick_rx,
-                    estop: estop_rx,
-                    writer: write_tx,
-                    feed: feed.clone(),
-                    stats: act_stats_tx,
-                },
-                cancel.clone(),
-            )),
-            tokio::spawn(command::route(
-                cmd_rx,
-                CommandRoutes {
-                    gating: gating_cmd_tx,
-                    learning: learning_cmd_tx,
-                    link: link_cmd_tx,
-                    estop: estop_tx,
-                    recorder: recorder_commands,
-                },
-                cancel.clone(),
-            )),
-            tokio::spawn(log_health(
-                (tick_stats.clone(), writer_stats.clone()),
-                cancel.clone(),
-            )),
-        ];
-        // A skeleton port that cannot be opened stops the start-up: the gesture experiment would run blind.
-        let (skeleton, skeleton_error) = match crate::skeleton_ingest::start_for(
-            &config,
-            pose_tx.clone(),
-            started,
-            cancel.clone(),
-        )
-        .await
-        {
-            Ok(Some((ingest, handle))) => {
-                actors.push(handle);
-                (Some(ingest), None)
-            }
-            Ok(None) => (None, None),
-            Err(e) => (None, Some(e)),
-        };
-        let server = Server {
-            feed,
-            commands: cmd_tx,
-            tick_stats,
-            writer_stats,
-            actuation_stats: act_stats_rx,
-            pose: pose_tx,
-            started,
-            config,
-            obs_names,
-            sim_status: None,
-            skeleton,
-            _cancel_on_drop: cancel.clone().drop_guard(),
-            cancel,
-            sim_cancel,
-            actors,
-            writer,
-            sim,
-        };
-        if let Some(e) = skeleton_error {
-            // Everything already started is stopped in order (the robot is left stopped, in Passive).
-            server.shutdown().await;
-            return Err(ServerError::Skeleton(e));
-        }
-        Ok(server)
+    /// Every health figure of this server (tick timing, latency, counters).
+    pub fn health(&self) -> Health {
+        self.health.clone()
     }
 
     /// A token that, when cancelled, stops the server's actors (the caller still awaits [`Server::shutdown`]).
@@ -361,31 +338,19 @@ impl Server {
     }
 
     /// Stops every actor, sends the shut-down sequence to the robot and waits for it to be written.
-    pub async fn shutdown(self) -> ShutdownReport {
+    pub async fn shutdown(mut self) -> ShutdownReport {
         self.cancel.cancel();
-        for a in self.actors {
+        for a in std::mem::take(&mut self.actors) {
             if let Err(e) = a.await {
                 tracing::error!("an actor panicked: {e}");
             }
         }
-        if let Err(e) = self.writer.await {
+        if let Err(e) = (&mut self.writer).await {
             tracing::error!("the link writer panicked: {e}");
         }
-        let sim_robot = match self.sim {
-            Some(handle) => {
-                // The writer closed the link after the shut-down sequence; the simulator stops at end-of-file.
-                let cancel = self.sim_cancel.clone();
-                let guard = tokio::spawn(async move {
-                    tokio::time::sleep(Duration::from_secs(1)).await;
-                    cancel.cancel();
-                });
-                let robot = handle.await.ok();
-                guard.abort();
-                robot
-            }
-            None => None,
-        };
-        ShutdownReport { sim_robot }
+        ShutdownReport {
+            sim_robot: self.stopper.stop().await,
+        }
     }
 }
 
@@ -394,7 +359,7 @@ impl Server {
 fn build_learning(config: &Config) -> Result<Learning, ServerError> {
     let mut learning = Learning::new(config).map_err(|e| ServerError::Learning(e.to_string()))?;
     if config.checkpoint.resume {
-        let (path, checkpoint) = crate::checkpoint::load_for_resume(config)
+        let (path, checkpoint) = checkpoint_files::load_for_resume(config)
             .map_err(|e| ServerError::Learning(format!("--resume: {e}")))?;
         learning
             .resume(&checkpoint)
@@ -408,39 +373,3 @@ fn build_learning(config: &Config) -> Result<Learning, ServerError> {
     }
     Ok(learning)
 }
-
-/// Logs tick health once a minute until `cancel` fires.
-pub async fn log_health(
-    server_stats: (SharedTickStats, writer::SharedWriterStats),
-    cancel: CancellationToken,
-) {
-    let (ticks, writes) = server_stats;
-    let mut every = tokio::time::interval_at(
-        Instant::now() + Duration::from_secs(60),
-        Duration::from_secs(60),
-    );
-    loop {
-        tokio::select! {
-            _ = cancel.cancelled() => break,
-            _ = every.tick() => {
-                let (lat, fired, skipped) = match ticks.lock() {
-                    Ok(s) => (s.lateness.summary(), s.fired, s.skipped),
-                    Err(_) => continue,
-                };
-                let cmd = match writes.lock() {
-                    Ok(s) => s.tick_to_command.summary(),
-                    Err(_) => continue,
-                };
-                tracing::info!(
-                    fired, skipped,
-                    lateness_p50_us = lat.p50_us, lateness_p99_us = lat.p99_us, lateness_max_us = lat.max_us,
-                    tick_to_command_p50_us = cmd.p50_us, tick_to_command_p99_us = cmd.p99_us, tick_to_command_max_us = cmd.max_us,
-                    "tick health"
-                );
-            }
-        }
-    }
-}
-
-/// Shared pointer alias used by subscribers.
-pub type Record = Arc<pavlov::record::TickRecord>;

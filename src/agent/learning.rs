@@ -41,6 +41,19 @@ pub struct LearnInput<'a> {
     pub forced_stimulus: bool,
 }
 
+/// A prediction's learning parameters in force.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamsInForce {
+    /// The prediction's name.
+    pub prediction: String,
+    /// Step size α.
+    pub alpha: f64,
+    /// Trace decay λ.
+    pub lambda: f64,
+    /// Gate threshold θ.
+    pub threshold: f64,
+}
+
 /// What the stage produced for acting.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LearnOutput {
@@ -188,40 +201,51 @@ impl LearningStage {
         self.set.learn(&[stimulus]).map(|_| ())
     }
 
-    /// Whether a tick's observation may be learned from: a frame older than `max_age_ticks`, or one seen
-    /// while the link is not up (stale, reconnecting, tripped), is a repeat of the past, not this tick's
-    /// state. Such a tick is predicted (for acting) but not learned from; the next learned tick starts a
-    /// fresh chain, so no credit crosses the gap (see `PredictionSet`).
-    pub fn observation_is_fresh(
-        age_ticks: Option<u32>,
-        link: crate::supervision::LinkState,
-        max_age_ticks: u32,
-    ) -> bool {
-        link == crate::supervision::LinkState::Up && age_ticks.is_some_and(|a| a <= max_age_ticks)
-    }
-
     /// Forgets the previous tick (after a gap in the sensor stream): credit is not carried across it.
     pub fn break_chain(&mut self) {
         self.set.break_chain();
     }
 
-    /// Changes α, λ or θ of prediction `name` (default: the gating prediction).
+    /// The parameters in force for prediction `name` (default: the gating prediction).
+    pub fn params(&self, name: Option<&str>) -> Option<ParamsInForce> {
+        let spec = match name {
+            Some(n) => self.set.specs().find(|s| s.name == n),
+            None => self.set.specs().nth(self.gate_index),
+        }?;
+        Some(ParamsInForce {
+            prediction: spec.name.clone(),
+            alpha: spec.alpha,
+            lambda: spec.lambda,
+            threshold: spec.threshold_value(),
+        })
+    }
+
+    /// Changes α, λ or θ of prediction `name` (default: the gating prediction) and returns the
+    /// parameters now in force. On error nothing changes.
     pub fn set_params(
         &mut self,
         name: Option<&str>,
         alpha: Option<f64>,
         lambda: Option<f64>,
         threshold: Option<f64>,
-    ) -> Result<String, LearnError> {
-        let name = match name {
-            Some(n) => n.to_string(),
-            None => self
-                .set
-                .specs()
-                .nth(self.gate_index)
-                .map(|s| s.name.clone())
-                .unwrap_or_default(),
+    ) -> Result<ParamsInForce, LearnError> {
+        let name = match self.params(name) {
+            Some(p) => p.prediction,
+            None => {
+                return Err(LearnError::UnknownPrediction(
+                    name.unwrap_or("").to_string(),
+                ));
+            }
         };
+        if let Some(a) = alpha {
+            crate::learn::td::check_alpha(&name, a)?;
+        }
+        if let Some(l) = lambda {
+            crate::learn::td::check_lambda(&name, l)?;
+        }
+        if let Some(t) = threshold {
+            crate::learn::spec::check_threshold(&name, Threshold::Fixed(t))?;
+        }
         if let Some(a) = alpha {
             self.set.set_alpha(&name, a)?;
         }
@@ -231,7 +255,8 @@ impl LearningStage {
         if let Some(t) = threshold {
             self.set.set_threshold(&name, Threshold::Fixed(t))?;
         }
-        Ok(name)
+        self.params(Some(&name))
+            .ok_or(LearnError::UnknownPrediction(name))
     }
 
     /// Resets every weight and trace to its initial value.
@@ -329,9 +354,10 @@ mod tests {
         assert_eq!(out.gate_value, None, "no valid input, no valid prediction");
         s.learn().unwrap();
         assert!(s.learn().is_err(), "learn twice without act");
+        let p = s.set_params(None, Some(0.01), None, Some(0.7)).unwrap();
         assert_eq!(
-            s.set_params(None, Some(0.01), None, Some(0.7)).unwrap(),
-            "stall"
+            (p.prediction.as_str(), p.alpha, p.threshold),
+            ("stall", 0.01, 0.7)
         );
         assert!(s.set_params(Some("nope"), Some(0.01), None, None).is_err());
     }

@@ -5,11 +5,15 @@
 //!
 //! - [`learning`]: observation → stimulus, features, predictions (act first), then the TD(λ) update.
 //! - [`gating`]: prediction + stimulus + mode → the action, with manual teleop and the e-stop.
+//! - [`safety`]: the one predicate for safety stops and for observations fresh enough to learn from.
+//! - [`tick_record`]: assembling a tick's record after actuation.
 //! - [`summary`]: the raw readings a tick record carries.
 
 pub mod gating;
 pub mod learning;
+pub mod safety;
 pub mod summary;
+pub mod tick_record;
 
 pub use gating::{GateOutput, GatingStage};
 pub use learning::{LearnInput, LearnOutput, LearningStage};

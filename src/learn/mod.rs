@@ -8,7 +8,8 @@
 //! - [`set`]: [`PredictionSet`], many predictions learned side by side, act first then learn.
 //! - [`snapshot`]: [`SetSnapshot`], checkpoints of weights, traces and the previous step.
 //!
-//! Facts: `shared/reference/learning.md` (§3.1 tile coding, §4.1 the update equations).
+//! Facts: the paper's update equations (TD(λ) with an output nonlinearity σ), tile coding as in [SB] and
+//! [tiles3] (`docs/SOURCES.md`).
 
 pub mod checkpoint;
 pub mod error;

@@ -8,12 +8,17 @@
 //! - [`frame`]: stream frames (header 19, length, id/data pairs, checksum).
 //! - [`parser`]: the incremental, resynchronising stream parser.
 //! - [`plausible`]: the documented value ranges that reveal a damaged frame with a valid checksum.
+//! - [`mode`]: the OI modes (packet 35 codes; Safe or Full to drive in).
+//! - [`handshake`]: the byte sequences of start-up, re-sync, re-arm and shut-down.
 //!
-//! Facts: `../shared/reference/create_oi.md` (the two OI specifications, cited there as [C1] and [C2]).
+//! Facts: the two OI specifications, cited as [C1] (Create 1) and [C2] (Create 2) with their page numbers
+//! (`docs/SOURCES.md`).
 
 pub mod command;
 pub mod error;
 pub mod frame;
+pub mod handshake;
+pub mod mode;
 pub mod model;
 pub mod packets;
 pub mod parser;

@@ -335,7 +335,7 @@ impl StreamParser {
     }
 
     /// Parses `chunk` and returns only the newest valid frame in it, for a driver that must never work
-    /// through a backlog in order (libcreate#68 in the reference).
+    /// through a backlog in order (a parser that did led to delays of minutes: AutonomyLab/libcreate issue 68).
     pub fn feed_newest(&mut self, chunk: &[u8]) -> Option<SensorValues> {
         let mut newest = None;
         self.feed(chunk, |values| newest = Some(values));

@@ -6,15 +6,15 @@
 //! values that are mostly impossible for a real robot: a bit set where the specification says the
 //! bit is unused, a boolean of 37, a cliff signal of 40 000. [`implausible`] finds the first value
 //! outside what the specifications allow, so the parser can reject the frame instead of committing
-//! it (reference §4.3 items 2 and 9: "validate ranges (e.g. 35 ≤ 3, cliff signals ≤ 4095) to detect
+//! it (drivers that parse unframed replies learned this the hard way, e.g. pycreate2 issue 12: "validate ranges (e.g. 35 ≤ 3, cliff signals ≤ 4095) to detect
 //! misalignment").
 //!
 //! Every bound is documented, and chosen so that **no genuine frame can break it**: where a source
 //! is unsure, or the two models' documents disagree, the wider range is used, and a packet without a
 //! range is not checked — except two bounds derived from physical limits with a wide margin (22
 //! voltage, 54–57 motor currents). Should any bound still be wrong for some robot, the waiver below
-//! limits the cost to a few frames. Sources: `../shared/reference/create_oi.md`, its packet table
-//! §3.2 (from [C1 pp17–21, 24–25; C2 pp23–32, 37–39]) unless a page is given.
+//! limits the cost to a few frames. Sources: the packet tables of [C1 pp17–21, 24–25; C2 pp23–32, 37–39]
+//! unless a page is given (tags: `docs/SOURCES.md`).
 //!
 //! | Packet | Create 1 | Create 2 | Source / reasoning |
 //! |---|---|---|---|
@@ -24,13 +24,13 @@
 //! | 15 C1 unused / C2 dirt detect | 0 | — | C1 "always 0"; C2 0–255 |
 //! | 16 unused | 0 | 0 | "always 0" on both |
 //! | 21 charging state | 0–5 | 0–6 | codes 0–5 [C1 p19; C2 p27]; the C2 membership table says 0–6 |
-//! | 22 voltage | 0–25 000 mV | 0–25 000 mV | *derived*: battery rail 10–20.5 V incl. charger [BATT, §1.1], + 20 % |
+//! | 22 voltage | 0–25 000 mV | 0–25 000 mV | *derived*: battery rail 10–20.5 V incl. charger [BATT], + 20 % |
 //! | 27 wall signal | 0–4095 | 0–1023 | "0–4095" / "0–1023" |
-//! | 28–31 cliff signals | 0–4095 | 0–4095 | "0–4095"; §4.3 item 9 |
+//! | 28–31 cliff signals | 0–4095 | 0–4095 | "0–4095"; drivers check it to detect misaligned replies |
 //! | 32 cargo-bay digital inputs | 0–31 | — | C1 bits 0–4; the C2 "unused" byte is not said to be 0 |
 //! | 33 cargo-bay analog signal | 0–1023 | — | C1 10-bit; C2 unused bytes |
 //! | 34 charging sources | 0–3 | 0–3 | bits 0–1, "0–3" |
-//! | 35 OI mode | 0–4 | 0–4 | 0–3, plus the mode+1 firmware quirk (create_robot#64, libcreate#67; §5.5) |
+//! | 35 OI mode | 0–4 | 0–4 | 0–3, plus the mode+1 firmware quirk (create_robot#64, libcreate#67) |
 //! | 36 song number | 0–15 | 0–15 | C1 0–15; C2 table 0–4 but its text says 0–15 |
 //! | 37 song playing | 0–1 | 0–1 | boolean |
 //! | 38 stream packet count | 0–43 | 0–108 | C1 0–43 (quick reference 0–42), C2 0–108 |
@@ -38,7 +38,7 @@
 //! | 41, 42 requested right / left velocity | ±500 | ±500 | "−500..500 mm/s" |
 //! | 45 light bumper | — | 0–127 | "0–127" [C2 p38] |
 //! | 46–51 light-bump signals | — | 0–4095 | "0–4095" |
-//! | 54–57 wheel / brush motor currents | — | ±10 000 mA | *derived*: no documented range; brush drivers rated ≤ 1.45 A [BATT, §5.3], wheels limited at 1 A [C1 p10]; 10 A is several times any stall |
+//! | 54–57 wheel / brush motor currents | — | ±10 000 mA | *derived*: no documented range; brush drivers rated ≤ 1.45 A [BATT], wheels limited at 1 A [C1 p10]; 10 A is several times any stall |
 //! | 58 stasis | — | 0–3 | bits 0–1 [C2 p32, p38] |
 //! | 19 distance (frame after a frame) | ±500 mm | ±500 mm | 15 ms at 500 mm/s is 7.5 mm; see below |
 //! | 20 angle (frame after a frame) | ±360° | ±360° | 15 ms at 4.3 rad/s is 3.7° (×3.1 on C2 fw ≤ 3.4.0 [C2 p27]) |

@@ -1,5 +1,5 @@
 //! Fault injection for the simulated Create's serial link (issue #7): what a real robot, cable and
-//! USB adapter do to a stream over weeks (reference §4.2, §5.5).
+//! USB adapter do to a stream over weeks, as driver issue threads report them (`docs/SOURCES.md`).
 //!
 //! - [`FaultSpec`] says what to inject; it parses from a short string (`"drop=1e-4,text=0.002,quirk"`,
 //!   presets `none`, `soak`, `all`; the grammar is in `parse`) or deserialises from TOML.

@@ -6,7 +6,8 @@
 //! - Both are reported as whole units, truncated toward zero and capped at the i16 range; a report
 //!   (stream frame, Sensors, Query List) subtracts what it reported. With
 //!   `keep_odometry_remainder` the fraction left over (and nothing beyond the cap) carries into the next
-//!   report; without it every report starts from zero. The firmware's choice is unknown [reference §5.2].
+//!   report; without it every report starts from zero. The firmware's choice is undocumented [C1 pp18–19; C2 p27];
+//!   create_robot issue 28 reports slow turns reading 0 on a Create 1.
 //! - Encoders [C2 p30–31]: counters of wheel travel in counts of π·72/508.8 mm that wrap at 16 bits;
 //!   they are not quadrature, so they count in the *commanded* direction (up when the command is zero).
 

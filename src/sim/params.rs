@@ -1,9 +1,8 @@
 //! [`SimParams`]: every physical parameter of the simulated Create in one documented place.
 //!
-//! Each field says where its value comes from. Source tags are those of
-//! `../shared/reference/create_oi.md`: [C1 pN] Create 1 OI spec, [C2 pN] Create 2 OI spec, [HR] *Hacking
-//! Roomba*, [BATT] iRobot's Create 2 battery note; "paper" is Modayil & Sutton, *Prediction Driven
-//! Behavior*. Values marked *estimate* have no primary source; the comment gives the reasoning.
+//! Each field says where its value comes from. Source tags (`docs/SOURCES.md`): [C1 pN] Create 1 OI spec,
+//! [C2 pN] Create 2 OI spec, [HR] *Hacking Roomba*, [BATT] iRobot's Create 2 battery note; "paper" is
+//! Modayil & Sutton, *Prediction Driven Behavior*. Values marked *estimate* have no primary source; the comment gives the reasoning.
 //!
 //! ## How the parameters produce the paper's latencies
 //!
@@ -53,7 +52,7 @@ pub struct SimParams {
     pub start_heading_rad: f64,
 
     // ----- body and kinematics -----
-    /// Body radius, m: Ø 329.9 mm [C2 p5]; the Create 1 is ~330 mm too [reference §5.1].
+    /// Body radius, m: Ø 329.9 mm [C2 p5]; the Create 1 is ~330 mm too [C1 p3].
     pub body_radius_m: f64,
     /// Distance between the wheels, m: 258 mm (Create 1), 235 mm (Create 2) [LC types.cpp; C2 p5].
     /// Also the base the firmware uses to turn wheel travel into the angle packet [C2 p27].
@@ -169,8 +168,8 @@ pub struct SimParams {
     /// 91 % (matches the 16 028 mV idle sample, create_robot#64), cut-off near 13 V. Create 1: 12-cell
     /// NiMH, 14.4 V nominal [HR p33], 15–17 V charged, shut-off below ~13 V (ROS answers 27623).
     pub ocv_curve: OcvCurve,
-    /// Internal resistance of the pack, Ω (*estimate*: gives the 0.5–1 V sag under a 2–3 A stall load
-    /// that the reference suggests).
+    /// Internal resistance of the pack, Ω (*estimate*: chosen so that a 2–3 A stall load sags the pack
+    /// by 0.5–1 V).
     pub internal_resistance_ohm: f64,
     /// Current drawn by the electronics with the motors off, A: 0.111 A on the Create 2
     /// (create_robot#64); 0.15 A for the Create 1 (*estimate*).
@@ -189,7 +188,7 @@ pub struct SimParams {
     pub battery_thermal_conductance_w_per_k: f64,
 
     // ----- infrared sensors -----
-    /// Mean cliff signal over the enclosure's wooden floor, 0–4095 [reference §3.2] (*estimate* of the
+    /// Mean cliff signal over the enclosure's wooden floor, 0–4095 [C1 p18; C2 p25] (*estimate* of the
     /// level: a bright floor reads high). Each of the four sensors gets its own offset (seeded).
     pub cliff_signal_mean: f64,
     /// Sensor-to-sensor spread of the cliff signal level (*estimate*).
@@ -197,7 +196,7 @@ pub struct SimParams {
     /// Per-reading noise of the cliff signals (*estimate*).
     pub cliff_signal_noise: f64,
     /// Wall signal (packet 27) with a wall touching the sensor. The packet's range is 0–4095 on the
-    /// Create 1 and 0–1023 on the Create 2 [reference §3.2]; the level reached is an *estimate*.
+    /// Create 1 and 0–1023 on the Create 2 [C1 p19; C2 p29]; the level reached is an *estimate*.
     pub wall_signal_peak: f64,
     /// Distance over which the wall signal falls by e, m (*estimate*: the Create's side sensor sees a
     /// wall a few centimetres away).
@@ -212,9 +211,9 @@ pub struct SimParams {
     pub wall_sensor_bearings_rad: (f64, f64),
     /// Bearings of the Create 2's six light-bump sensors (left, front left, centre left, centre right,
     /// front right, right), rad; each looks outward along its bearing (*estimate* of the Roomba 600
-    /// layout across the bumper face; packets 46–51 [reference §3.2]).
+    /// layout across the bumper face; packets 46–51 [C2 p32]).
     pub light_bump_bearings_rad: [f64; 6],
-    /// Highest light-bump signal, 0–4095 [reference §3.2] (*estimate* of the level reached at a wall).
+    /// Highest light-bump signal, 0–4095 [C1 p18; C2 p25] (*estimate* of the level reached at a wall).
     pub light_bump_peak: f64,
     /// Distance over which a light-bump signal falls by e, m (*estimate*: they see walls ~10 cm away).
     pub light_bump_scale_m: f64,

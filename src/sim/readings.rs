@@ -148,7 +148,7 @@ impl Sensing {
         r.wall = if self.caster_bit {
             wall > p.wall_signal_threshold
         } else {
-            // Create 2: packet 8 is deprecated and mirrors the right light bumper [reference §3.2].
+            // Create 2: packet 8 is deprecated and mirrors the right light bumper [C2 p24].
             r.light_bumper & bits::LIGHT_BUMP_RIGHT != 0
         };
 

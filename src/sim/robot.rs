@@ -104,7 +104,7 @@ pub struct SimRobot {
     /// Fault injection: the line's real rate when it differs from `baud` (a robot that fell back to a
     /// slower rate), bits/s.
     line_baud: Option<u32>,
-    /// Fault injection: report packet 35 as mode + 1 (the firmware quirk of reference §5.5).
+    /// Fault injection: report packet 35 as mode + 1 (the firmware quirk of create_robot issue 64).
     mode_quirk: bool,
     stream_ids: Vec<u8>,
     stream_paused: bool,

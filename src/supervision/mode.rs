@@ -21,17 +21,7 @@ pub enum ModeQuirk {
     Off,
 }
 
-/// The OI modes (packet 35 values) [C1 p6–7; C2 p7–10].
-pub mod code {
-    /// Off.
-    pub const OFF: u8 = 0;
-    /// Passive.
-    pub const PASSIVE: u8 = 1;
-    /// Safe.
-    pub const SAFE: u8 = 2;
-    /// Full.
-    pub const FULL: u8 = 3;
-}
+pub use crate::oi::mode::code;
 
 /// Turns raw packet-35 values into modes.
 #[derive(Debug, Clone)]

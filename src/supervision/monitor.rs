@@ -322,5 +322,4 @@ pub fn trip_cause(values: &SensorValues) -> TripCause {
 }
 
 #[cfg(test)]
-#[path = "monitor_tests.rs"]
 mod tests;

@@ -1,16 +1,14 @@
-//! The robot link: the byte stream to an iRobot Create, real (tokio-serial) or simulated, and the
-//! start-up and shut-down sequences spoken over it.
+//! The robot link: the byte stream to an iRobot Create, real (tokio-serial) or simulated, its writer and
+//! its supervision. The byte sequences spoken over it are the core's (`pavlov::oi::handshake`).
 //!
-//! - [`transport`]: opening a serial port, or spawning the simulated robot behind an in-process stream or a PTY.
-//! - [`handshake`]: Start, Safe/Full and Stream at start-up; stop, pause and Passive at shut-down.
+//! - [`serial`]: opening (and reopening) a serial port.
 //! - [`writer`]: the writer actor, the only task that writes to the robot.
-//! - [`opener`]: reopening a serial port, or plugging a new connection into the simulated robot.
+//! - [`opener`]: what link supervision reopens a port through, with the baud rescue.
 //! - [`supervisor`]: stale-stream detection, re-sync, reconnect with backoff, trips (see `pavlov::supervision`).
 
-pub mod handshake;
 pub mod opener;
+pub mod serial;
 pub mod supervisor;
-pub mod transport;
 pub mod writer;
 
 use tokio::io::{AsyncRead, AsyncWrite};

@@ -11,21 +11,15 @@ use pavlov::oi::{Model, SensorValues};
 use pavlov::record::LinkSummary;
 use pavlov::supervision::LinkState;
 use pavlov::supervision::monitor::{LinkAction, LinkMonitor, MonitorCounters};
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
 use super::opener::LinkOpener;
 use super::writer::WriterControl;
-use super::{LinkError, LinkReader, LinkWriter, handshake};
-use crate::command::CommandResult;
-
-/// Commands for the link, from the command router.
-#[derive(Debug)]
-pub enum LinkCommand {
-    /// The operator re-arms after a trip to Passive: send Safe/Full again.
-    Rearm(oneshot::Sender<CommandResult>),
-}
+use super::{LinkError, LinkReader, LinkWriter};
+use crate::command::{Applied, CommandError, Envelope, LinkCommand};
+use pavlov::oi::handshake;
 
 /// The first reopen attempt (counted since the last frame) that starts with a baud rescue; then every other.
 const RESCUE_FROM_ATTEMPT: u32 = 2;
@@ -61,7 +55,7 @@ impl Supervisor {
         Supervisor {
             monitor: LinkMonitor::new(
                 config.link.monitor(),
-                handshake::mode_code(mode),
+                mode.code(),
                 config.link.mode_quirk,
                 0,
             ),
@@ -125,7 +119,7 @@ impl Supervisor {
                         opener.rescue_baud()
                     });
                     // Close the old port first: a serial device is held exclusively.
-                    let (closed_tx, closed) = oneshot::channel();
+                    let (closed_tx, closed) = tokio::sync::oneshot::channel();
                     let open = opener.open();
                     let close = WriterControl::Close(closed_tx);
                     self.send(close);
@@ -207,14 +201,15 @@ impl Supervisor {
     }
 
     /// Applies a link command.
-    pub fn command(&mut self, command: LinkCommand) {
+    pub fn command(&mut self, envelope: Envelope<LinkCommand>) {
+        let Envelope { command, reply } = envelope;
         match command {
-            LinkCommand::Rearm(reply) => {
+            LinkCommand::Rearm {} => {
                 let result = match self.monitor.trip() {
-                    None => Err(format!(
+                    None => Err(CommandError::Rejected(format!(
                         "the robot has not tripped (link {}); nothing to re-arm",
                         self.monitor.state().name()
-                    )),
+                    ))),
                     Some(cause) => {
                         if self.monitor.rearm(self.now_ms()).is_some() {
                             self.send_mode();
@@ -224,7 +219,10 @@ impl Supervisor {
                             cause.describe(),
                             self.mode
                         );
-                        Ok(serde_json::json!({ "rearmed": cause, "mode": self.mode }))
+                        Ok(Applied::Rearmed {
+                            rearmed: cause,
+                            mode: self.mode,
+                        })
                     }
                 };
                 let _ = reply.send(result);

@@ -7,7 +7,6 @@
 //! The writer stamps when each motor command reached the OS (tick-to-command latency). On shut-down it
 //! writes the stop/pause/Passive sequence, flushes, and closes its half of the link.
 
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use tokio::io::AsyncWriteExt;
@@ -15,7 +14,7 @@ use tokio::sync::mpsc;
 use tokio::time::Instant;
 
 use super::LinkWriter;
-use crate::histogram::LatencyHistogram;
+use crate::telemetry::counters::SharedWriterStats;
 
 /// One write request.
 #[derive(Debug)]
@@ -44,24 +43,6 @@ pub enum WriterControl {
         startup: Vec<u8>,
     },
 }
-
-/// Counters of the writer.
-#[derive(Default)]
-pub struct WriterStats {
-    /// Time from the tick's deadline to the motor command written to the OS.
-    pub tick_to_command: LatencyHistogram,
-    /// Write errors seen.
-    pub errors: u64,
-    /// Bytes written.
-    pub bytes: u64,
-    /// Writes abandoned after [`WRITE_TIMEOUT`].
-    pub timeouts: u64,
-    /// Ports switched to after a reopen.
-    pub replaced: u64,
-}
-
-/// Shared handle on the writer's statistics.
-pub type SharedWriterStats = Arc<Mutex<WriterStats>>;
 
 /// Runs until the request channel closes, then writes `shutdown` and closes the link.
 pub async fn run(

@@ -2,7 +2,7 @@
 use super::*;
 use proptest::prelude::*;
 
-/// Two-byte and signed packets as listed in the reference's §3.2 table [C1 pp17–21; C2 pp23–32].
+/// Two-byte and signed packets as listed in the OI specifications' packet tables [C1 pp17–21; C2 pp23–32].
 const TWO_BYTE: &[u8] = &[
     19, 20, 22, 23, 25, 26, 27, 28, 29, 30, 31, 33, 39, 40, 41, 42, 43, 44, 46, 47, 48, 49, 50, 51,
     54, 55, 56, 57,

@@ -1,5 +1,5 @@
 //! The ASCII text a Create 2 prints on its transmit line unasked, for injection between and inside
-//! stream frames (reference §4.2, §5.5): the once-a-second charging line, shaped like
+//! stream frames (pycreate2 issue 12, create_robot issue 106): the once-a-second charging line, shaped like
 //! `bat:   min 0  sec 10  mV 17061  mA 1016  tenths-deg-C 348  mAH 2696  state 5`
 //! (`emard/roomba-wifi`, `AutonomyLab/create_robot#106`), and the lines of the boot banner
 //! ([`SimRobot::boot_banner`], pycreate2#12). Every line ends in CR LF and holds only printable ASCII,

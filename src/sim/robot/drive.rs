@@ -63,7 +63,7 @@ pub fn speed_target(left: f64, right: f64, p: &SimParams) -> DriveTarget {
     }
 }
 
-/// Open-loop target for Drive PWM values (−255..=255 per wheel [reference §1.4]).
+/// Open-loop target for Drive PWM values (−255..=255 per wheel [C2 p14]).
 pub fn pwm_target(left: i16, right: i16) -> DriveTarget {
     let duty = |v: i16| (f64::from(v) / 255.0).clamp(-1.0, 1.0);
     DriveTarget::Duty {

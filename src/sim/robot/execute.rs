@@ -1,10 +1,10 @@
-//! The OI mode machine and what every command does [C1 pp6–16; C2 pp7–22; reference §1.2, §1.4].
+//! The OI mode machine and what every command does [C1 pp6–16; C2 pp7–22].
 //!
 //! - Start → Passive from any mode. Safe/Control → Safe, Full → Full (from Passive, Safe or Full).
 //! - Actuator commands (drive, motors, LEDs, Play, and the model's other output commands) act only in
 //!   Safe and Full; in Passive they are consumed and ignored (counted).
 //! - Entering Passive or Off stops the wheels: in those modes nothing may drive them (whether the real
-//!   firmware stops them on Start is undocumented, reference §6).
+//!   firmware stops them on Start is undocumented).
 //! - Spot, Clean, Max, Seek Dock, Demo and Power enter Passive; the simulator runs no built-in
 //!   behaviour.
 //! - Create 2: Stop → Off and ends the stream; Reset → Off, ends the stream, clears the OI state and
@@ -107,7 +107,7 @@ impl SimRobot {
     }
 
     /// The text a Create 2 prints when it boots (after Reset or power-on), lines ending in CR LF: a short
-    /// banner built from the lines a real one prints (pycreate2#12, reference §5.5), not a byte-exact copy.
+    /// banner built from the lines a real one prints (pycreate2 issue 12), not a byte-exact copy.
     pub fn boot_banner(&self) -> String {
         format!(
             "\r\nbl-start\r\nRoomba by iRobot!\r\nr3-robot/tags/release-stm32-3.7.7:6913 CLEAN\r\n\

@@ -13,7 +13,7 @@ use crate::sim::world::{LEFT, RIGHT};
 
 use super::SimRobot;
 
-/// Packet 17 when no IR byte is seen: 255 on the Create 1, 0 on the Create 2 [C2 p26; reference §3.2].
+/// Packet 17 when no IR byte is seen: 255 on the Create 1, 0 on the Create 2 [C1 p18; C2 p26].
 fn ir_none(model: Model) -> i32 {
     match model {
         Model::Create1 => 255,
@@ -60,7 +60,7 @@ impl SimRobot {
         for (&pid, &s) in signal_ids.iter().zip(&r.cliff_signals) {
             v.set(pid, s);
         }
-        // Create 1 cargo bay: digital input 4 (device detect) is high by default [reference §3.2].
+        // Create 1 cargo bay: digital input 4 (device detect) is high by default [C1 p20].
         let cargo = if self.model == Model::Create1 { 16 } else { 0 };
         v.set(id::CARGO_BAY_DIGITAL_INPUTS, cargo);
         v.set(id::CARGO_BAY_ANALOG_SIGNAL, 0);

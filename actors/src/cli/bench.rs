@@ -1,0 +1,71 @@
+//! `pavlov bench`: the server on the simulator in real time, with tick lateness and tick-to-command
+//! percentiles, optionally under websocket load and abuse. It prints figures; it asserts nothing.
+
+use std::time::Duration;
+
+use anyhow::Result;
+use pavlov_actors::bench::{self, abuse::Abuse, load};
+
+use super::args::{ConfigArgs, load_config, repository_web_dir};
+
+/// `pavlov bench`'s arguments.
+#[derive(clap::Args)]
+pub struct BenchArgs {
+    #[command(flatten)]
+    config: ConfigArgs,
+    /// How long to run, in seconds of real time.
+    #[arg(long, default_value_t = 60, value_name = "SECONDS")]
+    seconds: u64,
+    /// Also run with this many websocket clients reading the dashboard stream, and compare.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    ws_clients: usize,
+    /// With --ws-clients: add one websocket client that never reads.
+    #[arg(long)]
+    stalled_client: bool,
+    /// Run the websocket load twice, without and with abusers (command and malformed-message floods,
+    /// over-size messages, connection storms, clients that never read), and compare tick lateness.
+    #[arg(long)]
+    ws_abuse: bool,
+}
+
+/// Runs the benchmark and prints its report.
+pub async fn run(args: BenchArgs) -> Result<()> {
+    let cfg = load_config(&args.config)?;
+    let duration = Duration::from_secs(args.seconds);
+    if args.ws_abuse {
+        let load = load::Load {
+            clients: args.ws_clients.max(1),
+            stalled: args.stalled_client,
+        };
+        let report =
+            load::run_abuse_comparison(cfg, duration, repository_web_dir(), load, Abuse::default())
+                .await?;
+        println!("{report}");
+        return Ok(());
+    }
+    let report = bench::run_realtime(cfg.clone(), duration).await?;
+    println!("{report}");
+    if args.ws_clients > 0 || args.stalled_client {
+        let load = load::Load {
+            clients: args.ws_clients,
+            stalled: args.stalled_client,
+        };
+        let loaded =
+            load::run_realtime_with_clients(cfg, duration, repository_web_dir(), load).await?;
+        println!(
+            "with {} websocket clients{}:",
+            args.ws_clients,
+            if args.stalled_client {
+                " + 1 stalled"
+            } else {
+                ""
+            }
+        );
+        println!("{loaded}");
+        println!(
+            "tick lateness p99: {} µs without clients, {} µs with them",
+            report.lateness.p99_us, loaded.bench.lateness.p99_us
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,143 @@
+//! `pavlov experiment stall|interaction`: the paper's experiments on the simulated Create, through the
+//! real runtime under virtual time.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use pavlov::config::Config;
+
+use pavlov_actors::experiment::{interaction, stall};
+
+/// The stall experiment's configuration, built in.
+const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
+
+/// The interaction experiment's configuration, built in.
+const INTERACTION_CONFIG: &str = include_str!("../../../config/interaction.toml");
+
+/// `pavlov experiment`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ExperimentArgs {
+    /// Which experiment.
+    #[command(subcommand)]
+    pub which: Experiment,
+}
+
+/// The experiments.
+#[derive(clap::Subcommand, Debug, Clone)]
+pub enum Experiment {
+    /// The paper's stall experiment: interleaved reactive / Pavlovian runs on the simulated Create, through
+    /// the real runtime under virtual time; writes summary.json, CSV tables, recordings and SVG figures.
+    Stall(StallArgs),
+    /// The paper's interaction experiment: a simulated operator commands a left spin with the left elbow;
+    /// reactive vs Pavlovian response timing, and current / rotation aligned on the command (Figs 3, 4).
+    Interaction(InteractionArgs),
+}
+
+/// `pavlov experiment interaction`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct InteractionArgs {
+    /// Runs per policy (the paper: 1).
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    pub runs: usize,
+    /// Minutes per run (the paper: under 10).
+    #[arg(long, default_value_t = 10.0, value_name = "MIN")]
+    pub minutes: f64,
+    /// How many of each run's last observed commands the aligned averages (Figure 4) use (the paper: 40).
+    #[arg(long, default_value_t = 40, value_name = "N")]
+    pub commands: usize,
+    /// The experiment's seed.
+    #[arg(long, default_value_t = 1, value_name = "S")]
+    pub seed: u64,
+    /// Results directory (default: results/interaction-<seed>).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Configuration (TOML); default: the built-in config/interaction.toml.
+    #[arg(long, short = 'c', value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Do not write per-tick recordings of the runs.
+    #[arg(long)]
+    pub no_record: bool,
+}
+
+/// `pavlov experiment stall`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct StallArgs {
+    /// Runs per policy (the paper: 10).
+    #[arg(long, default_value_t = 10, value_name = "N")]
+    pub runs: usize,
+    /// Minutes per run (the paper: 6).
+    #[arg(long, default_value_t = 6.0, value_name = "MIN")]
+    pub minutes: f64,
+    /// The experiment's seed; each run's simulator seed is derived from it.
+    #[arg(long, default_value_t = 1, value_name = "S")]
+    pub seed: u64,
+    /// Results directory (default: results/stall-<seed>).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Configuration (TOML); default: the built-in config/stall.toml. Mode and seed are set per run.
+    #[arg(long, short = 'c', value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Do not write per-tick recordings of the runs.
+    #[arg(long)]
+    pub no_record: bool,
+    /// OS threads to run on (default: the number of CPUs, at most 2).
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+}
+
+fn load_config(path: Option<&PathBuf>, builtin: &str) -> Result<Config> {
+    let text = match path {
+        Some(p) => std::fs::read_to_string(p)
+            .with_context(|| format!("cannot read configuration {}", p.display()))?,
+        None => builtin.to_string(),
+    };
+    Config::from_toml(&text).context("invalid configuration")
+}
+
+/// Runs `pavlov experiment …`; prints the table on stdout.
+pub fn run(args: ExperimentArgs) -> Result<()> {
+    match args.which {
+        Experiment::Stall(a) => {
+            let config = load_config(a.config.as_ref(), STALL_CONFIG)?;
+            let threads = a.threads.unwrap_or_else(default_threads);
+            let opts = stall::StallOptions {
+                runs_per_policy: a.runs,
+                minutes: a.minutes,
+                seed: a.seed,
+                record: !a.no_record,
+                threads,
+                out: a
+                    .out
+                    .unwrap_or_else(|| PathBuf::from(format!("results/stall-{}", a.seed))),
+            };
+            let table = stall::run_and_report(&config, &opts, true)?;
+            print!("{table}");
+            Ok(())
+        }
+        Experiment::Interaction(a) => {
+            let config = load_config(a.config.as_ref(), INTERACTION_CONFIG)?;
+            let opts = interaction::InteractionOptions {
+                runs_per_policy: a.runs,
+                minutes: a.minutes,
+                aligned_commands: a.commands,
+                seed: a.seed,
+                record: !a.no_record,
+                threads: default_threads(),
+                out: a
+                    .out
+                    .unwrap_or_else(|| PathBuf::from(format!("results/interaction-{}", a.seed))),
+            };
+            let summary = interaction::run_study_with_progress(&config, &opts, true)?;
+            interaction::report::write_all(&opts.out, &summary)?;
+            print!("{}", interaction::report::table(&summary));
+            println!("results: {}", opts.out.display());
+            Ok(())
+        }
+    }
+}
+
+fn default_threads() -> usize {
+    std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(2)
+}

@@ -1,0 +1,48 @@
+//! The command line: one module per command, each with its clap arguments and its entry point.
+
+pub mod args;
+pub mod bench;
+pub mod experiment;
+pub mod human;
+pub mod replay;
+pub mod serve;
+pub mod sim;
+
+use clap::{Parser, Subcommand};
+
+/// `pavlov`.
+#[derive(Parser)]
+#[command(
+    name = "pavlov",
+    version,
+    about = "Pavlovian control of an iRobot Create: online TD(λ) predictions driving fixed responses",
+    long_about = "A lab server that runs Pavlovian control (Modayil & Sutton, \"Prediction Driven Behavior\") on an \
+iRobot Create 1 or 2: every 20 ms it reads the robot's sensors, learns TD(λ) predictions online, and lets a fixed \
+response take over from the default policy when a prediction crosses its threshold. Without --robot it drives a \
+simulated Create that speaks the real Open Interface bytes.\n\nLogging: set RUST_LOG (e.g. RUST_LOG=debug or \
+RUST_LOG=pavlov_actors=trace); the default is info."
+)]
+pub struct Cli {
+    /// The command.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The commands.
+#[derive(Subcommand)]
+pub enum Command {
+    /// Run the server. Without --robot it drives the simulated Create in process.
+    Serve(serve::ServeArgs),
+    /// Reproduce the paper's experiments on the simulated Create (e.g. `pavlov experiment stall --seed 1`).
+    Experiment(experiment::ExperimentArgs),
+    /// Run a recording back through the learning and gating stages and check that it reproduces exactly.
+    Replay(replay::ReplayArgs),
+    /// Run the simulated Create on its own, on a pseudo-terminal that any OI client can open.
+    Sim(sim::SimArgs),
+    /// Run the simulated human operator and stream its skeleton as OSC over UDP (what a depth sensor with
+    /// OSCeleton or KinectV2-OSC would send), e.g. to a `pavlov serve` running the interaction experiment.
+    Human(human::HumanArgs),
+    /// Benchmark: run the server on the simulator in real time and print tick lateness and
+    /// tick-to-command latency percentiles, optionally with websocket clients and abusers attached.
+    Bench(bench::BenchArgs),
+}

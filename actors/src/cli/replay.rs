@@ -1,0 +1,26 @@
+//! `pavlov replay DIR`: runs a recording back through the core and fails unless it is reproduced exactly.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use pavlov_actors::storage::{recording, replay};
+
+/// `pavlov replay`'s arguments.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ReplayArgs {
+    /// A recording directory (with ticks.jsonl) or a .jsonl file.
+    #[arg(value_name = "DIR")]
+    pub path: PathBuf,
+}
+
+/// Replays and prints the summary; an inexact replay is an error.
+pub fn run(args: ReplayArgs) -> Result<()> {
+    let rec = recording::load(&args.path)?;
+    if rec.torn_tail {
+        eprintln!("note: the recording's last line was incomplete and was skipped");
+    }
+    let report = replay::replay(&rec)?;
+    println!("{}", replay::describe(&report));
+    anyhow::ensure!(report.exact(), "the replay differs from the recording");
+    Ok(())
+}

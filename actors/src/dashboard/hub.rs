@@ -1,0 +1,273 @@
+//! The hub: turns each tick record into its JSON message once, keeps the run counters, and fans the
+//! messages out to every websocket client over a lossy broadcast.
+//!
+//! Serialising once per tick (not once per client) keeps the cost of 50 clients near that of one: a client
+//! gets a cheap clone of the same bytes. The hub reads the tick feed's broadcast, so it never slows the
+//! tick either; if it ever lagged, the records it missed are counted and logged. It also keeps the newest
+//! record's link summary for `/metrics`.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+
+use axum::extract::ws::Utf8Bytes;
+use pavlov::analysis::interaction::live::LiveInteraction;
+use pavlov::analysis::interaction::live_aligned::LiveAligned;
+use pavlov::analysis::run_metrics::RunMetrics;
+use pavlov::record::TickRecord;
+use tokio::sync::broadcast;
+use tokio_util::sync::CancellationToken;
+
+use super::messages::{StatusHealth, StatusMessage, TickMessage};
+use super::protocol::STATUS_EVERY_TICKS;
+use crate::telemetry::Health;
+
+/// Capacity of the hub's broadcast to the clients' forwarders, in messages (about 4 s of ticks).
+pub const HUB_CAPACITY: usize = 256;
+
+/// Statuses carry `interaction.aligned` every this many ticks (a multiple of [`STATUS_EVERY_TICKS`]; once a
+/// second at 50 Hz): the curves are about 76 points × 2 series × 2 modes, too many for every status.
+pub const ALIGNED_EVERY_TICKS: u64 = 5 * STATUS_EVERY_TICKS;
+
+/// One message for the clients.
+#[derive(Debug, Clone)]
+pub enum Outgoing {
+    /// A `tick` message (subject to the client's rate).
+    Tick {
+        /// The tick's sequence number.
+        seq: u64,
+        /// The JSON text.
+        text: Utf8Bytes,
+    },
+    /// A `status` message (every client gets every one).
+    Status(Utf8Bytes),
+}
+
+/// Counters the hub shares with the endpoint.
+#[derive(Debug, Default)]
+pub struct HubCounters {
+    /// Websocket clients connected now.
+    pub clients: AtomicUsize,
+    /// Tick records the hub itself missed (it lagged behind the feed).
+    pub records_missed: AtomicU64,
+}
+
+/// The hub's output side: clients subscribe here.
+#[derive(Clone)]
+pub struct HubHandle {
+    tx: broadcast::Sender<Outgoing>,
+}
+
+impl HubHandle {
+    /// A new subscription, starting with the next message.
+    pub fn subscribe(&self) -> broadcast::Receiver<Outgoing> {
+        self.tx.subscribe()
+    }
+}
+
+/// The hub's state: the run counters over every record seen, and the live interaction metrics (with the
+/// aligned averages) when the stimulus is the gesture command.
+pub struct Hub {
+    metrics: RunMetrics,
+    interaction: Option<(LiveInteraction, LiveAligned)>,
+    tx: broadcast::Sender<Outgoing>,
+}
+
+impl Hub {
+    /// A hub for a run ticking every `period_ms`, and the handle clients subscribe with. With
+    /// `track_interaction` (the stimulus is the left-elbow command) the statuses carry `interaction`.
+    pub fn new(period_ms: f64, track_interaction: bool) -> (Hub, HubHandle) {
+        let (tx, _) = broadcast::channel(HUB_CAPACITY);
+        (
+            Hub {
+                metrics: RunMetrics::new(period_ms),
+                interaction: track_interaction
+                    .then(|| (LiveInteraction::new(), LiveAligned::new(period_ms))),
+                tx: tx.clone(),
+            },
+            HubHandle { tx },
+        )
+    }
+
+    /// Handles one record: updates the counters and broadcasts its messages.
+    pub fn on_record(
+        &mut self,
+        record: &TickRecord,
+        health: impl FnOnce() -> StatusHealth,
+        clients: usize,
+    ) {
+        self.metrics.observe(record);
+        if let Some((live, aligned)) = &mut self.interaction {
+            live.observe(record);
+            aligned.observe(record);
+        }
+        let text = Utf8Bytes::from(TickMessage::new(record).to_json());
+        // An error only means no client is connected.
+        let _ = self.tx.send(Outgoing::Tick {
+            seq: record.seq,
+            text,
+        });
+        if record.seq % STATUS_EVERY_TICKS == 0 {
+            let health = health();
+            let counters = self.metrics.summary();
+            let interaction = self.interaction.as_ref().map(|(live, _)| live.summary());
+            let aligned = self
+                .interaction
+                .as_ref()
+                .filter(|_| record.seq % ALIGNED_EVERY_TICKS == 0)
+                .map(|(_, aligned)| aligned.summary());
+            let status = StatusMessage::new(record.seq, &health, &counters, clients)
+                .with_interaction(interaction.as_ref())
+                .with_aligned(aligned.as_ref())
+                .to_json();
+            let _ = self.tx.send(Outgoing::Status(Utf8Bytes::from(status)));
+        }
+    }
+
+    /// The run counters so far.
+    pub fn metrics(&self) -> &RunMetrics {
+        &self.metrics
+    }
+}
+
+/// Runs the hub until `cancel` fires or the feed closes.
+pub async fn run(
+    mut hub: Hub,
+    mut feed: broadcast::Receiver<Arc<TickRecord>>,
+    health: Health,
+    counters: Arc<HubCounters>,
+    cancel: CancellationToken,
+) {
+    loop {
+        let next = tokio::select! {
+            _ = cancel.cancelled() => break,
+            next = feed.recv() => next,
+        };
+        match next {
+            Ok(record) => {
+                let clients = counters.clients.load(Ordering::Relaxed);
+                hub.on_record(&record, || StatusHealth::from(&health.figures()), clients);
+            }
+            Err(broadcast::error::RecvError::Lagged(n)) => {
+                counters.records_missed.fetch_add(n, Ordering::Relaxed);
+                tracing::warn!(missed = n, "the dashboard hub fell behind the tick feed");
+            }
+            Err(broadcast::error::RecvError::Closed) => break,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pavlov::control::Mode;
+    use pavlov::record::SensorSummary;
+
+    fn record(seq: u64) -> TickRecord {
+        TickRecord {
+            sensors: SensorSummary {
+                overcurrent_left: seq % 2 == 0,
+                ..Default::default()
+            },
+            obs: vec![0.0; 3],
+            ..TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Reactive)
+        }
+    }
+
+    #[test]
+    fn every_record_becomes_a_tick_and_every_tenth_a_status_with_counters() {
+        let (mut hub, handle) = Hub::new(20.0, false);
+        let mut rx = handle.subscribe();
+        for seq in 0..21 {
+            hub.on_record(&record(seq), StatusHealth::default, 3);
+        }
+        let mut ticks = Vec::new();
+        let mut statuses = Vec::new();
+        while let Ok(m) = rx.try_recv() {
+            match m {
+                Outgoing::Tick { seq, text } => {
+                    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+                    assert_eq!(v["seq"], seq);
+                    ticks.push(seq);
+                }
+                Outgoing::Status(text) => {
+                    statuses.push(serde_json::from_str::<serde_json::Value>(&text).unwrap())
+                }
+            }
+        }
+        assert_eq!(ticks, (0..21).collect::<Vec<_>>());
+        assert_eq!(statuses.len(), 3);
+        let last = &statuses[2];
+        assert_eq!(last["type"], "status");
+        assert_eq!(last["seq"], 20);
+        assert_eq!(last["clients"], 3);
+        assert_eq!(last["counters"]["ticks"], 21);
+        assert_eq!(last["counters"]["overcurrent_observations"], 11);
+        assert_eq!(hub.metrics().ticks, 21);
+        assert!(last.get("interaction").is_none(), "{last}");
+    }
+
+    #[test]
+    fn an_interaction_hub_reports_commands_and_leads_in_its_statuses() {
+        let (mut hub, handle) = Hub::new(20.0, true);
+        let mut rx = handle.subscribe();
+        for seq in 0..121 {
+            let mut r = record(seq);
+            // The gate engages at tick 65, the stimulus at tick 68: one command answered 60 ms early; the
+            // wheels turn and the current rises from 150 to 600 mA at tick 66, 40 ms early.
+            r.gate = seq >= 65;
+            r.stimulus = seq >= 68;
+            r.sensors.angle_deg = i32::from(seq >= 66);
+            r.sensors.battery_current_ma = Some(if seq >= 66 { -600 } else { -150 });
+            hub.on_record(&r, StatusHealth::default, 1);
+        }
+        let mut last = None;
+        while let Ok(m) = rx.try_recv() {
+            if let Outgoing::Status(text) = m {
+                last = Some(serde_json::from_str::<serde_json::Value>(&text).unwrap());
+            }
+        }
+        let i = &last.unwrap()["interaction"];
+        assert_eq!(i["commands"], 1, "{i}");
+        assert_eq!(i["early"], 1, "{i}");
+        assert_eq!(i["false_starts"], 0, "{i}");
+        assert_eq!(i["mean_lead_ms"], 60.0, "{i}");
+        assert_eq!(i["mean_current_lead_ms"], 40.0, "{i}");
+        assert_eq!(i["mean_motion_lead_ms"], 40.0, "{i}");
+    }
+
+    #[test]
+    fn statuses_carry_the_aligned_averages_once_a_second() {
+        let (mut hub, handle) = Hub::new(20.0, true);
+        let mut rx = handle.subscribe();
+        for seq in 0..=200 {
+            let mut r = record(seq);
+            // A Pavlovian command at tick 50; the current steps to −600 mA at tick 45.
+            r.mode = Mode::Pavlovian;
+            r.stimulus = (50..60).contains(&seq);
+            r.sensors.battery_current_ma = Some(if (45..90).contains(&seq) { -600 } else { -150 });
+            hub.on_record(&r, StatusHealth::default, 1);
+        }
+        let mut with_aligned = Vec::new();
+        let mut last_aligned = None;
+        while let Ok(m) = rx.try_recv() {
+            if let Outgoing::Status(text) = m {
+                let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+                assert!(v["interaction"].is_object(), "{v}");
+                if let Some(a) = v["interaction"].get("aligned") {
+                    with_aligned.push(v["seq"].as_u64().unwrap());
+                    last_aligned = Some(a.clone());
+                }
+            }
+        }
+        assert_eq!(with_aligned, vec![0, 50, 100, 150, 200]);
+        let a = last_aligned.unwrap();
+        assert_eq!(a["offsets_ms"].as_array().unwrap().len(), 76);
+        assert_eq!(a["pavlovian"]["commands"], 1, "{a}");
+        assert_eq!(a["reactive"]["commands"], 0, "{a}");
+        // Offset −100 ms (tick 45): the step; −120 ms (tick 44): the rest current.
+        assert_eq!(a["offsets_ms"][20], -100.0);
+        assert_eq!(a["pavlovian"]["current_ma"][20], -600.0, "{a}");
+        assert_eq!(a["pavlovian"]["current_ma"][19], -150.0, "{a}");
+        assert!(a["reactive"]["current_ma"][0].is_null(), "{a}");
+    }
+}

@@ -1,0 +1,333 @@
+//! The server's telemetry messages of the dashboard protocol (`web/PROTOCOL.md`): `hello`, `tick` and
+//! `status`, serialised straight from the records and counters they describe.
+
+use pavlov::analysis::interaction::live::LiveInteractionSummary;
+use pavlov::analysis::interaction::live_aligned::AlignedSummary;
+use pavlov::analysis::run_metrics::MetricsSummary;
+use pavlov::control::{Action, Mode};
+use pavlov::record::{
+    ElbowSummary, LinkSummary, PredictionValue, SafetyStop, SensorSummary, TickRecord,
+};
+use serde::Serialize;
+use serde_json::Value;
+
+use super::protocol::{PROTOCOL_VERSION, STATUS_EVERY_TICKS, known_commands};
+use crate::telemetry::HealthFigures;
+use crate::telemetry::counters::ActuationStats;
+
+/// Left and right wheel speeds, mm/s.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Wheels {
+    /// Left wheel.
+    pub left: i16,
+    /// Right wheel.
+    pub right: i16,
+}
+
+impl From<Action> for Wheels {
+    fn from(a: Action) -> Self {
+        Wheels {
+            left: a.left_mm_s,
+            right: a.right_mm_s,
+        }
+    }
+}
+
+/// A `tick` message, borrowed from the record it describes.
+#[derive(Serialize)]
+pub struct TickMessage<'a> {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    seq: u64,
+    t: f64,
+    mode: Mode,
+    obs_age_ticks: Option<u32>,
+    obs: &'a [f32],
+    predictions: &'a [PredictionValue],
+    stimulus: bool,
+    gate: bool,
+    command: Wheels,
+    default: Wheels,
+    estop: bool,
+    safety_stop: Option<SafetyStop>,
+    sensors: &'a SensorSummary,
+    elbow: Option<&'a ElbowSummary>,
+    link: &'a LinkSummary,
+    lateness_us: u32,
+}
+
+impl<'a> TickMessage<'a> {
+    /// The message for one record.
+    pub fn new(r: &'a TickRecord) -> Self {
+        TickMessage {
+            kind: "tick",
+            seq: r.seq,
+            t: r.t_ms / 1000.0,
+            mode: r.mode,
+            obs_age_ticks: r.obs_age_ticks,
+            obs: &r.obs,
+            predictions: &r.predictions,
+            stimulus: r.stimulus,
+            gate: r.gate,
+            command: r.command.into(),
+            default: r.default_action.into(),
+            estop: r.estop,
+            safety_stop: r.safety_stop,
+            sensors: &r.sensors,
+            elbow: r.elbow.as_ref(),
+            link: &r.link,
+            lateness_us: r.lateness_us,
+        }
+    }
+
+    /// The JSON text.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_default()
+    }
+}
+
+/// Tick health in a `status` message.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct StatusHealth {
+    /// Median tick lateness since start, µs.
+    pub lateness_p50_us: u64,
+    /// 99th percentile of tick lateness since start, µs.
+    pub lateness_p99_us: u64,
+    /// Worst tick lateness since start, µs.
+    pub lateness_max_us: u64,
+    /// Ticks fired.
+    pub ticks_fired: u64,
+    /// Ticks skipped because the ticker woke too late.
+    pub ticks_skipped: u64,
+    /// 99th percentile of tick deadline → motor command written, µs.
+    pub tick_to_command_p99_us: u64,
+    /// Serial write errors.
+    pub write_errors: u64,
+    /// Actuation's counters (forced stops, full writer queue).
+    pub actuation: ActuationStats,
+}
+
+impl From<&HealthFigures> for StatusHealth {
+    fn from(f: &HealthFigures) -> Self {
+        StatusHealth {
+            lateness_p50_us: f.lateness.p50_us,
+            lateness_p99_us: f.lateness.p99_us,
+            lateness_max_us: f.lateness.max_us,
+            ticks_fired: f.ticks_fired,
+            ticks_skipped: f.ticks_skipped,
+            tick_to_command_p99_us: f.tick_to_command.p99_us,
+            write_errors: f.write_errors,
+            actuation: f.actuation,
+        }
+    }
+}
+
+/// A `status` message: health, run counters, the number of connected clients and, in the gesture-command
+/// experiment, the live interaction metrics.
+#[derive(Serialize)]
+pub struct StatusMessage<'a> {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    seq: u64,
+    health: &'a StatusHealth,
+    counters: &'a MetricsSummary,
+    clients: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    interaction: Option<InteractionStatus<'a>>,
+}
+
+/// The `interaction` object: the live metrics and, on some statuses, the aligned averages.
+#[derive(Serialize)]
+struct InteractionStatus<'a> {
+    #[serde(flatten)]
+    summary: &'a LiveInteractionSummary,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    aligned: Option<&'a AlignedSummary>,
+}
+
+impl<'a> StatusMessage<'a> {
+    /// The status as of tick `seq`.
+    pub fn new(
+        seq: u64,
+        health: &'a StatusHealth,
+        counters: &'a MetricsSummary,
+        clients: usize,
+    ) -> Self {
+        StatusMessage {
+            kind: "status",
+            seq,
+            health,
+            counters,
+            clients,
+            interaction: None,
+        }
+    }
+
+    /// Adds the live interaction metrics (absent from the JSON when `None`).
+    pub fn with_interaction(mut self, interaction: Option<&'a LiveInteractionSummary>) -> Self {
+        self.interaction = interaction.map(|summary| InteractionStatus {
+            summary,
+            aligned: None,
+        });
+        self
+    }
+
+    /// Adds the aligned averages to `interaction` (no effect without it; absent from the JSON when `None`).
+    pub fn with_aligned(mut self, aligned: Option<&'a AlignedSummary>) -> Self {
+        if let Some(i) = &mut self.interaction {
+            i.aligned = aligned;
+        }
+        self
+    }
+
+    /// The JSON text.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_default()
+    }
+}
+
+/// The signals a client can plot, announced in `hello`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Signals {
+    /// Names of the `obs` array's entries, in order.
+    pub obs: Vec<String>,
+    /// Names of the predictions, in the `predictions` array's order.
+    pub predictions: Vec<String>,
+    /// The prediction that drives the Pavlovian gate.
+    pub gate_prediction: String,
+}
+
+/// The `hello` message.
+#[derive(Debug, Clone, Serialize)]
+pub struct Hello {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    /// [`PROTOCOL_VERSION`].
+    pub protocol: u32,
+    /// Server name and version.
+    pub server: String,
+    /// The tick period, ms.
+    pub tick_period_ms: u64,
+    /// Ticks per second the client receives (the tick rate until it asks for less).
+    pub rate_hz: f64,
+    /// `status` messages come every this many ticks.
+    pub status_every_ticks: u64,
+    /// Whether this connection may send control commands (it presented the token, or none is needed).
+    pub can_command: bool,
+    /// What the `tick` arrays hold.
+    pub signals: Signals,
+    /// Every command name.
+    pub commands: Vec<&'static str>,
+    /// Message size limit and per-client queue, as configured.
+    pub limits: Limits,
+    /// The configuration in force (the token redacted).
+    pub config: Value,
+}
+
+/// Limits announced in `hello`.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Limits {
+    /// Largest message the server accepts, bytes.
+    pub max_message_bytes: usize,
+    /// Ticks queued for this client before the oldest are dropped.
+    pub client_queue: usize,
+    /// The message rate limit (`{"burst":…,"per_second":…}`); messages beyond it get `rate_limited`.
+    pub rate: super::rate::RateLimit,
+}
+
+impl Hello {
+    /// A hello for a connection.
+    pub fn new(
+        tick_period_ms: u64,
+        can_command: bool,
+        signals: Signals,
+        limits: Limits,
+        config: Value,
+    ) -> Self {
+        Hello {
+            kind: "hello",
+            protocol: PROTOCOL_VERSION,
+            server: format!("pavlov {}", env!("CARGO_PKG_VERSION")),
+            tick_period_ms,
+            rate_hz: 1000.0 / tick_period_ms.max(1) as f64,
+            status_every_ticks: STATUS_EVERY_TICKS,
+            can_command,
+            signals,
+            commands: known_commands(),
+            limits,
+            config,
+        }
+    }
+
+    /// The JSON text.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn tick_messages_carry_the_record() {
+        let record = TickRecord {
+            seq: 12,
+            t_ms: 240.0,
+            mode: Mode::Pavlovian,
+            obs_age_ticks: Some(1),
+            sensors: SensorSummary {
+                overcurrent_left: true,
+                battery_current_ma: Some(-700),
+                ..Default::default()
+            },
+            obs: vec![0.5, 1.0],
+            elbow: None,
+            stimulus: true,
+            predictions: vec![PredictionValue {
+                name: "stall".into(),
+                value: 0.25,
+                threshold: 0.5,
+            }],
+            gate: true,
+            default_action: Action {
+                left_mm_s: 100,
+                right_mm_s: 100,
+            },
+            command: Action::STOP,
+            safety_stop: Some(SafetyStop::EStop),
+            estop: true,
+            lateness_us: 80,
+            link: LinkSummary {
+                up: true,
+                good_frames: 9,
+                bad_frames: 1,
+                skipped_bytes: 3,
+                ..Default::default()
+            },
+            inputs: None,
+        };
+        let v: Value = serde_json::from_str(&TickMessage::new(&record).to_json()).unwrap();
+        assert_eq!(v["type"], "tick");
+        assert_eq!(v["seq"], 12);
+        assert_eq!(v["t"], 0.24);
+        assert_eq!(v["mode"], "pavlovian");
+        assert_eq!(v["obs"], json!([0.5, 1.0]));
+        assert_eq!(
+            v["predictions"][0],
+            json!({"name":"stall","value":0.25,"threshold":0.5})
+        );
+        assert_eq!(v["command"], json!({"left":0,"right":0}));
+        assert_eq!(v["default"], json!({"left":100,"right":100}));
+        assert_eq!(v["safety_stop"], "e_stop");
+        assert_eq!(v["sensors"]["overcurrent_left"], true);
+        assert_eq!(v["sensors"]["battery_current_ma"], -700);
+        assert_eq!(v["link"]["bad_frames"], 1);
+        assert_eq!(v["elbow"], Value::Null);
+        assert_eq!(
+            (v["stimulus"].clone(), v["gate"].clone(), v["estop"].clone()),
+            (json!(true), json!(true), json!(true))
+        );
+    }
+}

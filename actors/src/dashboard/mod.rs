@@ -1,0 +1,240 @@
+//! The dashboard endpoint: one HTTP port that serves the browser dashboard (`/`), a health check
+//! (`/healthz`), Prometheus metrics (`/metrics`) and the websocket (`/ws`) that streams every tick and
+//! takes commands.
+//!
+//! - [`protocol`]: the client commands (see `web/PROTOCOL.md`), parsed with precise errors, and the replies;
+//! - [`messages`]: the server's `hello`, `tick` and `status` messages;
+//! - [`hub`]: serialises each tick once and fans it out, and keeps the run counters;
+//! - [`client`]: each client's bounded, drop-oldest queue and its tick-rate decimation;
+//! - [`session`]: one connection's reader, writer and forwarder;
+//! - [`rate`]: the per-connection message rate limit;
+//! - [`metrics`]: the `/metrics` text (written with [`exposition`]), and [`metrics_check`], a strict reader
+//!   of it for tests;
+//! - [`auth`]: the handshake's Origin and token checks;
+//! - [`guard`]: the TCP connection limit and the deadline to become a websocket;
+//! - [`http`]: routes, static files and the handshake;
+//! - [`load`]: the websocket load behind `pavlov bench --ws-clients`, and [`abuse`], its abusive clients.
+//!
+//! Nothing here can delay the tick: the hub reads the tick feed's lossy broadcast, every client reads the
+//! hub's lossy broadcast into its own bounded queue, and only the client's own writer waits on its socket.
+//! All of it runs on a separate single-worker runtime, so it never occupies the control actors' workers.
+
+pub mod auth;
+pub mod guard;
+pub mod http;
+pub mod hub;
+pub mod messages;
+pub mod out_queue;
+pub mod protocol;
+pub mod rate;
+pub mod session;
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicU64;
+use std::time::Duration;
+
+use axum::serve::ListenerExt;
+use tokio::task::JoinHandle;
+use tokio_util::sync::CancellationToken;
+
+use crate::server::Server;
+pub use crate::telemetry::counters::DashboardStats;
+use auth::AccessPolicy;
+use hub::{Hub, HubCounters};
+use messages::Signals;
+use session::SessionCounters;
+
+/// Kernel send buffer of each client socket. Kept small so that a slow client's backlog sits in its
+/// drop-oldest queue (where it is bounded and counted) rather than in the kernel.
+const CLIENT_SEND_BUFFER: usize = 64 * 1024;
+
+/// Errors starting the endpoint.
+#[derive(Debug, thiserror::Error)]
+pub enum DashboardError {
+    /// The dashboard's runtime could not be created.
+    #[error("cannot start the dashboard's runtime: {0}")]
+    Runtime(std::io::Error),
+    /// The listen address could not be bound.
+    #[error("cannot listen on {addr} for the dashboard: {source}")]
+    Bind {
+        /// The address from `[dashboard] bind` / `--bind`.
+        addr: String,
+        /// Why.
+        source: std::io::Error,
+    },
+}
+
+/// The running endpoint. It runs on its own single-worker tokio runtime (thread `dashboard`), so that
+/// websocket work can neither occupy the control actors' runtime workers nor take more than one core.
+pub struct Dashboard {
+    addr: SocketAddr,
+    state: Arc<http::AppState>,
+    cancel: CancellationToken,
+    http: Option<JoinHandle<()>>,
+    hub: Option<JoinHandle<()>>,
+    runtime: Option<tokio::runtime::Runtime>,
+}
+
+impl Drop for Dashboard {
+    fn drop(&mut self) {
+        self.cancel.cancel();
+        if let Some(rt) = self.runtime.take() {
+            // Allowed inside an async context, unlike dropping the runtime.
+            rt.shutdown_background();
+        }
+    }
+}
+
+fn redacted_config(config: &pavlov::config::Config) -> serde_json::Value {
+    let mut config = config.clone();
+    if config.dashboard.token.is_some() {
+        config.dashboard.token = Some("<redacted>".into());
+    }
+    serde_json::to_value(&config).unwrap_or(serde_json::Value::Null)
+}
+
+impl Dashboard {
+    /// Binds `[dashboard] bind` and starts serving the dashboard of `server`; uPlot is served from
+    /// `web_dir/node_modules/uplot/dist`.
+    pub async fn start(server: &Server, web_dir: PathBuf) -> Result<Dashboard, DashboardError> {
+        let cfg = &server.config.dashboard;
+        let bind_error = |source| DashboardError::Bind {
+            addr: cfg.bind.clone(),
+            source,
+        };
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .thread_name("dashboard")
+            .enable_all()
+            .build()
+            .map_err(DashboardError::Runtime)?;
+        let std_listener = std::net::TcpListener::bind(&cfg.bind).map_err(bind_error)?;
+        std_listener.set_nonblocking(true).map_err(bind_error)?;
+        let addr = std_listener.local_addr().map_err(bind_error)?;
+        let listener = {
+            let _inside = runtime.enter();
+            tokio::net::TcpListener::from_std(std_listener).map_err(bind_error)?
+        };
+        if !http::uplot_installed(&web_dir) {
+            tracing::error!(
+                "the dashboard's chart library is missing ({}): {}",
+                web_dir.join(http::UPLOT_DIST).display(),
+                http::INSTALL_HINT
+            );
+        }
+        let cancel = CancellationToken::new();
+        let period_ms = server.config.tick.period_ms;
+        let gesture_commands = matches!(
+            server.config.control.stimulus,
+            pavlov::config::StimulusSpec::LeftElbow { .. }
+        );
+        let (hub, hub_handle) = Hub::new(period_ms as f64, gesture_commands);
+        let hub_counters = Arc::new(HubCounters::default());
+        let guard_counters = Arc::new(guard::GuardCounters::default());
+        let state = Arc::new(http::AppState {
+            policy: AccessPolicy::new(cfg, addr),
+            hub: hub_handle,
+            commands: server.commands.clone(),
+            tick_period_ms: period_ms,
+            signals: Signals {
+                obs: server.obs_names.clone(),
+                predictions: server
+                    .config
+                    .predictions
+                    .iter()
+                    .map(|p| p.name.clone())
+                    .collect(),
+                gate_prediction: server.config.control.gate_prediction.clone(),
+            },
+            config: redacted_config(&server.config),
+            max_message_bytes: cfg.max_message_bytes,
+            client_queue: cfg.client_queue,
+            max_clients: cfg.max_clients,
+            rate: rate::DEFAULT_RATE_LIMIT,
+            health: server.health(),
+            web_dir,
+            hub_counters: hub_counters.clone(),
+            session_counters: Arc::new(SessionCounters::default()),
+            guard_counters: guard_counters.clone(),
+            connections: AtomicU64::new(0),
+            rejected: AtomicU64::new(0),
+            cancel: cancel.clone(),
+        });
+        let hub = runtime.spawn(hub::run(
+            hub,
+            server.feed.subscribe(),
+            server.health(),
+            hub_counters,
+            cancel.clone(),
+        ));
+        let listener = listener.tap_io(|tcp| {
+            let _ = tcp.set_nodelay(true);
+            let _ = socket2::SockRef::from(&*tcp).set_send_buffer_size(CLIENT_SEND_BUFFER);
+        });
+        let listener = guard::GuardedListener::new(
+            listener,
+            cfg.max_clients.saturating_add(guard::EXTRA_CONNECTIONS),
+            guard::PRE_UPGRADE_LIMIT,
+            guard_counters,
+        );
+        let app = http::router(state.clone());
+        let shutdown = cancel.clone();
+        let http = runtime.spawn(async move {
+            let serve =
+                axum::serve(listener, app).with_graceful_shutdown(shutdown.cancelled_owned());
+            if let Err(e) = serve.await {
+                tracing::error!("the dashboard endpoint failed: {e}");
+            }
+        });
+        tracing::info!(%addr, token = state.policy.token_required(), "dashboard endpoint listening");
+        Ok(Dashboard {
+            addr,
+            state,
+            cancel,
+            http: Some(http),
+            hub: Some(hub),
+            runtime: Some(runtime),
+        })
+    }
+
+    /// The address actually bound (useful with port 0).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The page's URL.
+    pub fn url(&self) -> String {
+        let host = if self.addr.ip().is_unspecified() {
+            "127.0.0.1".to_string()
+        } else {
+            match self.addr {
+                SocketAddr::V4(a) => a.ip().to_string(),
+                SocketAddr::V6(a) => format!("[{}]", a.ip()),
+            }
+        };
+        format!("http://{host}:{}/", self.addr.port())
+    }
+
+    /// The endpoint's counters now.
+    pub fn stats(&self) -> DashboardStats {
+        self.state.stats()
+    }
+
+    /// Everything `/metrics` reports, now.
+    pub fn metrics(&self) -> crate::telemetry::prometheus::MetricsSnapshot {
+        self.state.metrics()
+    }
+
+    /// Closes every connection (code 1001) and stops listening.
+    pub async fn shutdown(mut self) {
+        self.cancel.cancel();
+        if let Some(http) = self.http.take() {
+            let _ = tokio::time::timeout(Duration::from_secs(3), http).await;
+        }
+        if let Some(hub) = self.hub.take() {
+            let _ = tokio::time::timeout(Duration::from_secs(3), hub).await;
+        }
+    }
+}

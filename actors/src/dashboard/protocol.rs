@@ -1,0 +1,441 @@
+//! The dashboard's wire protocol (documented for clients in `web/PROTOCOL.md`): JSON text frames. This
+//! module holds the client side (commands) and the replies; the telemetry is in [`super::messages`].
+//!
+//! Server → client: `hello` once, then `tick` (every tick, or fewer if the client asked for a lower rate)
+//! and `status` (health and run counters every [`STATUS_EVERY_TICKS`] ticks), and one `ack` or `error` per
+//! client message. Client → server: JSON objects with a `cmd` field and an optional `id` that the reply
+//! echoes. This module parses client messages with precise errors and builds the replies; it
+//! does no I/O.
+
+use serde::Serialize;
+use serde_json::{Map, Value};
+
+use crate::command::ControlCommand;
+
+/// Version of this protocol, announced in `hello`.
+pub const PROTOCOL_VERSION: u32 = 1;
+/// The websocket subprotocol the server selects when a client offers it.
+pub const SUBPROTOCOL: &str = "pavlov.v1";
+/// Prefix of a subprotocol entry that carries the access token (`token.<token>`).
+pub const TOKEN_PROTOCOL_PREFIX: &str = "token.";
+/// A `status` message goes out on every tick whose sequence number is a multiple of this (5 Hz at 50 Hz).
+pub const STATUS_EVERY_TICKS: u64 = 10;
+
+/// Commands about the connection itself, answered by the websocket actor (allowed without the token).
+pub const SESSION_COMMANDS: [&str; 2] = ["set_rate", "ping"];
+
+/// A command about the connection itself.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SessionCommand {
+    /// Receive at most `hz` ticks per second.
+    SetRate {
+        /// Requested rate, Hz.
+        hz: f64,
+    },
+    /// Answered with an ack; a liveness check.
+    Ping,
+}
+
+/// What a client asked for.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ClientCommand {
+    /// Handled by the websocket actor.
+    Session(SessionCommand),
+    /// Forwarded to the server.
+    Control(ControlCommand),
+}
+
+/// A parsed client message.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClientRequest {
+    /// The client's `id`, echoed in the reply (a string or a number).
+    pub id: Option<Value>,
+    /// The `cmd` name.
+    pub cmd: String,
+    /// The command.
+    pub command: ClientCommand,
+}
+
+/// Why a client message was refused. The `code` goes out in the error reply.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ProtocolError {
+    /// Not JSON.
+    #[error("malformed JSON: {0}")]
+    BadJson(String),
+    /// JSON, but not an object.
+    #[error("a message must be a JSON object with a \"cmd\" field, got {0}")]
+    NotAnObject(&'static str),
+    /// `id` of the wrong type.
+    #[error("\"id\" must be a string or a number, got {0}")]
+    BadId(&'static str),
+    /// No `cmd`, or not a string.
+    #[error("missing \"cmd\": a message must have a string field \"cmd\"")]
+    MissingCmd,
+    /// A `cmd` nobody handles.
+    #[error("unknown command `{0}`; known commands: {known}", known = known_commands().join(", "))]
+    UnknownCommand(String),
+    /// A known `cmd` with bad or missing arguments.
+    #[error("bad arguments for `{cmd}`: {message}")]
+    BadArguments {
+        /// The command.
+        cmd: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A binary frame.
+    #[error("binary frames are not supported; send JSON text frames")]
+    Binary,
+}
+
+impl ProtocolError {
+    /// The machine-readable error code.
+    pub fn code(&self) -> &'static str {
+        match self {
+            ProtocolError::BadJson(_) => "bad_json",
+            ProtocolError::NotAnObject(_) => "bad_message",
+            ProtocolError::BadId(_) => "bad_id",
+            ProtocolError::MissingCmd => "missing_cmd",
+            ProtocolError::UnknownCommand(_) => "unknown_command",
+            ProtocolError::BadArguments { .. } => "bad_arguments",
+            ProtocolError::Binary => "binary_unsupported",
+        }
+    }
+}
+
+/// A refused message: the error and whatever `id` could be recovered for the reply.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rejection {
+    /// The client's `id`, if the message had a usable one.
+    pub id: Option<Value>,
+    /// Why.
+    pub error: ProtocolError,
+}
+
+/// Every command name: the server's ([`ControlCommand::names`]), then the session's.
+pub fn known_commands() -> Vec<&'static str> {
+    ControlCommand::names()
+        .chain(SESSION_COMMANDS.iter().copied())
+        .collect()
+}
+
+fn json_kind(v: &Value) -> &'static str {
+    match v {
+        Value::Null => "null",
+        Value::Bool(_) => "a boolean",
+        Value::Number(_) => "a number",
+        Value::String(_) => "a string",
+        Value::Array(_) => "an array",
+        Value::Object(_) => "an object",
+    }
+}
+
+/// Parses one text frame from a client.
+pub fn parse_request(text: &str) -> Result<ClientRequest, Rejection> {
+    let reject = |id: Option<Value>, error| Rejection { id, error };
+    let value: Value = serde_json::from_str(text)
+        .map_err(|e| reject(None, ProtocolError::BadJson(e.to_string())))?;
+    let Value::Object(mut fields) = value else {
+        return Err(reject(None, ProtocolError::NotAnObject(json_kind(&value))));
+    };
+    let id = match fields.remove("id") {
+        None | Some(Value::Null) => None,
+        Some(v @ (Value::String(_) | Value::Number(_))) => Some(v),
+        Some(other) => return Err(reject(None, ProtocolError::BadId(json_kind(&other)))),
+    };
+    let cmd = match fields.get("cmd") {
+        Some(Value::String(s)) => s.clone(),
+        _ => return Err(reject(id, ProtocolError::MissingCmd)),
+    };
+    let command = if SESSION_COMMANDS.contains(&cmd.as_str()) {
+        parse_session(&cmd, fields).map(ClientCommand::Session)
+    } else if ControlCommand::is_name(&cmd) {
+        parse_control(&cmd, fields).map(ClientCommand::Control)
+    } else {
+        Err(ProtocolError::UnknownCommand(cmd.clone()))
+    };
+    match command {
+        Ok(command) => Ok(ClientRequest { id, cmd, command }),
+        Err(error) => Err(reject(id, error)),
+    }
+}
+
+/// Parses a control command. serde ignores `deny_unknown_fields` for the unit variants of an internally
+/// tagged enum (`{"cmd":"estop","force":true}` would pass), so every field given must also appear when
+/// the parsed command is serialised back.
+fn parse_control(cmd: &str, fields: Map<String, Value>) -> Result<ControlCommand, ProtocolError> {
+    let bad = |message: String| ProtocolError::BadArguments {
+        cmd: cmd.to_string(),
+        message,
+    };
+    let given: Vec<String> = fields.keys().cloned().collect();
+    let command = serde_json::from_value::<ControlCommand>(Value::Object(fields))
+        .map_err(|e| bad(e.to_string()))?;
+    let known = match serde_json::to_value(&command) {
+        Ok(Value::Object(known)) => known,
+        _ => return Err(bad("the command cannot be represented".into())),
+    };
+    match given.iter().find(|k| !known.contains_key(k.as_str())) {
+        Some(extra) => Err(bad(format!("unknown field `{extra}`"))),
+        None => Ok(command),
+    }
+}
+
+fn parse_session(
+    cmd: &str,
+    mut fields: Map<String, Value>,
+) -> Result<SessionCommand, ProtocolError> {
+    fields.remove("cmd");
+    let bad = |message: String| ProtocolError::BadArguments {
+        cmd: cmd.to_string(),
+        message,
+    };
+    let command = match cmd {
+        "set_rate" => {
+            let hz = match fields.remove("hz") {
+                Some(Value::Number(n)) => n.as_f64().unwrap_or(f64::NAN),
+                Some(other) => {
+                    return Err(bad(format!(
+                        "`hz` must be a number, got {}",
+                        json_kind(&other)
+                    )));
+                }
+                None => return Err(bad("missing field `hz`".into())),
+            };
+            if !(hz > 0.0 && hz.is_finite()) {
+                return Err(bad(format!("`hz` must be a positive number, got {hz}")));
+            }
+            SessionCommand::SetRate { hz }
+        }
+        _ => SessionCommand::Ping,
+    };
+    match fields.keys().next() {
+        Some(extra) => Err(bad(format!("unknown field `{extra}`"))),
+        None => Ok(command),
+    }
+}
+
+#[derive(Serialize)]
+struct Ack<'a> {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    id: &'a Option<Value>,
+    cmd: &'a str,
+    result: &'a Value,
+}
+
+#[derive(Serialize)]
+struct ErrorReply<'a> {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    id: &'a Option<Value>,
+    code: &'a str,
+    message: &'a str,
+}
+
+/// The `id` of a message that will not be processed (over the rate limit), if it is a JSON object with a
+/// string or number `id`; nothing else of the message is kept.
+pub fn peek_id(text: &str) -> Option<Value> {
+    #[derive(serde::Deserialize)]
+    struct IdOnly {
+        #[serde(default)]
+        id: Option<Value>,
+    }
+    // A derived struct would also accept an array (its first element as the id).
+    if !text.trim_start().starts_with('{') {
+        return None;
+    }
+    match serde_json::from_str::<IdOnly>(text) {
+        Ok(IdOnly {
+            id: Some(id @ (Value::String(_) | Value::Number(_))),
+        }) => Some(id),
+        _ => None,
+    }
+}
+
+/// `{"type":"ack","id":…,"cmd":…,"result":…}`.
+pub fn ack_json(id: &Option<Value>, cmd: &str, result: &Value) -> String {
+    let ack = Ack {
+        kind: "ack",
+        id,
+        cmd,
+        result,
+    };
+    serde_json::to_string(&ack).unwrap_or_default()
+}
+
+/// `{"type":"error","id":…,"code":…,"message":…}`.
+pub fn error_json(id: &Option<Value>, code: &str, message: &str) -> String {
+    let reply = ErrorReply {
+        kind: "error",
+        id,
+        code,
+        message,
+    };
+    serde_json::to_string(&reply).unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::command::{GatingCommand, LatchCommand};
+    use pavlov::control::Mode;
+    use serde_json::json;
+
+    #[test]
+    fn the_id_of_an_unprocessed_message_is_recovered_when_it_can_be() {
+        assert_eq!(peek_id(r#"{"cmd":"ping","id":7}"#), Some(json!(7)));
+        assert_eq!(peek_id(r#" {"id":"a","x":[1,{"y":2}]}"#), Some(json!("a")));
+        assert_eq!(peek_id(r#"{"id":{"a":1}}"#), None);
+        assert_eq!(peek_id(r#"{"cmd":"ping"}"#), None);
+        assert_eq!(peek_id("[7]"), None);
+        assert_eq!(peek_id("{not json"), None);
+    }
+
+    fn rejected(text: &str) -> Rejection {
+        parse_request(text).unwrap_err()
+    }
+
+    #[test]
+    fn control_commands_parse_with_their_id_stripped() {
+        let r = parse_request(r#"{"cmd":"set_mode","mode":"manual","id":7}"#).unwrap();
+        assert_eq!(r.id, Some(json!(7)));
+        assert_eq!(r.cmd, "set_mode");
+        assert_eq!(
+            r.command,
+            ClientCommand::Control(GatingCommand::SetMode { mode: Mode::Manual }.into())
+        );
+        let r = parse_request(r#"{"id":"a","cmd":"estop"}"#).unwrap();
+        assert_eq!(r.id, Some(json!("a")));
+        assert_eq!(
+            r.command,
+            ClientCommand::Control(LatchCommand::Estop {}.into())
+        );
+        let r = parse_request(r#"{"cmd":"release","id":null}"#).unwrap();
+        assert_eq!(r.id, None);
+    }
+
+    #[test]
+    fn every_listed_control_command_is_a_real_one() {
+        let samples = [
+            json!({"cmd":"set_mode","mode":"reactive"}),
+            json!({"cmd":"estop"}),
+            json!({"cmd":"rearm"}),
+            json!({"cmd":"release"}),
+            json!({"cmd":"teleop","left_mm_s":100,"right_mm_s":-100}),
+            json!({"cmd":"human_request"}),
+            json!({"cmd":"set_params","alpha":0.1,"lambda":0.9,"threshold":0.4}),
+            json!({"cmd":"reset_weights"}),
+            json!({"cmd":"save_weights"}),
+            json!({"cmd":"start_recording"}),
+            json!({"cmd":"stop_recording"}),
+        ];
+        let names: Vec<&str> = ControlCommand::names().collect();
+        assert_eq!(samples.len(), names.len());
+        for sample in samples {
+            let r = parse_request(&sample.to_string()).unwrap();
+            assert!(names.contains(&r.cmd.as_str()), "{}", r.cmd);
+            assert!(matches!(r.command, ClientCommand::Control(_)), "{}", r.cmd);
+        }
+    }
+
+    #[test]
+    fn session_commands_parse_and_check_their_arguments() {
+        let r = parse_request(r#"{"cmd":"set_rate","hz":10}"#).unwrap();
+        assert_eq!(
+            r.command,
+            ClientCommand::Session(SessionCommand::SetRate { hz: 10.0 })
+        );
+        let r = parse_request(r#"{"cmd":"ping","id":1}"#).unwrap();
+        assert_eq!(r.command, ClientCommand::Session(SessionCommand::Ping));
+        for bad in [
+            r#"{"cmd":"set_rate"}"#,
+            r#"{"cmd":"set_rate","hz":"fast"}"#,
+            r#"{"cmd":"set_rate","hz":0}"#,
+            r#"{"cmd":"set_rate","hz":-3}"#,
+            r#"{"cmd":"set_rate","hz":5,"extra":1}"#,
+            r#"{"cmd":"ping","x":true}"#,
+        ] {
+            assert_eq!(rejected(bad).error.code(), "bad_arguments", "{bad}");
+        }
+    }
+
+    #[test]
+    fn malformed_json_is_bad_json_without_an_id() {
+        let r = rejected(r#"{"cmd":"estop","id":3"#);
+        assert_eq!(r.id, None);
+        assert_eq!(r.error.code(), "bad_json");
+        assert!(r.error.to_string().contains("EOF"), "{}", r.error);
+    }
+
+    #[test]
+    fn non_objects_are_refused_by_kind() {
+        for (text, kind) in [
+            ("[1,2]", "an array"),
+            ("3", "a number"),
+            ("\"estop\"", "a string"),
+            ("null", "null"),
+        ] {
+            let r = rejected(text);
+            assert_eq!(r.error, ProtocolError::NotAnObject(kind));
+        }
+    }
+
+    #[test]
+    fn bad_ids_and_missing_cmd_are_named() {
+        assert_eq!(
+            rejected(r#"{"cmd":"estop","id":[1]}"#).error,
+            ProtocolError::BadId("an array")
+        );
+        let r = rejected(r#"{"id":5}"#);
+        assert_eq!((r.id, r.error), (Some(json!(5)), ProtocolError::MissingCmd));
+        assert_eq!(rejected(r#"{"cmd":42}"#).error, ProtocolError::MissingCmd);
+    }
+
+    #[test]
+    fn unknown_commands_list_the_known_ones_and_keep_the_id() {
+        let r = rejected(r#"{"cmd":"fly","id":"x"}"#);
+        assert_eq!(r.id, Some(json!("x")));
+        assert_eq!(r.error.code(), "unknown_command");
+        let msg = r.error.to_string();
+        assert!(
+            msg.contains("`fly`") && msg.contains("set_mode") && msg.contains("set_rate"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn bad_arguments_carry_serde_detail() {
+        let cases = [
+            (r#"{"cmd":"set_mode","mode":"fly"}"#, "fly"),
+            (r#"{"cmd":"set_mode"}"#, "mode"),
+            (r#"{"cmd":"estop","force":true}"#, "force"),
+            (
+                r#"{"cmd":"teleop","left_mm_s":40000,"right_mm_s":0}"#,
+                "40000",
+            ),
+            (r#"{"cmd":"set_params","alpha":"big"}"#, "big"),
+        ];
+        for (text, detail) in cases {
+            let r = rejected(text);
+            assert_eq!(r.error.code(), "bad_arguments", "{text}");
+            assert!(r.error.to_string().contains(detail), "{text}: {}", r.error);
+        }
+    }
+
+    #[test]
+    fn replies_are_well_formed_json() {
+        let ack: Value =
+            serde_json::from_str(&ack_json(&Some(json!(3)), "estop", &json!({"estop":true})))
+                .unwrap();
+        assert_eq!(
+            ack,
+            json!({"type":"ack","id":3,"cmd":"estop","result":{"estop":true}})
+        );
+        let err: Value =
+            serde_json::from_str(&error_json(&None, "bad_json", "x \"quoted\"")).unwrap();
+        assert_eq!(
+            err,
+            json!({"type":"error","id":null,"code":"bad_json","message":"x \"quoted\""})
+        );
+    }
+}

@@ -1,0 +1,369 @@
+//! One websocket connection: a forwarder (hub → the client's queue, at the client's rate), a writer (queue →
+//! socket) and a reader (socket → parsed commands → the server's command router → ack or error).
+//!
+//! The forwarder never waits on the socket: when the client falls behind, its queue drops the oldest
+//! telemetry. The writer gives up on a client whose socket accepts nothing for [`WRITE_STALL`]. Bad
+//! messages get an error reply and the connection stays open; only an over-size message (which the
+//! websocket layer cannot resynchronise after) closes it, with code 1009. Every message draws on the
+//! connection's [`TokenBucket`]: one over the limit is answered `rate_limited` and not processed, and a
+//! connection over its limit is read at most [`OVER_LIMIT_READS_PER_SECOND`] messages a second. When
+//! [`super::out_queue::CONTROL_CAPACITY`] replies are waiting, the reader stops reading (so a fast client is
+//! slowed by TCP, not by memory) for up to [`UNREAD_PATIENCE`], then disconnects the client. Each way a
+//! connection can be closed for misbehaving is counted in [`SessionCounters`].
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, close_code};
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{Value, json};
+use tokio::sync::{broadcast, mpsc};
+use tokio_util::sync::CancellationToken;
+
+use super::auth::Access;
+use super::hub::{HubHandle, Outgoing};
+use super::out_queue::{Decimator, OutQueue};
+use super::protocol::{
+    ClientCommand, ClientRequest, SessionCommand, ack_json, error_json, parse_request, peek_id,
+};
+use super::rate::{RateLimit, TokenBucket};
+use crate::command::ControlRequest;
+
+/// A client whose socket accepts nothing for this long is disconnected.
+pub const WRITE_STALL: Duration = Duration::from_secs(10);
+/// How long a full reply queue may stay full before the client is disconnected.
+pub const UNREAD_PATIENCE: Duration = Duration::from_secs(5);
+/// While a connection is over its rate limit, the server reads at most this many of its messages a second;
+/// the rest wait in TCP buffers, so a flood costs the server little CPU and no memory.
+pub const OVER_LIMIT_READS_PER_SECOND: u32 = 1000;
+/// Messages over the limit between two pauses of the reader.
+const PACE_BATCH: u32 = 10;
+/// How long a command may wait for room in the router's inbox.
+const ROUTER_SEND_TIMEOUT: Duration = Duration::from_secs(1);
+/// How long a command may take to be applied before the client is told it timed out.
+const COMMAND_TIMEOUT: Duration = Duration::from_secs(3);
+/// How long a closing connection may take to flush its last replies.
+const CLOSE_GRACE: Duration = Duration::from_secs(1);
+
+/// Whether the `n`-th occurrence of an abuse event is worth a log line: the first three, then every power of
+/// two, so a flood is visible in the log without the log becoming the flood (the counters have every one).
+pub fn worth_logging(n: u64) -> bool {
+    n <= 3 || n.is_power_of_two()
+}
+
+/// Endpoint-wide counters the sessions update.
+#[derive(Debug, Default)]
+pub struct SessionCounters {
+    /// Telemetry messages dropped for slow clients, all clients together.
+    pub telemetry_dropped: AtomicU64,
+    /// Commands forwarded to the server.
+    pub commands: AtomicU64,
+    /// Error replies sent (including `rate_limited`).
+    pub errors: AtomicU64,
+    /// Messages refused with `rate_limited`.
+    pub rate_limited: AtomicU64,
+    /// Connections closed with 1009 for an over-size message.
+    pub closed_oversize: AtomicU64,
+    /// Connections dropped because their replies piled up unread.
+    pub closed_unread: AtomicU64,
+    /// Connections dropped because their socket accepted nothing for [`WRITE_STALL`].
+    pub closed_write_stall: AtomicU64,
+}
+
+/// Everything a session needs.
+pub struct Session {
+    /// Where the telemetry comes from.
+    pub hub: HubHandle,
+    /// The server's command inbox.
+    pub commands: mpsc::Sender<ControlRequest>,
+    /// What this client may do.
+    pub access: Access,
+    /// The `hello` text.
+    pub hello: String,
+    /// Telemetry queued before the oldest is dropped.
+    pub queue: usize,
+    /// The tick rate, Hz.
+    pub tick_hz: f64,
+    /// The message rate limit.
+    pub rate: RateLimit,
+    /// Shared counters.
+    pub counters: Arc<SessionCounters>,
+    /// Fires when the endpoint shuts down.
+    pub cancel: CancellationToken,
+}
+
+enum Out {
+    Text(Utf8Bytes),
+    Close(u16, &'static str),
+}
+
+impl Session {
+    /// Serves one connection until either side ends it.
+    pub async fn run(self, socket: WebSocket) {
+        let (sink, stream) = socket.split();
+        let queue = Arc::new(OutQueue::new(self.queue));
+        let stride = Arc::new(AtomicU64::new(1));
+        let _ = queue.push_control(Out::Text(self.hello.clone().into()));
+        let forwarder = tokio::spawn(forward(
+            self.hub.subscribe(),
+            queue.clone(),
+            stride.clone(),
+            self.counters.clone(),
+        ));
+        let writer = write(sink, queue.clone(), self.counters.clone());
+        tokio::pin!(writer);
+        tokio::select! {
+            _ = &mut writer => {}
+            _ = self.read(stream, &queue, &stride) => {
+                queue.close();
+                let _ = tokio::time::timeout(CLOSE_GRACE, &mut writer).await;
+            }
+            _ = self.cancel.cancelled() => {
+                let _ = queue.push_control(Out::Close(close_code::AWAY, "server shutting down"));
+                queue.close();
+                let _ = tokio::time::timeout(CLOSE_GRACE, &mut writer).await;
+            }
+        }
+        forwarder.abort();
+    }
+
+    async fn read(
+        &self,
+        mut stream: futures_util::stream::SplitStream<WebSocket>,
+        queue: &OutQueue<Out>,
+        stride: &AtomicU64,
+    ) {
+        let mut bucket = TokenBucket::new(self.rate, std::time::Instant::now());
+        let mut pace = Pacer::default();
+        while let Some(msg) = stream.next().await {
+            let over_limit = matches!(
+                msg,
+                Ok(Message::Text(_) | Message::Binary(_) | Message::Ping(_) | Message::Pong(_))
+            ) && !bucket.try_take(std::time::Instant::now());
+            let reply = match msg {
+                Ok(Message::Text(text)) if over_limit => self.rate_limited(peek_id(&text)),
+                Ok(Message::Binary(_)) if over_limit => self.rate_limited(None),
+                Ok(Message::Ping(_) | Message::Pong(_)) if over_limit => {
+                    pace.over_limit().await;
+                    continue;
+                }
+                Ok(Message::Text(text)) => self.handle(&text, stride).await,
+                Ok(Message::Binary(_)) => {
+                    let e = super::protocol::ProtocolError::Binary;
+                    self.error(&None, e.code(), &e.to_string())
+                }
+                Ok(Message::Ping(_) | Message::Pong(_)) => continue,
+                Ok(Message::Close(_)) => return,
+                Err(e) => {
+                    if is_capacity_error(&e) {
+                        let n = self
+                            .counters
+                            .closed_oversize
+                            .fetch_add(1, Ordering::Relaxed)
+                            + 1;
+                        if worth_logging(n) {
+                            tracing::info!(
+                                total = n,
+                                "websocket client sent an over-size message: {e}"
+                            );
+                        }
+                        let _ = queue.push_control(Out::Close(close_code::SIZE, "message too big"));
+                    } else {
+                        tracing::debug!("websocket read error: {e}");
+                    }
+                    return;
+                }
+            };
+            if queue
+                .push_control_waiting(Out::Text(reply.into()), UNREAD_PATIENCE)
+                .await
+                .is_err()
+            {
+                let n = self.counters.closed_unread.fetch_add(1, Ordering::Relaxed) + 1;
+                if worth_logging(n) {
+                    tracing::warn!(
+                        total = n,
+                        "websocket client does not read its replies; disconnecting it"
+                    );
+                }
+                return;
+            }
+            if over_limit {
+                pace.over_limit().await;
+            }
+        }
+    }
+
+    fn rate_limited(&self, id: Option<Value>) -> String {
+        self.counters.rate_limited.fetch_add(1, Ordering::Relaxed);
+        let RateLimit { burst, per_second } = self.rate;
+        self.error(
+            &id,
+            "rate_limited",
+            &format!(
+                "too many messages: at most {per_second} per second in bursts of {burst}; this one was not processed"
+            ),
+        )
+    }
+
+    fn error(&self, id: &Option<Value>, code: &str, message: &str) -> String {
+        self.counters.errors.fetch_add(1, Ordering::Relaxed);
+        error_json(id, code, message)
+    }
+
+    async fn handle(&self, text: &str, stride: &AtomicU64) -> String {
+        let ClientRequest { id, cmd, command } = match parse_request(text) {
+            Ok(r) => r,
+            Err(rej) => return self.error(&rej.id, rej.error.code(), &rej.error.to_string()),
+        };
+        match command {
+            ClientCommand::Session(SessionCommand::SetRate { hz }) => {
+                let every = Decimator::stride_for(hz, self.tick_hz);
+                stride.store(every, Ordering::Relaxed);
+                ack_json(
+                    &id,
+                    &cmd,
+                    &json!({"rate_hz": self.tick_hz / every as f64, "every": every}),
+                )
+            }
+            ClientCommand::Session(SessionCommand::Ping) => ack_json(&id, &cmd, &json!({})),
+            ClientCommand::Control(_) if self.access == Access::Watch => self.error(
+                &id,
+                "unauthorized",
+                "this connection may only watch: reconnect with the token to send commands",
+            ),
+            ClientCommand::Control(command) => {
+                self.counters.commands.fetch_add(1, Ordering::Relaxed);
+                tracing::info!(cmd = %cmd, "command from a websocket client");
+                let (request, reply) = ControlRequest::new(command);
+                match tokio::time::timeout(ROUTER_SEND_TIMEOUT, self.commands.send(request)).await {
+                    Ok(Ok(())) => {}
+                    Ok(Err(_)) => {
+                        return self.error(&id, "unavailable", "the server is shutting down");
+                    }
+                    Err(_) => {
+                        return self.error(
+                            &id,
+                            "busy",
+                            "the server's command queue is full; try again",
+                        );
+                    }
+                }
+                match tokio::time::timeout(COMMAND_TIMEOUT, reply).await {
+                    Ok(Ok(Ok(applied))) => {
+                        let result = serde_json::to_value(&applied).unwrap_or_default();
+                        ack_json(&id, &cmd, &result)
+                    }
+                    Ok(Ok(Err(e))) => self.error(&id, e.code(), &e.to_string()),
+                    Ok(Err(_)) => {
+                        self.error(&id, "unavailable", "the server stopped before answering")
+                    }
+                    Err(_) => self.error(&id, "timeout", "the command was not answered in time"),
+                }
+            }
+        }
+    }
+}
+
+/// Slows the reader of a connection that is over its rate limit: a pause after every [`PACE_BATCH`]
+/// messages over the limit, so it reads at most [`OVER_LIMIT_READS_PER_SECOND`] of them a second.
+#[derive(Default)]
+struct Pacer {
+    over: u32,
+}
+
+impl Pacer {
+    async fn over_limit(&mut self) {
+        self.over = self.over.wrapping_add(1);
+        if self.over % PACE_BATCH == 0 {
+            tokio::time::sleep(Duration::from_secs(1) * PACE_BATCH / OVER_LIMIT_READS_PER_SECOND)
+                .await;
+        }
+    }
+}
+
+fn is_capacity_error(e: &axum::Error) -> bool {
+    let mut source: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(s) = source {
+        let text = s.to_string();
+        if text.contains("Space limit exceeded")
+            || text.contains("too long")
+            || text.contains("too big")
+        {
+            return true;
+        }
+        source = s.source();
+    }
+    false
+}
+
+async fn forward(
+    mut rx: broadcast::Receiver<Outgoing>,
+    queue: Arc<OutQueue<Out>>,
+    stride: Arc<AtomicU64>,
+    counters: Arc<SessionCounters>,
+) {
+    let mut decimator = Decimator::all();
+    loop {
+        let dropped = match rx.recv().await {
+            Ok(Outgoing::Tick { seq, text }) => {
+                let every = stride.load(Ordering::Relaxed);
+                if every != decimator.every() {
+                    decimator.set_every(every);
+                }
+                if !decimator.pass(seq) {
+                    continue;
+                }
+                queue.push_telemetry(Out::Text(text))
+            }
+            Ok(Outgoing::Status(text)) => queue.push_telemetry(Out::Text(text)),
+            Err(broadcast::error::RecvError::Lagged(n)) => {
+                queue.count_dropped(n);
+                n
+            }
+            Err(broadcast::error::RecvError::Closed) => break,
+        };
+        if dropped > 0 {
+            counters
+                .telemetry_dropped
+                .fetch_add(dropped, Ordering::Relaxed);
+        }
+    }
+}
+
+async fn write(
+    mut sink: futures_util::stream::SplitSink<WebSocket, Message>,
+    queue: Arc<OutQueue<Out>>,
+    counters: Arc<SessionCounters>,
+) {
+    while let Some(out) = queue.pop().await {
+        let (msg, last) = match out {
+            Out::Text(text) => (Message::Text(text), false),
+            Out::Close(code, reason) => (
+                Message::Close(Some(CloseFrame {
+                    code,
+                    reason: Utf8Bytes::from_static(reason),
+                })),
+                true,
+            ),
+        };
+        match tokio::time::timeout(WRITE_STALL, sink.send(msg)).await {
+            Ok(Ok(())) if !last => {}
+            Ok(Ok(())) => return,
+            Ok(Err(e)) => {
+                tracing::debug!("websocket write failed: {e}");
+                return;
+            }
+            Err(_) => {
+                counters.closed_write_stall.fetch_add(1, Ordering::Relaxed);
+                tracing::warn!(
+                    "a websocket client accepted nothing for {} s; disconnecting it",
+                    WRITE_STALL.as_secs()
+                );
+                return;
+            }
+        }
+    }
+    let _ = sink.send(Message::Close(None)).await;
+}

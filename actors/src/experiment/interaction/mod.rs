@@ -1,0 +1,119 @@
+//! The paper's interaction experiment ("Reducing Lag By Predicting the Next Command") on the simulated
+//! Create: a simulated operator commands a left spin with the left elbow; runs alternate reactive /
+//! Pavlovian (config/interaction.toml: π = stay still, ϱ = spin left, E = left elbow below 90°), each
+//! learning from scratch through the one [`super::runner`]. Run `i` draws its robot and operator seeds
+//! from [`super::run_rng`]. Per policy: when the response started relative to each ground-truth command
+//! onset ([`pavlov::analysis::interaction`]), and the battery current and rotation averaged over the last
+//! N observed command onsets of each run (`--commands`, the paper: 40; the paper's Figure 4).
+//!
+//! - [`run`]: one run; [`analysis`]: the statistics; [`report`]: files and the terminal table;
+//!   [`plots`]: the Figure 3 and Figure 4 analogues.
+
+pub mod analysis;
+pub mod plots;
+pub mod report;
+pub mod run;
+
+use std::path::PathBuf;
+
+use pavlov::analysis::stats::WelchTest;
+use pavlov::config::Config;
+use pavlov::control::Mode;
+use serde::Serialize;
+
+use analysis::{AlignedPoint, PolicyTiming, aligned, latency_test, timing};
+use run::InteractionRun;
+
+use super::runner::{RunError, run_all};
+use super::{interleaved_mode, mode_name};
+
+/// The study's settings.
+#[derive(Debug, Clone, Serialize)]
+pub struct InteractionOptions {
+    /// Runs per policy (the paper: 1).
+    pub runs_per_policy: usize,
+    /// Minutes per run (the paper: under 10).
+    pub minutes: f64,
+    /// How many of each run's last observed commands the aligned averages use (the paper: 40).
+    pub aligned_commands: usize,
+    /// The experiment's seed.
+    pub seed: u64,
+    /// Record every run.
+    pub record: bool,
+    /// OS threads.
+    pub threads: usize,
+    /// Results directory.
+    pub out: PathBuf,
+}
+
+/// Everything `summary.json` holds.
+#[derive(Debug, Clone, Serialize)]
+pub struct InteractionSummary {
+    /// The settings.
+    pub options: InteractionOptions,
+    /// How the seeds are derived.
+    pub seed_derivation: String,
+    /// Every run.
+    pub runs: Vec<InteractionRun>,
+    /// Per-policy response timing.
+    pub timing: Vec<PolicyTiming>,
+    /// Welch's test of the latencies, Pavlovian vs reactive.
+    pub latency_welch: Option<WelchTest>,
+    /// Aligned averages around the observed command onsets.
+    pub aligned: Vec<AlignedPoint>,
+    /// Wall time, s.
+    pub wall_s: f64,
+}
+
+/// Runs every run (alternating reactive / Pavlovian) on `threads` threads, with no progress bar.
+pub fn run_study(base: &Config, o: &InteractionOptions) -> Result<InteractionSummary, RunError> {
+    run_study_with_progress(base, o, false)
+}
+
+/// [`run_study`], with a progress bar on stderr when `progress`.
+pub fn run_study_with_progress(
+    base: &Config,
+    o: &InteractionOptions,
+    progress: bool,
+) -> Result<InteractionSummary, RunError> {
+    let wall = std::time::Instant::now();
+    let period_s = base.tick.period_ms.max(1) as f64 / 1000.0;
+    let ticks = (o.minutes * 60.0 / period_s).round().max(1.0) as usize;
+    let specs: Vec<(usize, Mode)> = (0..2 * o.runs_per_policy)
+        .map(|i| (i, interleaved_mode(i)))
+        .collect();
+    let bar = super::progress_bar(specs.len(), progress);
+    bar.set_message(format!("{} min each", o.minutes));
+    bar.tick();
+    let one = |&(i, m): &(usize, Mode)| {
+        let dir = o
+            .record
+            .then(|| o.out.join("runs").join(format!("{i:02}-{}", mode_name(m))));
+        run::run(base, i, m, o.seed, ticks, o.aligned_commands, dir)
+    };
+    let on_done = |r: &InteractionRun| {
+        bar.inc(1);
+        bar.set_message(format!(
+            "run {} {}: mean latency {} ms, {:.1} s wall",
+            r.index,
+            mode_name(r.mode),
+            r.metrics
+                .mean_latency_ms()
+                .map_or("–".into(), |x| format!("{x:.0}")),
+            r.wall_s
+        ));
+    };
+    let runs = run_all(&specs, o.threads, &one, &on_done)?;
+    bar.finish_and_clear();
+    Ok(InteractionSummary {
+        options: o.clone(),
+        seed_derivation: "run i (even = reactive, odd = Pavlovian): robot seed \
+                          Rng::new(seed).fork(i).next_u64(), operator seed Rng::new(seed).fork(i).fork(1).next_u64()"
+            .into(),
+        timing: vec![timing(&runs, Mode::Reactive), timing(&runs, Mode::Pavlovian)],
+        latency_welch: latency_test(&runs),
+        aligned: aligned(&runs),
+        runs,
+        wall_s: wall.elapsed().as_secs_f64(),
+    })
+}

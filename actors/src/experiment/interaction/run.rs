@@ -1,0 +1,236 @@
+//! One interaction run: the simulated operator's skeleton fed straight into the server's pose channel, and
+//! what the study measures of the run's ticks against the operator's true commands.
+//!
+//! Runs alternate reactive / Pavlovian (config/interaction.toml: π = stay still, ϱ = spin left, E = left
+//! elbow below 90°), each learning from scratch under tokio's paused clock. Run `i` uses robot seed
+//! `Rng::new(seed).fork(i).next_u64()` and operator seed `Rng::new(seed).fork(i).fork(1).next_u64()`.
+//! Per policy: when the response started relative to each ground-truth command onset
+//! ([`pavlov::analysis::interaction`]), and the battery current and rotation averaged over the last
+//! N observed command onsets of each run (`--commands`, the paper: 40; the paper's Figure 4).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use pavlov::analysis::interaction::live_physical::physical_sample;
+use pavlov::analysis::interaction::physical::{PhysicalLatency, PhysicalParams, measure_physical};
+use pavlov::analysis::interaction::{
+    CommandWindow, InteractionMetrics, MatchParams, ResponseSample, measure,
+};
+use pavlov::config::Config;
+use pavlov::control::Mode;
+use pavlov::record::TickRecord;
+use pavlov::sim::human::{HumanParams, SimHuman};
+use serde::Serialize;
+use tokio_util::sync::CancellationToken;
+
+use crate::experiment::run_rng;
+use crate::experiment::runner::{Collect, RunError, RunRequest, run_paused};
+use crate::server::Server;
+
+/// Aligned window: ticks before the onset.
+pub const BEFORE_TICKS: i64 = 25;
+/// Aligned window: ticks after the onset.
+pub const AFTER_TICKS: i64 = 50;
+/// An onset counts only after this many ticks without the stimulus (one gesture can flicker).
+pub const DEBOUNCE_TICKS: usize = 50;
+
+/// One run's outcome.
+#[derive(Debug, Clone, Serialize)]
+pub struct InteractionRun {
+    /// Position in the interleaved sequence.
+    pub index: usize,
+    /// Reactive or Pavlovian.
+    pub mode: Mode,
+    /// The simulated robot's seed.
+    pub robot_seed: u64,
+    /// The simulated operator's seed.
+    pub human_seed: u64,
+    /// Response timing against the ground-truth commands.
+    pub metrics: InteractionMetrics,
+    /// The ground-truth commands.
+    pub commands: Vec<CommandWindow>,
+    /// Per command: when the battery current dropped and the wheels moved, relative to its onset
+    /// ([`pavlov::analysis::interaction::physical`]).
+    pub physical: Vec<PhysicalLatency>,
+    /// Ticks of the observed command onsets used for the aligned averages.
+    pub aligned_onsets: Vec<u64>,
+    /// The recording, if written.
+    pub recording: Option<PathBuf>,
+    /// Wall time, s.
+    pub wall_s: f64,
+    /// Every tick (not serialised).
+    #[serde(skip)]
+    pub records: Vec<Arc<TickRecord>>,
+}
+
+/// The seeds of run `index`: (robot, operator).
+pub fn run_seeds(seed: u64, index: usize) -> (u64, u64) {
+    let run = run_rng(seed, index);
+    (run.clone().next_u64(), run.fork(1).next_u64())
+}
+
+/// What an interaction run keeps: every record, and the simulated operator driving the pose channel.
+struct InteractionCollector {
+    human: Option<SimHuman>,
+    driver: Option<tokio::task::JoinHandle<SimHuman>>,
+    cancel: CancellationToken,
+    records: Vec<Arc<TickRecord>>,
+}
+
+impl Collect for InteractionCollector {
+    type Output = (Vec<Arc<TickRecord>>, Vec<CommandWindow>);
+
+    fn start(&mut self, server: &Server) {
+        if let Some(human) = self.human.take() {
+            self.driver = Some(tokio::spawn(crate::simulated::human::drive_pose(
+                human,
+                server.pose.clone(),
+                server.started,
+                self.cancel.clone(),
+            )));
+        }
+    }
+
+    fn record(&mut self, record: Arc<TickRecord>) {
+        self.records.push(record);
+    }
+
+    async fn finish(self) -> Result<Self::Output, RunError> {
+        self.cancel.cancel();
+        let commands = match self.driver {
+            Some(driver) => match driver.await {
+                Ok(h) => h.commands().iter().map(|&c| c.into()).collect(),
+                Err(e) => {
+                    return Err(RunError::Collector(format!(
+                        "the simulated operator failed: {e}"
+                    )));
+                }
+            },
+            None => Vec::new(),
+        };
+        Ok((self.records, commands))
+    }
+}
+
+/// Runs one interaction run of `ticks` ticks.
+pub fn run(
+    base: &Config,
+    index: usize,
+    mode: Mode,
+    seed: u64,
+    ticks: usize,
+    aligned_commands: usize,
+    record_dir: Option<PathBuf>,
+) -> Result<InteractionRun, RunError> {
+    let (robot_seed, human_seed) = run_seeds(seed, index);
+    let mut config = base.clone();
+    config.control.mode = mode;
+    config.sim.seed = robot_seed;
+    config.skeleton.enabled = Some(false);
+    let request = RunRequest {
+        config,
+        ticks: ticks as u64,
+        record: record_dir.map(|d| (d, format!("interaction run {index} {mode:?}"))),
+    };
+    let collector = InteractionCollector {
+        human: Some(SimHuman::new(HumanParams::default(), human_seed)),
+        driver: None,
+        cancel: CancellationToken::new(),
+        records: Vec::with_capacity(ticks),
+    };
+    let done = run_paused(request, collector)?;
+    let (records, commands) = done.output;
+    let samples: Vec<ResponseSample> = records
+        .iter()
+        .map(|r| ResponseSample {
+            t_ms: r.t_ms,
+            responding: r.gate,
+        })
+        .collect();
+    let end_ms = records.last().map_or(0.0, |r| r.t_ms);
+    let commands: Vec<CommandWindow> = commands
+        .into_iter()
+        .filter(|c| c.onset_ms <= end_ms)
+        .collect();
+    let metrics = measure(&samples, &commands, &MatchParams::default());
+    let physical_samples: Vec<_> = records.iter().map(|r| physical_sample(r)).collect();
+    let physical = measure_physical(
+        &physical_samples,
+        &commands,
+        &MatchParams::default(),
+        &PhysicalParams::default(),
+    );
+    let aligned_onsets = observed_onsets(&records)
+        .into_iter()
+        .rev()
+        .take(aligned_commands)
+        .rev()
+        .collect();
+    Ok(InteractionRun {
+        index,
+        mode,
+        robot_seed,
+        human_seed,
+        metrics,
+        commands,
+        physical,
+        aligned_onsets,
+        recording: done.recording,
+        wall_s: done.wall_s,
+        records,
+    })
+}
+
+/// Ticks (indices into `records`) where the stimulus comes on after [`DEBOUNCE_TICKS`] without it, and
+/// the aligned window fits.
+pub fn observed_onsets(records: &[Arc<TickRecord>]) -> Vec<u64> {
+    let mut out = Vec::new();
+    let mut quiet = DEBOUNCE_TICKS;
+    for (i, r) in records.iter().enumerate() {
+        if r.stimulus {
+            let fits = i as i64 >= BEFORE_TICKS && (i as i64 + AFTER_TICKS) < records.len() as i64;
+            if quiet >= DEBOUNCE_TICKS && fits {
+                out.push(i as u64);
+            }
+            quiet = 0;
+        } else {
+            quiet += 1;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rec(seq: u64, stimulus: bool) -> Arc<TickRecord> {
+        Arc::new(TickRecord {
+            stimulus,
+            gate: stimulus,
+            ..TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Pavlovian)
+        })
+    }
+
+    #[test]
+    fn onsets_are_debounced_and_need_room_for_the_aligned_window() {
+        // Stimulus at 10 (too early for the window), 100..110, a flicker at 115 (debounced), 200..205,
+        // and 300 (too late: the run ends at 320).
+        let on = |i: u64| {
+            i == 10 || (100..110).contains(&i) || i == 115 || (200..205).contains(&i) || i == 300
+        };
+        let records: Vec<Arc<TickRecord>> = (0..320).map(|i| rec(i, on(i))).collect();
+        assert_eq!(observed_onsets(&records), vec![100, 200]);
+    }
+
+    #[test]
+    fn run_seeds_differ_between_runs_and_between_robot_and_operator() {
+        let (r0, h0) = run_seeds(1, 0);
+        let (r1, h1) = run_seeds(1, 1);
+        assert_ne!(r0, h0);
+        assert_ne!(r0, r1);
+        assert_ne!(h0, h1);
+        assert_eq!(run_seeds(1, 0), (r0, h0));
+        assert_eq!(r0, crate::experiment::stall::run_seed(1, 0));
+    }
+}

@@ -1,0 +1,212 @@
+//! The one way an experiment runs: the real server on the simulated Create under tokio's paused clock, and
+//! one scheduler that spreads the runs over OS threads.
+//!
+//! [`run_paused`] gives each run its own single-threaded runtime with the clock paused, so a 6-minute run
+//! takes as long as the computation does and the same seed always gives the same ticks. It starts the
+//! server (with the recorder when the run is recorded), lets a [`Collect`] see every tick record as it is
+//! published, and shuts the server down in order. [`run_all`] runs a list of runs on `threads` threads;
+//! each run's outcome depends only on its own seed, never on the scheduling. An experiment is a folder
+//! that plans its runs, supplies a [`Collect`], and analyses what comes back.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+
+use pavlov::config::Config;
+use pavlov::record::TickRecord;
+use tokio::sync::broadcast::error::RecvError;
+
+use crate::server::{RobotTarget, Server};
+use crate::storage::recorder::Recorder;
+use crate::storage::recording::RecordingHeader;
+
+/// Why a run failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// The runtime could not be built.
+    #[error("cannot build the runtime: {0}")]
+    Runtime(std::io::Error),
+    /// The recorder could not start.
+    #[error("cannot start the recorder: {0}")]
+    Recorder(std::io::Error),
+    /// The server could not start.
+    #[error("cannot start the server: {0}")]
+    Server(String),
+    /// The feed closed before the run was complete.
+    #[error("the tick feed closed after {0} records")]
+    FeedClosed(u64),
+    /// Something the experiment ran beside the server failed.
+    #[error("{0}")]
+    Collector(String),
+    /// A run's thread panicked.
+    #[error("a run panicked")]
+    Panicked,
+}
+
+/// One run to make.
+#[derive(Debug, Clone)]
+pub struct RunRequest {
+    /// The configuration (mode and seeds already set for this run).
+    pub config: Config,
+    /// Ticks to collect.
+    pub ticks: u64,
+    /// Record every tick into this directory, with this label in the recording's header.
+    pub record: Option<(PathBuf, String)>,
+}
+
+/// What an experiment does with a run's ticks.
+pub trait Collect {
+    /// What it makes of them.
+    type Output;
+    /// Called once the server runs, before the first record (e.g. to start a simulated operator).
+    fn start(&mut self, _server: &Server) {}
+    /// Called with every tick record, in order.
+    fn record(&mut self, record: Arc<TickRecord>);
+    /// Called after the last record, before the server shuts down.
+    fn finish(self) -> impl std::future::Future<Output = Result<Self::Output, RunError>>;
+}
+
+/// A finished run.
+#[derive(Debug, Clone)]
+pub struct Finished<T> {
+    /// What the collector made of it.
+    pub output: T,
+    /// The recording, if one was written.
+    pub recording: Option<PathBuf>,
+    /// Records the recorder wrote.
+    pub recorded: u64,
+    /// Records the feed could not hand to the recorder (queue full).
+    pub recorder_dropped: u64,
+    /// Records the collector's subscription missed (should be 0).
+    pub lagged: u64,
+    /// Wall-clock time the run took, s.
+    pub wall_s: f64,
+}
+
+/// Runs `request` under a paused clock and hands every record to `collector`.
+pub fn run_paused<C: Collect>(
+    request: RunRequest,
+    collector: C,
+) -> Result<Finished<C::Output>, RunError> {
+    let wall = std::time::Instant::now();
+    let RunRequest {
+        config,
+        ticks,
+        record,
+    } = request;
+    let recorder = match record {
+        Some((dir, label)) => {
+            let header = RecordingHeader::new(&config, label);
+            // The queue holds the whole run, so the recording is complete however the threads are scheduled.
+            let capacity = usize::try_from(ticks)
+                .unwrap_or(usize::MAX)
+                .saturating_add(64);
+            Some(
+                Recorder::spawn(header, Some(dir.clone()), dir, capacity)
+                    .map_err(RunError::Recorder)?,
+            )
+        }
+        None => None,
+    };
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .start_paused(true)
+        .build()
+        .map_err(RunError::Runtime)?;
+    let link = recorder.as_ref().map(|r| r.link.clone());
+    let outcome = rt.block_on(collect(config, ticks, link, collector));
+    drop(rt);
+    let report = recorder.map(Recorder::join).unwrap_or_default();
+    let (output, dropped, lagged) = outcome?;
+    Ok(Finished {
+        output,
+        recording: report.files.first().cloned(),
+        recorded: report.written,
+        recorder_dropped: dropped,
+        lagged,
+        wall_s: wall.elapsed().as_secs_f64(),
+    })
+}
+
+async fn collect<C: Collect>(
+    config: Config,
+    ticks: u64,
+    recorder: Option<crate::storage::recorder::RecorderLink>,
+    mut collector: C,
+) -> Result<(C::Output, u64, u64), RunError> {
+    let mut builder = Server::builder(config, RobotTarget::Simulated);
+    if let Some(r) = recorder {
+        builder = builder.recorder(r);
+    }
+    let server = builder
+        .start()
+        .await
+        .map_err(|e| RunError::Server(e.to_string()))?;
+    let mut rx = server.feed.subscribe();
+    collector.start(&server);
+    let (mut seen, mut lagged) = (0u64, 0u64);
+    while seen < ticks {
+        match rx.recv().await {
+            Ok(r) => {
+                seen += 1;
+                collector.record(r);
+            }
+            Err(RecvError::Lagged(n)) => lagged += n,
+            Err(RecvError::Closed) => return Err(RunError::FeedClosed(seen)),
+        }
+    }
+    let output = collector.finish().await;
+    let dropped = server.feed.recorder_dropped();
+    server.shutdown().await;
+    Ok((output?, dropped, lagged))
+}
+
+/// Runs `run` on every spec, on `threads` OS threads, and returns the results in spec order.
+/// `progress` is called as runs finish; the first failure stops further runs from starting.
+pub fn run_all<S: Sync, R: Send>(
+    specs: &[S],
+    threads: usize,
+    run: &(dyn Fn(&S) -> Result<R, RunError> + Sync),
+    progress: &(dyn Fn(&R) + Sync),
+) -> Result<Vec<R>, RunError> {
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<Result<R, RunError>>>> =
+        Mutex::new((0..specs.len()).map(|_| None).collect());
+    std::thread::scope(|s| {
+        for _ in 0..threads.clamp(1, specs.len().max(1)) {
+            s.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(spec) = specs.get(i) else { break };
+                    // The servers' own logs (start-up, tick health) would drown the progress bar.
+                    let outcome = tracing::subscriber::with_default(
+                        tracing::subscriber::NoSubscriber::default(),
+                        || run(spec),
+                    );
+                    if let Ok(r) = &outcome {
+                        progress(r);
+                    }
+                    let failed = outcome.is_err();
+                    if let Ok(mut all) = results.lock()
+                        && let Some(slot) = all.get_mut(i)
+                    {
+                        *slot = Some(outcome);
+                    }
+                    if failed {
+                        next.store(specs.len(), Ordering::Relaxed);
+                    }
+                }
+            });
+        }
+    });
+    let all = results.into_inner().map_err(|_| RunError::Panicked)?;
+    let mut out = Vec::with_capacity(all.len());
+    for r in all {
+        match r {
+            Some(Ok(r)) => out.push(r),
+            Some(Err(e)) => return Err(e),
+            None => {}
+        }
+    }
+    Ok(out)
+}

@@ -1,0 +1,257 @@
+//! The stall experiment's outputs: `summary.json`, CSV tables, the figures, and the terminal table.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use pavlov::control::Mode;
+use serde::{Deserialize, Serialize};
+
+use super::analysis::{Analysis, METRICS, metric};
+use super::run::RunResult;
+use super::{StallOptions, WINDOW_S, plots};
+use crate::experiment::mode_name;
+
+/// Everything `summary.json` holds.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Summary {
+    /// Always "stall".
+    pub experiment: String,
+    /// The settings.
+    pub options: StallOptions,
+    /// How each run's simulator seed is derived.
+    pub seed_derivation: String,
+    /// Every run, in interleaved order.
+    pub runs: Vec<RunResult>,
+    /// The statistics.
+    pub analysis: Analysis,
+    /// Wall-clock time of the whole study, s.
+    pub wall_s: f64,
+    /// Simulated time over every run, s.
+    pub simulated_s: f64,
+    /// Simulated time per second of wall time.
+    pub speedup: f64,
+}
+
+/// Writes `summary.json`, the CSV tables and the SVG figures into `dir`.
+pub fn write_all(dir: &Path, summary: &Summary) -> std::io::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let json = serde_json::to_string_pretty(summary).map_err(std::io::Error::other)?;
+    std::fs::write(dir.join("summary.json"), json)?;
+    std::fs::write(dir.join("runs.csv"), runs_csv(&summary.runs))?;
+    std::fs::write(dir.join("windows.csv"), windows_csv(&summary.runs))?;
+    std::fs::write(dir.join("learning_curve.csv"), curve_csv(&summary.analysis))?;
+    let excerpts: Vec<(Mode, &[pavlov::record::TickRecord])> = [Mode::Reactive, Mode::Pavlovian]
+        .into_iter()
+        .filter_map(|m| {
+            summary
+                .runs
+                .iter()
+                .find(|r| r.mode == m && !r.excerpt.is_empty())
+                .map(|r| (m, plots::push_window(&r.excerpt, 500)))
+        })
+        .collect();
+    std::fs::write(dir.join("fig1_signals.csv"), signals_csv(&excerpts))?;
+    plots::fig1_push(&dir.join("fig1_push.svg"), &excerpts)?;
+    plots::fig2_bars(&dir.join("fig2_bars.svg"), &summary.analysis)?;
+    plots::learning_curve(&dir.join("fig_learning_curve.svg"), &summary.analysis)?;
+    Ok(())
+}
+
+fn opt(v: Option<f64>) -> String {
+    v.map_or_else(String::new, |x| format!("{x}"))
+}
+
+/// One row per run.
+pub fn runs_csv(runs: &[RunResult]) -> String {
+    let mut s = String::from("run,policy,seed");
+    for (key, _, _) in METRICS {
+        s.push(',');
+        s.push_str(key);
+    }
+    s.push('\n');
+    for r in runs {
+        let _ = write!(s, "{},{},{}", r.index, mode_name(r.mode), r.seed);
+        for (key, _, _) in METRICS {
+            let _ = write!(s, ",{}", opt(metric(r, key)));
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// One row per run and window.
+pub fn windows_csv(runs: &[RunResult]) -> String {
+    let mut s = String::from(
+        "run,policy,window,start_s,overcurrent_observations,stall_events,distance_m,energy_j\n",
+    );
+    for r in runs {
+        for (w, c) in r.windows.iter().enumerate() {
+            let _ = writeln!(
+                s,
+                "{},{},{w},{},{},{},{},{}",
+                r.index,
+                mode_name(r.mode),
+                w as f64 * WINDOW_S,
+                c.overcurrent_observations,
+                c.stall_events,
+                c.distance_m,
+                c.energy_j
+            );
+        }
+    }
+    s
+}
+
+/// The learning curve.
+pub fn curve_csv(a: &Analysis) -> String {
+    let mut s =
+        String::from("window,start_s,reactive_mean,reactive_se,pavlovian_mean,pavlovian_se\n");
+    for p in &a.learning_curve {
+        let _ = writeln!(
+            s,
+            "{},{},{},{},{},{}",
+            p.window, p.start_s, p.reactive.mean, p.reactive.se, p.pavlovian.mean, p.pavlovian.se
+        );
+    }
+    s
+}
+
+/// The Figure 1 signals.
+pub fn signals_csv(excerpts: &[(Mode, &[pavlov::record::TickRecord])]) -> String {
+    let mut s = String::from(
+        "policy,seq,t_s,prediction,threshold,overcurrent,stimulus,gate,command_left_mm_s,command_right_mm_s\n",
+    );
+    for (mode, recs) in excerpts {
+        for r in recs.iter() {
+            let (v, th) = r
+                .predictions
+                .first()
+                .map_or((f64::NAN, f64::NAN), |p| (p.value, p.threshold));
+            let _ = writeln!(
+                s,
+                "{},{},{},{v},{th},{},{},{},{},{}",
+                mode_name(*mode),
+                r.seq,
+                r.t_ms / 1000.0,
+                u8::from(r.sensors.overcurrent_left || r.sensors.overcurrent_right),
+                u8::from(r.stimulus),
+                u8::from(r.gate),
+                r.command.left_mm_s,
+                r.command.right_mm_s
+            );
+        }
+    }
+    s
+}
+
+/// A number with about three significant digits.
+fn num(x: f64) -> String {
+    let a = x.abs();
+    if !x.is_finite() {
+        "–".into()
+    } else if a >= 100.0 {
+        format!("{x:.0}")
+    } else if a >= 10.0 {
+        format!("{x:.1}")
+    } else if a >= 1.0 {
+        format!("{x:.2}")
+    } else {
+        format!("{x:.3}")
+    }
+}
+
+fn pm(d: &pavlov::analysis::stats::Describe) -> String {
+    format!("{} ± {}", num(d.mean), num(d.se))
+}
+
+/// The table printed at the end of a study.
+pub fn table(summary: &Summary) -> String {
+    let o = &summary.options;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Stall experiment: seed {}, {} runs per policy × {} min, interleaved (reactive first); mean ± SE over runs",
+        o.seed, o.runs_per_policy, o.minutes
+    );
+    let _ = writeln!(
+        s,
+        "{:<28} {:>24} {:>24} {:>9} {:>8} {:>6} {:>8}",
+        "metric", "reactive", "Pavlovian", "change", "t", "df", "p"
+    );
+    for c in &summary.analysis.comparisons {
+        let (t, df, p) = c.welch.map_or(("–".into(), "–".into(), "–".into()), |w| {
+            (
+                format!("{:.2}", w.t),
+                format!("{:.1}", w.df),
+                if w.p < 0.001 {
+                    format!("{:.0e}", w.p)
+                } else {
+                    format!("{:.3}", w.p)
+                },
+            )
+        });
+        let change = c
+            .relative_change
+            .map_or("–".into(), |r| format!("{:+.1}%", r * 100.0));
+        let _ = writeln!(
+            s,
+            "{:<28} {:>24} {:>24} {:>9} {:>8} {:>6} {:>8}",
+            format!("{} ({})", c.label, c.unit),
+            pm(&c.reactive),
+            pm(&c.pavlovian),
+            change,
+            t,
+            df,
+            p
+        );
+    }
+    let _ = writeln!(
+        s,
+        "learning curve (over-current observations per {WINDOW_S} s window, reactive / Pavlovian mean):"
+    );
+    let mut line = String::new();
+    for p in &summary.analysis.learning_curve {
+        let _ = write!(
+            line,
+            " {}s: {:.1}/{:.1}",
+            p.start_s, p.reactive.mean, p.pavlovian.mean
+        );
+    }
+    let _ = writeln!(s, "{}", line.trim_start());
+    match summary.analysis.benefit_from_window {
+        Some(w) => {
+            let _ = writeln!(
+                s,
+                "Pavlovian below reactive in every window from {} s on",
+                w as f64 * WINDOW_S
+            );
+        }
+        None => {
+            let _ = writeln!(s, "Pavlovian is not below reactive in every later window");
+        }
+    }
+    let f = &summary.analysis.first_predictive_stop_s;
+    let _ = writeln!(
+        s,
+        "first stop on the prediction alone (gate on, stimulus off): {} ± {} s into the run ({} Pavlovian runs)",
+        num(f.mean),
+        num(f.se),
+        f.n
+    );
+    let _ = writeln!(
+        s,
+        "seeds (run: policy seed): {}",
+        summary
+            .runs
+            .iter()
+            .map(|r| format!("{}:{} {}", r.index, &mode_name(r.mode)[..1], r.seed))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let _ = writeln!(
+        s,
+        "{:.0} s simulated in {:.1} s of wall time ({:.0}× real time)",
+        summary.simulated_s, summary.wall_s, summary.speedup
+    );
+    s
+}

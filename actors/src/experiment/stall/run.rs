@@ -1,0 +1,170 @@
+//! One stall run: what the study keeps of its ticks — the run's metrics, the counts per learning-curve
+//! window, the first prediction-driven stop and a short excerpt for Figure 1 — while the full record
+//! stream goes to the recorder.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use pavlov::analysis::run_metrics::{MetricsSummary, RunMetrics};
+use pavlov::config::Config;
+use pavlov::control::Mode;
+use pavlov::record::TickRecord;
+use serde::{Deserialize, Serialize};
+
+use crate::experiment::runner::{Collect, RunError, RunRequest, run_paused};
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct RunSpec {
+    /// Position in the interleaved sequence (0-based).
+    pub index: usize,
+    /// Reactive or Pavlovian.
+    pub mode: Mode,
+    /// The simulator's seed for this run.
+    pub seed: u64,
+    /// Ticks to run.
+    pub ticks: u64,
+    /// Length of a learning-curve window, in ticks.
+    pub window_ticks: u64,
+    /// Keep the records from this tick on for the Figure 1 excerpt (None: keep none).
+    pub excerpt_from_tick: Option<u64>,
+    /// How many records the excerpt keeps.
+    pub excerpt_len: usize,
+    /// Where to record the run (None: no recording).
+    pub record_dir: Option<PathBuf>,
+}
+
+/// Counts over one window of a run.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct WindowCounts {
+    /// Ticks with an over-current flag.
+    pub overcurrent_observations: u64,
+    /// Rising edges of the stimulus.
+    pub stall_events: u64,
+    /// Distance travelled, m.
+    pub distance_m: f64,
+    /// Energy drawn, J.
+    pub energy_j: f64,
+}
+
+/// The outcome of one run.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RunResult {
+    /// Position in the sequence.
+    pub index: usize,
+    /// Reactive or Pavlovian.
+    pub mode: Mode,
+    /// The simulator's seed.
+    pub seed: u64,
+    /// The run's metrics.
+    pub metrics: MetricsSummary,
+    /// Per-window counts, in order.
+    pub windows: Vec<WindowCounts>,
+    /// The recording, if one was written.
+    pub recording: Option<PathBuf>,
+    /// Records the recorder wrote.
+    pub recorded: u64,
+    /// Records the feed could not hand to the recorder (queue full).
+    pub recorder_dropped: u64,
+    /// Records the experiment's own subscription missed (should be 0).
+    pub lagged: u64,
+    /// Wall-clock time the run took, s.
+    pub wall_s: f64,
+    /// When the response first engaged on the prediction alone (gate on, stimulus off), s.
+    pub first_predictive_stop_s: Option<f64>,
+    /// The Figure 1 excerpt (not serialised into the summary).
+    #[serde(skip)]
+    pub excerpt: Vec<TickRecord>,
+}
+
+/// What a stall run keeps while it runs.
+struct StallCollector<'a> {
+    spec: &'a RunSpec,
+    metrics: RunMetrics,
+    windows: Vec<WindowCounts>,
+    excerpt: Vec<TickRecord>,
+    first_predictive_stop_s: Option<f64>,
+}
+
+struct Kept {
+    metrics: MetricsSummary,
+    windows: Vec<WindowCounts>,
+    excerpt: Vec<TickRecord>,
+    first_predictive_stop_s: Option<f64>,
+}
+
+impl Collect for StallCollector<'_> {
+    type Output = Kept;
+
+    fn record(&mut self, record: Arc<TickRecord>) {
+        if self.first_predictive_stop_s.is_none() && record.gate && !record.stimulus {
+            self.first_predictive_stop_s = Some(record.t_ms / 1000.0);
+        }
+        let before = self.metrics.summary();
+        self.metrics.observe(&record);
+        let w = usize::try_from(record.seq / self.spec.window_ticks.max(1)).unwrap_or(usize::MAX);
+        if w >= self.windows.len() && w < 100_000 {
+            self.windows.resize(w + 1, WindowCounts::default());
+        }
+        if let Some(win) = self.windows.get_mut(w) {
+            let after = self.metrics.summary();
+            win.overcurrent_observations +=
+                after.overcurrent_observations - before.overcurrent_observations;
+            win.stall_events += after.stall_events - before.stall_events;
+            win.distance_m += after.distance_m - before.distance_m;
+            win.energy_j += after.energy_j - before.energy_j;
+        }
+        if let Some(from) = self.spec.excerpt_from_tick
+            && record.seq >= from
+            && self.excerpt.len() < self.spec.excerpt_len
+        {
+            self.excerpt.push((*record).clone());
+        }
+    }
+
+    async fn finish(self) -> Result<Kept, RunError> {
+        Ok(Kept {
+            metrics: self.metrics.summary(),
+            windows: self.windows,
+            excerpt: self.excerpt,
+            first_predictive_stop_s: self.first_predictive_stop_s,
+        })
+    }
+}
+
+/// Runs `spec` with `base` (mode and seed are overridden) and returns its result.
+pub fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> {
+    let mut config = base.clone();
+    config.control.mode = spec.mode;
+    config.sim.seed = spec.seed;
+    let period_ms = config.tick.period_ms as f64;
+    let label = format!("run {} {:?} seed {}", spec.index, spec.mode, spec.seed);
+    let request = RunRequest {
+        config,
+        ticks: spec.ticks,
+        record: spec.record_dir.clone().map(|d| (d, label)),
+    };
+    let collector = StallCollector {
+        spec,
+        metrics: RunMetrics::new(period_ms),
+        windows: Vec::new(),
+        excerpt: Vec::new(),
+        first_predictive_stop_s: None,
+    };
+    let done = run_paused(request, collector)?;
+    let kept = done.output;
+    Ok(RunResult {
+        index: spec.index,
+        mode: spec.mode,
+        seed: spec.seed,
+        metrics: kept.metrics,
+        windows: kept.windows,
+        recording: done.recording,
+        recorded: done.recorded,
+        recorder_dropped: done.recorder_dropped,
+        lagged: done.lagged,
+        wall_s: done.wall_s,
+        first_predictive_stop_s: kept.first_predictive_stop_s,
+        excerpt: kept.excerpt,
+    })
+}

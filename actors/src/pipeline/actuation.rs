@@ -1,0 +1,249 @@
+//! The actuation actor: the only writer of motion commands, and the robot's last line of safety.
+//!
+//! For each decision it writes Drive Direct (right wheel first) through the link writer, unless the core's
+//! safety predicate ([`pavlov::agent::safety::stop_reason`]) says stop: the e-stop is latched, the robot
+//! has tripped to Passive, the link is not up, or the observation behind the decision is stale. On every
+//! tick it also checks that a fresh decision has arrived; after `max_action_age_ticks` ticks without one
+//! (a stalled pipeline) it stops the wheels by itself and counts it. It then assembles the tick's
+//! [`TickRecord`] ([`pavlov::agent::tick_record`]) and publishes it to the feed (dashboard, recorder,
+//! metrics).
+
+use std::sync::Arc;
+
+use pavlov::agent::safety;
+use pavlov::agent::tick_record::{self, Actuated, Sensed};
+use pavlov::config::SafetyConfig;
+use pavlov::control::Action;
+use pavlov::oi::Model;
+use pavlov::oi::command::Command;
+use pavlov::record::TickRecord;
+use tokio::sync::{mpsc, watch};
+use tokio_util::sync::CancellationToken;
+
+use super::feed::TickFeed;
+use super::gating::Decision;
+use super::ticker::Tick;
+use crate::link::writer::WriteRequest;
+use crate::telemetry::counters::ActuationStats;
+
+/// Actuation's state.
+pub struct Actuation {
+    model: Model,
+    safety: SafetyConfig,
+    last_decision_seq: Option<u64>,
+    last_written: Option<Action>,
+    stats: ActuationStats,
+}
+
+impl Actuation {
+    /// Actuation for `model` with the given safety limits.
+    pub fn new(model: Model, safety: SafetyConfig) -> Self {
+        Actuation {
+            model,
+            safety,
+            last_decision_seq: None,
+            last_written: None,
+            stats: ActuationStats::default(),
+        }
+    }
+
+    fn write(&mut self, action: Action, tick: Option<&Tick>, writer: &mpsc::Sender<WriteRequest>) {
+        let cmd = Command::DriveDirect {
+            right: action.right_mm_s,
+            left: action.left_mm_s,
+        };
+        match cmd.encode(self.model) {
+            Ok(bytes) => {
+                let req = WriteRequest {
+                    bytes,
+                    tick_deadline: tick.map(|t| t.deadline),
+                };
+                if writer.try_send(req).is_err() {
+                    self.stats.writer_full += 1;
+                } else {
+                    self.stats.commands += 1;
+                    self.last_written = Some(action);
+                }
+            }
+            Err(e) => tracing::error!("cannot encode {action:?}: {e}"),
+        }
+    }
+
+    /// Handles one decision: writes the command and returns the tick's record.
+    pub fn on_decision(
+        &mut self,
+        d: Decision,
+        estop: bool,
+        writer: &mpsc::Sender<WriteRequest>,
+    ) -> TickRecord {
+        let obs = &d.learned.observation;
+        let stop = safety::stop_reason(
+            estop,
+            obs.link.state,
+            obs.age_ticks,
+            self.safety.max_obs_age_ticks,
+        );
+        if stop == Some(pavlov::record::SafetyStop::StaleObservation) {
+            self.stats.stale_observations += 1;
+        }
+        let command = if stop.is_some() {
+            Action::STOP
+        } else {
+            d.gate.action
+        };
+        let tick = obs.tick;
+        self.last_decision_seq = Some(tick.seq);
+        self.write(command, Some(&tick), writer);
+        let learned = d.learned;
+        let obs = learned.observation;
+        let sensed = Sensed {
+            seq: tick.seq,
+            t_ms: learned.t_ms,
+            lateness_us: tick.lateness().as_micros().min(u32::MAX as u128) as u32,
+            values: obs.values,
+            age_ticks: obs.age_ticks,
+            distance_mm: obs.distance_mm,
+            angle_deg: obs.angle_deg,
+            link: obs.link,
+        };
+        let actuated = Actuated {
+            command,
+            safety_stop: stop,
+            estop,
+        };
+        tick_record::assemble(
+            sensed,
+            learned.output,
+            learned.forced_stimulus,
+            d.gate,
+            actuated,
+        )
+    }
+
+    /// Called on every tick: stops the wheels when the pipeline has not delivered a decision in time.
+    pub fn on_tick(&mut self, tick: &Tick, writer: &mpsc::Sender<WriteRequest>) -> bool {
+        let behind = safety::pipeline_stalled(
+            tick.seq,
+            self.last_decision_seq,
+            self.safety.max_action_age_ticks,
+        );
+        if behind && self.last_written != Some(Action::STOP) {
+            tracing::warn!(
+                tick = tick.seq,
+                "no fresh action for {} ticks: stopping the wheels",
+                self.safety.max_action_age_ticks
+            );
+            self.stats.pipeline_stalls += 1;
+            self.write(Action::STOP, Some(tick), writer);
+        }
+        behind
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> ActuationStats {
+        self.stats
+    }
+}
+
+/// The channels actuation reads and writes.
+pub struct ActuationChannels {
+    /// Gating's decisions.
+    pub decisions: mpsc::Receiver<Decision>,
+    /// The ticker, for the stalled-pipeline watchdog.
+    pub ticks: watch::Receiver<Option<Tick>>,
+    /// The e-stop latch.
+    pub estop: watch::Receiver<bool>,
+    /// The link writer's queue.
+    pub writer: mpsc::Sender<WriteRequest>,
+    /// Where tick records go.
+    pub feed: TickFeed,
+    /// Actuation's counters, published after each decision.
+    pub stats: watch::Sender<ActuationStats>,
+}
+
+/// Runs until `cancel` fires or the decision channel closes; the writer then sends the shut-down sequence.
+pub async fn run(mut actuation: Actuation, channels: ActuationChannels, cancel: CancellationToken) {
+    let ActuationChannels {
+        mut decisions,
+        mut ticks,
+        mut estop,
+        writer,
+        feed,
+        stats,
+    } = channels;
+    loop {
+        tokio::select! {
+            biased;
+            _ = cancel.cancelled() => break,
+            d = decisions.recv() => {
+                let Some(d) = d else { break };
+                let latched = *estop.borrow();
+                let record = actuation.on_decision(d, latched, &writer);
+                feed.publish(Arc::new(record));
+                stats.send_replace(actuation.stats());
+            }
+            changed = estop.changed() => {
+                if changed.is_err() { break; }
+                if *estop.borrow_and_update() {
+                    // Do not wait for the next decision: stop the wheels the moment the e-stop latches.
+                    actuation.write(Action::STOP, None, &writer);
+                }
+            }
+            changed = ticks.changed() => {
+                if changed.is_err() { break; }
+                let tick = *ticks.borrow_and_update();
+                if let Some(tick) = tick {
+                    actuation.on_tick(&tick, &writer);
+                }
+            }
+        }
+    }
+    // Stop now; the writer adds pause + Passive when its queue closes.
+    actuation.write(Action::STOP, None, &writer);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tokio::time::Instant;
+
+    fn tick(seq: u64) -> Tick {
+        let now = Instant::now();
+        Tick {
+            seq,
+            deadline: now,
+            fired: now,
+        }
+    }
+
+    #[tokio::test]
+    async fn a_stalled_pipeline_stops_the_wheels_once_after_three_ticks() {
+        let (tx, mut rx) = mpsc::channel(16);
+        let mut a = Actuation::new(Model::Create1, SafetyConfig::default());
+        a.write(Action::new(100, 100), None, &tx);
+        a.last_decision_seq = Some(10);
+        assert_eq!(rx.recv().await.unwrap().bytes, vec![145, 0, 100, 0, 100]);
+        assert!(
+            !a.on_tick(&tick(13), &tx),
+            "3 ticks without a decision is still in time"
+        );
+        assert!(rx.try_recv().is_err());
+        assert!(a.on_tick(&tick(14), &tx));
+        assert_eq!(rx.try_recv().unwrap().bytes, vec![145, 0, 0, 0, 0]);
+        assert!(a.on_tick(&tick(15), &tx));
+        assert!(
+            rx.try_recv().is_err(),
+            "the stop is written once, not flooded"
+        );
+        assert_eq!(a.stats().pipeline_stalls, 1);
+    }
+
+    #[tokio::test]
+    async fn no_decision_at_all_also_counts_as_stalled() {
+        let (tx, mut rx) = mpsc::channel(16);
+        let mut a = Actuation::new(Model::Create2, SafetyConfig::default());
+        assert!(!a.on_tick(&tick(2), &tx));
+        assert!(a.on_tick(&tick(3), &tx));
+        assert_eq!(rx.try_recv().unwrap().bytes, vec![145, 0, 0, 0, 0]);
+    }
+}

@@ -1,0 +1,133 @@
+//! The tick feed: every [`TickRecord`] goes out to the dashboard hub, the recorder and the metrics.
+//!
+//! Publishing never blocks the tick. Live subscribers (websocket clients, tests) share a `broadcast` channel:
+//! a subscriber that falls behind skips the oldest records and is told how many it missed. The recorder gets
+//! its own bounded queue; when it is full the record is dropped and counted, so a slow disk is visible rather
+//! than silently slowing control.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use pavlov::record::{LinkSummary, TickRecord};
+
+use crate::telemetry::counters::RecorderGauge;
+use tokio::sync::{broadcast, mpsc, watch};
+
+/// Capacity of the live broadcast, in records (20 s at 50 Hz).
+pub const LIVE_CAPACITY: usize = 1024;
+
+/// The publishing side of the feed.
+#[derive(Clone)]
+pub struct TickFeed {
+    live: broadcast::Sender<Arc<TickRecord>>,
+    latest_link: Arc<watch::Sender<Option<LinkSummary>>>,
+    recorder: Option<mpsc::Sender<Arc<TickRecord>>>,
+    recorder_dropped: Arc<AtomicU64>,
+}
+
+impl TickFeed {
+    /// A feed with no recorder attached.
+    pub fn new() -> Self {
+        let (live, _) = broadcast::channel(LIVE_CAPACITY);
+        TickFeed {
+            live,
+            latest_link: Arc::new(watch::Sender::new(None)),
+            recorder: None,
+            recorder_dropped: Arc::new(AtomicU64::new(0)),
+        }
+    }
+
+    /// Attaches a recorder queue.
+    pub fn with_recorder(mut self, tx: mpsc::Sender<Arc<TickRecord>>) -> Self {
+        self.recorder = Some(tx);
+        self
+    }
+
+    /// Sends a record to every consumer without waiting.
+    pub fn publish(&self, record: Arc<TickRecord>) {
+        if let Some(rec) = &self.recorder
+            && rec.try_send(record.clone()).is_err()
+        {
+            self.recorder_dropped.fetch_add(1, Ordering::Relaxed);
+        }
+        self.latest_link.send_replace(Some(record.link));
+        // An error only means nobody is subscribed right now.
+        let _ = self.live.send(record);
+    }
+
+    /// A new live subscription, starting with the next record.
+    pub fn subscribe(&self) -> broadcast::Receiver<Arc<TickRecord>> {
+        self.live.subscribe()
+    }
+
+    /// The link summary of the newest record (`None` before the first).
+    pub fn latest_link(&self) -> watch::Receiver<Option<LinkSummary>> {
+        self.latest_link.subscribe()
+    }
+
+    /// Records the recorder could not take.
+    pub fn recorder_dropped(&self) -> u64 {
+        self.recorder_dropped.load(Ordering::Relaxed)
+    }
+
+    /// Records queued for the recorder and not yet taken by it (`None` without a recorder).
+    pub fn recorder_backlog(&self) -> Option<usize> {
+        self.recorder
+            .as_ref()
+            .map(|tx| tx.max_capacity().saturating_sub(tx.capacity()))
+    }
+
+    /// A read-only view of the recorder's queue for metrics. It holds no sender, so it does not keep the
+    /// recorder running after the server has gone.
+    pub fn recorder_gauge(&self) -> RecorderGauge {
+        RecorderGauge::new(
+            self.recorder.as_ref().map(|tx| tx.downgrade()),
+            self.recorder_dropped.clone(),
+        )
+    }
+}
+
+impl Default for TickFeed {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pavlov::control::Mode;
+
+    fn record(seq: u64) -> Arc<TickRecord> {
+        Arc::new(TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Reactive))
+    }
+
+    #[test]
+    fn the_backlog_counts_records_queued_and_not_yet_taken() {
+        let (tx, mut rx) = mpsc::channel(4);
+        let feed = TickFeed::new().with_recorder(tx);
+        let gauge = feed.recorder_gauge();
+        assert!(gauge.attached());
+        for seq in 0..6 {
+            feed.publish(record(seq));
+        }
+        assert_eq!(feed.recorder_backlog(), Some(4));
+        assert_eq!(gauge.backlog(), 4);
+        assert_eq!(gauge.dropped(), 2);
+        assert!(rx.try_recv().is_ok());
+        assert_eq!(gauge.backlog(), 3);
+        // The gauge keeps no sender: the recorder sees the end of the feed.
+        drop(feed);
+        while rx.try_recv().is_ok() {}
+        assert!(rx.is_closed());
+        assert_eq!(gauge.backlog(), 0);
+    }
+
+    #[test]
+    fn without_a_recorder_there_is_no_backlog() {
+        let feed = TickFeed::new();
+        assert_eq!(feed.recorder_backlog(), None);
+        assert!(!feed.recorder_gauge().attached());
+        assert_eq!(feed.recorder_gauge().backlog(), 0);
+    }
+}

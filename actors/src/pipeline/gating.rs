@@ -1,0 +1,101 @@
+//! The gating actor: a thin shell over [`pavlov::agent::GatingStage`].
+//!
+//! It turns each [`Learned`] tick into a [`Decision`] for actuation and applies gating's commands (mode,
+//! teleop) between ticks. It follows the e-stop latch the router sets, so a teleop command is refused
+//! while the e-stop is latched.
+
+use pavlov::agent::{GateOutput, GatingStage};
+use pavlov::control::Action;
+use tokio::sync::{mpsc, watch};
+use tokio_util::sync::CancellationToken;
+
+use super::learning::Learned;
+use crate::command::{Applied, CommandError, Envelope, GatingCommand, Inbox, Outcome};
+
+/// The fastest wheel speed a teleop command may ask for, mm/s: the Drive Direct range of both models.
+pub const TELEOP_LIMIT_MM_S: i16 = 500;
+
+/// What gating decided on one tick, with everything learning produced for it.
+#[derive(Debug, Clone)]
+pub struct Decision {
+    /// Learning's output for the tick.
+    pub learned: Learned,
+    /// The gate's output.
+    pub gate: GateOutput,
+}
+
+fn apply(stage: &mut GatingStage, cmd: GatingCommand, seq: u64) -> Outcome {
+    match cmd {
+        GatingCommand::SetMode { mode } => {
+            stage.set_mode(mode);
+            tracing::info!(?mode, "control mode changed");
+            Ok(Applied::Mode { mode })
+        }
+        GatingCommand::Teleop {
+            left_mm_s,
+            right_mm_s,
+        } => {
+            let limit = -TELEOP_LIMIT_MM_S..=TELEOP_LIMIT_MM_S;
+            if !limit.contains(&left_mm_s) || !limit.contains(&right_mm_s) {
+                return Err(CommandError::Rejected(format!(
+                    "teleop wheel speeds must be within ±{TELEOP_LIMIT_MM_S} mm/s, got left {left_mm_s}, right {right_mm_s}"
+                )));
+            }
+            let action = Action {
+                left_mm_s,
+                right_mm_s,
+            };
+            stage
+                .teleop(action, seq)
+                .map(|()| Applied::Teleop { teleop: action })
+                .map_err(|e| CommandError::Rejected(e.to_string()))
+        }
+    }
+}
+
+/// The channels gating reads and writes.
+pub struct GatingChannels {
+    /// Learning's output.
+    pub learned: mpsc::Receiver<Learned>,
+    /// Gating's commands.
+    pub commands: Inbox<GatingCommand>,
+    /// The e-stop latch.
+    pub estop: watch::Receiver<bool>,
+    /// Where decisions go (to actuation).
+    pub out: mpsc::Sender<Decision>,
+}
+
+/// Runs until its input closes or `cancel` fires.
+pub async fn run(mut stage: GatingStage, channels: GatingChannels, cancel: CancellationToken) {
+    let GatingChannels {
+        mut learned,
+        mut commands,
+        mut estop,
+        out,
+    } = channels;
+    let mut last_seq = 0;
+    loop {
+        tokio::select! {
+            biased;
+            _ = cancel.cancelled() => break,
+            changed = estop.changed() => {
+                if changed.is_err() {
+                    break;
+                }
+                stage.set_estop(*estop.borrow_and_update());
+            }
+            Some(Envelope { command, reply }) = commands.recv() => {
+                let _ = reply.send(apply(&mut stage, command, last_seq));
+            }
+            p = learned.recv() => {
+                let Some(p) = p else { break };
+                last_seq = p.observation.tick.seq;
+                let o = &p.output;
+                let gate = stage.decide(last_seq, o.stimulus, o.gate_value, o.gate_threshold);
+                if out.try_send(Decision { learned: p, gate }).is_err() {
+                    tracing::debug!("actuation is behind; a decision was dropped");
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,187 @@
+//! The tick graph: the actors that run once per 20 ms tick, and every channel between them, wired here
+//! in one place.
+//!
+//! ```text
+//!            ┌────────── Tick (watch) ─────────────────────────────────────────────┐
+//! ticker ────┤                                                                      ▼ watchdog
+//!            └─► sensor ingest ─Observation─► learning ─Learned─► gating ─Decision─► actuation ─► link writer
+//!                  ▲ link commands             ▲ pose  ▲ cmds       ▲ cmds ▲ e-stop    ▲ e-stop      │
+//! router ──────────┴───────────────────────────┴───────┘────────────┘──────┴───────────┘      TickRecord ─► feed
+//! ```
+//!
+//! - [`ticker`]: the only clock that drives control.
+//! - [`sensor_ingest`]: robot bytes → the newest observation on every tick (hosts link supervision).
+//! - [`skeleton_ingest`]: OSC skeletons over UDP → the newest pose.
+//! - [`learning`], [`gating`], [`actuation`]: thin shells over the core's stages; actuation assembles
+//!   each tick's record.
+//! - [`feed`]: every tick record out to the dashboard, the recorder and the tests, without blocking.
+//!
+//! Every channel on the tick path is bounded and written with `try_send`: a stage that falls behind loses
+//! its oldest input (and actuation's watchdog stops the wheels), it never makes an earlier stage wait.
+
+pub mod actuation;
+pub mod feed;
+pub mod gating;
+pub mod learning;
+pub mod sensor_ingest;
+pub mod skeleton_ingest;
+pub mod ticker;
+
+use std::time::Duration;
+
+use pavlov::agent::GatingStage;
+use pavlov::config::Config;
+use pavlov::skeleton::PoseTracker;
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+use tokio_util::sync::CancellationToken;
+
+use crate::command::{self, ControlRequest, Envelope, INBOX_CAPACITY, RecorderCommand, Routes};
+use crate::link::writer::WriteRequest;
+use crate::telemetry::counters::{ActuationStats, SharedTickStats};
+
+use actuation::{Actuation, ActuationChannels};
+use feed::TickFeed;
+use gating::GatingChannels;
+use learning::{Learning, LearningChannels};
+use sensor_ingest::{IngestChannels, IngestLink};
+
+/// Capacity of the stage-to-stage channels, in ticks.
+const STAGE_CAPACITY: usize = 4;
+
+/// Capacity of the server's command inbox.
+const COMMAND_CAPACITY: usize = 64;
+
+/// What the pipeline is built from.
+pub struct PipelineParts {
+    /// Learning, ready to run (resumed and autosaving as configured).
+    pub learning: Learning,
+    /// The link's reading side with its parser and supervisor.
+    pub ingest: IngestLink,
+    /// The link writer's command queue.
+    pub writer: mpsc::Sender<WriteRequest>,
+    /// Where tick records go.
+    pub feed: TickFeed,
+    /// The recorder's inbox, when the server records.
+    pub recorder: Option<mpsc::Sender<Envelope<RecorderCommand>>>,
+    /// When the first tick is due.
+    pub started: Instant,
+}
+
+/// The running pipeline.
+pub struct Pipeline {
+    /// The command inbox (the router's).
+    pub commands: mpsc::Sender<ControlRequest>,
+    /// Publish skeleton poses here.
+    pub pose: watch::Sender<PoseTracker>,
+    /// The ticker's figures.
+    pub ticks: SharedTickStats,
+    /// Actuation's counters.
+    pub actuation: watch::Receiver<ActuationStats>,
+    /// The actor tasks, in start order.
+    pub tasks: Vec<JoinHandle<()>>,
+}
+
+/// Starts every actor of the tick graph for `config`; they stop when `cancel` fires.
+pub fn spawn(config: &Config, parts: PipelineParts, cancel: &CancellationToken) -> Pipeline {
+    let PipelineParts {
+        learning,
+        ingest,
+        writer,
+        feed,
+        recorder,
+        started,
+    } = parts;
+    let period = Duration::from_millis(config.tick.period_ms);
+    let gating = GatingStage::new(
+        config.control.mode,
+        config.control.default_policy,
+        config.control.response,
+    );
+    let actuation = Actuation::new(config.robot.model, config.safety.clone());
+
+    let (tick_tx, tick_rx) = watch::channel(None);
+    let (obs_tx, obs_rx) = mpsc::channel(STAGE_CAPACITY);
+    let (learned_tx, learned_rx) = mpsc::channel(STAGE_CAPACITY);
+    let (decision_tx, decision_rx) = mpsc::channel(STAGE_CAPACITY);
+    let (command_tx, command_rx) = mpsc::channel(COMMAND_CAPACITY);
+    let (gating_cmd_tx, gating_cmd_rx) = mpsc::channel(INBOX_CAPACITY);
+    let (learning_cmd_tx, learning_cmd_rx) = mpsc::channel(INBOX_CAPACITY);
+    let (link_cmd_tx, link_cmd_rx) = mpsc::channel(INBOX_CAPACITY);
+    let (estop_tx, estop_rx) = watch::channel(false);
+    let (stats_tx, stats_rx) = watch::channel(ActuationStats::default());
+    let (pose_tx, pose_rx) = watch::channel(PoseTracker::new(config.skeleton.max_joint_age_ms));
+    let ticks = SharedTickStats::default();
+
+    let tasks = vec![
+        tokio::spawn(ticker::run(
+            started,
+            period,
+            tick_tx,
+            ticks.clone(),
+            cancel.clone(),
+        )),
+        tokio::spawn(sensor_ingest::run(
+            ingest,
+            period,
+            IngestChannels {
+                ticks: tick_rx.clone(),
+                commands: link_cmd_rx,
+                out: obs_tx,
+            },
+            cancel.clone(),
+        )),
+        tokio::spawn(learning::run(
+            learning,
+            started,
+            LearningChannels {
+                observations: obs_rx,
+                pose: pose_rx,
+                commands: learning_cmd_rx,
+                out: learned_tx,
+            },
+            cancel.clone(),
+        )),
+        tokio::spawn(gating::run(
+            gating,
+            GatingChannels {
+                learned: learned_rx,
+                commands: gating_cmd_rx,
+                estop: estop_rx.clone(),
+                out: decision_tx,
+            },
+            cancel.clone(),
+        )),
+        tokio::spawn(actuation::run(
+            actuation,
+            ActuationChannels {
+                decisions: decision_rx,
+                ticks: tick_rx,
+                estop: estop_rx,
+                writer,
+                feed,
+                stats: stats_tx,
+            },
+            cancel.clone(),
+        )),
+        tokio::spawn(command::route(
+            command_rx,
+            Routes {
+                estop: estop_tx,
+                gating: gating_cmd_tx,
+                learning: learning_cmd_tx,
+                link: link_cmd_tx,
+                recorder,
+            },
+            cancel.clone(),
+        )),
+    ];
+    Pipeline {
+        commands: command_tx,
+        pose: pose_tx,
+        ticks,
+        actuation: stats_rx,
+        tasks,
+    }
+}

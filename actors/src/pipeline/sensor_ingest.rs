@@ -1,0 +1,156 @@
+//! The sensor ingest actor: robot bytes in, the newest observation out on every tick.
+//!
+//! It reads the link continuously and feeds the core's [`StreamParser`], which resynchronises after garbage
+//! and only commits frames whose checksum holds. It keeps just the newest frame (it never works through a
+//! backlog) but sums the odometry packets (distance 19, angle 20) over every frame, because the robot resets
+//! them each time it reports them. On each tick it sends learning an [`Observation`] with the frame's age
+//! and the link's state. It hosts link supervision ([`Supervisor`]): every frame and tick goes to it, and
+//! a reopened port's reader replaces the old one here.
+
+use std::time::Duration;
+
+use pavlov::oi::SensorValues;
+use pavlov::oi::packets::id;
+use pavlov::oi::parser::StreamParser;
+use pavlov::record::LinkSummary;
+use tokio::io::AsyncReadExt;
+use tokio::sync::{mpsc, watch};
+use tokio::time::Instant;
+use tokio_util::sync::CancellationToken;
+
+use super::ticker::Tick;
+use crate::command::{Inbox, LinkCommand};
+use crate::link::LinkReader;
+use crate::link::supervisor::Supervisor;
+
+/// The robot's state as seen at one tick.
+#[derive(Debug, Clone)]
+pub struct Observation {
+    /// The tick this observation belongs to.
+    pub tick: Tick,
+    /// The newest complete frame's values (`None` before the first frame).
+    pub values: Option<SensorValues>,
+    /// Age of that frame in whole ticks at the tick's deadline.
+    pub age_ticks: Option<u32>,
+    /// Distance (mm) summed over every frame since the previous tick.
+    pub distance_mm: i32,
+    /// Angle (degrees) summed over every frame since the previous tick.
+    pub angle_deg: i32,
+    /// The link's state, mode, counters.
+    pub link: LinkSummary,
+}
+
+/// The channels and link parts the ingest works with.
+pub struct IngestLink {
+    /// The robot-to-host half of the link.
+    pub reader: LinkReader,
+    /// The stream parser for the requested packets.
+    pub parser: StreamParser,
+    /// Link supervision (re-sync, reopen, trips).
+    pub supervisor: Supervisor,
+}
+
+/// The channels sensor ingest reads and writes.
+pub struct IngestChannels {
+    /// The ticker.
+    pub ticks: watch::Receiver<Option<Tick>>,
+    /// Link commands from the router.
+    pub commands: Inbox<LinkCommand>,
+    /// Where observations go (to learning).
+    pub out: mpsc::Sender<Observation>,
+}
+
+/// Runs until `cancel` fires or the tick channel closes.
+pub async fn run(
+    link: IngestLink,
+    period: Duration,
+    channels: IngestChannels,
+    cancel: CancellationToken,
+) {
+    let IngestLink {
+        reader,
+        mut parser,
+        mut supervisor,
+    } = link;
+    let IngestChannels {
+        mut ticks,
+        mut commands,
+        out,
+    } = channels;
+    let mut reader = Some(reader);
+    let mut buf = vec![0u8; 4096];
+    let mut newest: Option<(SensorValues, Instant)> = None;
+    let (mut distance, mut angle) = (0i32, 0i32);
+    let mut commands_open = true;
+    loop {
+        tokio::select! {
+            biased;
+            _ = cancel.cancelled() => break,
+            changed = ticks.changed() => {
+                if changed.is_err() {
+                    break;
+                }
+                let Some(tick) = *ticks.borrow_and_update() else { continue };
+                supervisor.on_tick();
+                if supervisor.reopening() {
+                    // The old port is being closed and reopened; its reader goes with it.
+                    reader = None;
+                }
+                let age_ticks = newest.as_ref().map(|(_, at)| {
+                    let age = tick.deadline.saturating_duration_since(*at);
+                    (age.as_micros() / period.as_micros().max(1)) as u32
+                });
+                let obs = Observation {
+                    tick,
+                    values: newest.as_ref().map(|(v, _)| v.clone()),
+                    age_ticks,
+                    distance_mm: std::mem::take(&mut distance),
+                    angle_deg: std::mem::take(&mut angle),
+                    link: supervisor.summary(parser.stats()),
+                };
+                if out.try_send(obs).is_err() {
+                    tracing::debug!("learning is behind; observation for tick {} dropped", tick.seq);
+                }
+            }
+            command = commands.recv(), if commands_open => match command {
+                Some(c) => supervisor.command(c),
+                None => commands_open = false,
+            },
+            fresh = supervisor.reopen_finished(), if supervisor.reopening() => {
+                if let Some(fresh) = fresh {
+                    // Bytes of a frame cut by the reconnect must not join the new port's first frame.
+                    parser.reset();
+                    reader = Some(fresh);
+                }
+            }
+            n = read_link(&mut reader, &mut buf), if reader.is_some() => match n {
+                Ok(0) => {
+                    tracing::warn!("robot link closed (end of file)");
+                    reader = None;
+                    supervisor.on_lost();
+                }
+                Err(e) => {
+                    tracing::warn!("robot link read failed: {e}");
+                    reader = None;
+                    supervisor.on_lost();
+                }
+                Ok(n) => {
+                    let now = Instant::now();
+                    parser.feed(&buf[..n], |frame| {
+                        distance = distance.saturating_add(frame.get_or_zero(id::DISTANCE));
+                        angle = angle.saturating_add(frame.get_or_zero(id::ANGLE));
+                        supervisor.on_frame(&frame);
+                        newest = Some((frame, now));
+                    });
+                }
+            }
+        }
+    }
+}
+
+async fn read_link(reader: &mut Option<LinkReader>, buf: &mut [u8]) -> std::io::Result<usize> {
+    match reader {
+        Some(r) => r.read(buf).await,
+        None => std::future::pending().await,
+    }
+}

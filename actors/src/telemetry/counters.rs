@@ -1,0 +1,119 @@
+//! The counters the actors keep as they run, shared with whoever reports them (the dashboard, `/metrics`,
+//! the log line, the benchmarks) through [`super::Health`]. Each is written by one actor only; readers copy
+//! them under a short lock or from a `watch`, never on the tick's critical path.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+use pavlov::record::TickRecord;
+use tokio::sync::mpsc;
+
+use super::histogram::LatencyHistogram;
+
+/// Tick health shared with the metrics reporter.
+#[derive(Default)]
+pub struct TickStats {
+    /// Lateness of every fired tick.
+    pub lateness: LatencyHistogram,
+    /// Ticks fired.
+    pub fired: u64,
+    /// Ticks skipped because the ticker was woken too late.
+    pub skipped: u64,
+}
+
+/// Shared handle on the tick statistics.
+pub type SharedTickStats = Arc<Mutex<TickStats>>;
+
+/// Counters of the writer.
+#[derive(Default)]
+pub struct WriterStats {
+    /// Time from the tick's deadline to the motor command written to the OS.
+    pub tick_to_command: LatencyHistogram,
+    /// Write errors seen.
+    pub errors: u64,
+    /// Bytes written.
+    pub bytes: u64,
+    /// Writes abandoned after [`crate::link::writer::WRITE_TIMEOUT`].
+    pub timeouts: u64,
+    /// Ports switched to after a reopen.
+    pub replaced: u64,
+}
+
+/// Shared handle on the writer's statistics.
+pub type SharedWriterStats = Arc<Mutex<WriterStats>>;
+
+/// Actuation's counters.
+#[derive(Debug, Default, Clone, Copy, serde::Serialize)]
+pub struct ActuationStats {
+    /// Commands written.
+    pub commands: u64,
+    /// Stops forced because no fresh decision arrived.
+    pub pipeline_stalls: u64,
+    /// Stops forced by a stale observation.
+    pub stale_observations: u64,
+    /// Commands the writer queue could not take.
+    pub writer_full: u64,
+}
+
+/// The recorder queue's figures, readable without keeping the queue open.
+#[derive(Clone)]
+pub struct RecorderGauge {
+    queue: Option<mpsc::WeakSender<Arc<TickRecord>>>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl RecorderGauge {
+    /// A gauge on a recorder queue (`None`: no recorder) and its drop counter.
+    pub fn new(queue: Option<mpsc::WeakSender<Arc<TickRecord>>>, dropped: Arc<AtomicU64>) -> Self {
+        RecorderGauge { queue, dropped }
+    }
+
+    /// Whether the feed has a recorder attached.
+    pub fn attached(&self) -> bool {
+        self.queue.is_some()
+    }
+
+    /// Records queued and not yet taken by the recorder (0 once the feed is gone).
+    pub fn backlog(&self) -> usize {
+        self.queue
+            .as_ref()
+            .and_then(|weak| weak.upgrade())
+            .map_or(0, |tx| tx.max_capacity().saturating_sub(tx.capacity()))
+    }
+
+    /// Records the recorder could not take because its queue was full.
+    pub fn dropped(&self) -> u64 {
+        self.dropped.load(Ordering::Relaxed)
+    }
+}
+
+/// Counters of the endpoint, for tests, benchmarks and logs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct DashboardStats {
+    /// Clients connected now.
+    pub clients: usize,
+    /// Websocket connections accepted so far.
+    pub connections: u64,
+    /// Handshakes refused (origin, token, too many clients).
+    pub rejected: u64,
+    /// Telemetry messages dropped for slow clients (all clients).
+    pub telemetry_dropped: u64,
+    /// Commands forwarded to the server.
+    pub commands: u64,
+    /// Error replies sent (including `rate_limited`).
+    pub errors: u64,
+    /// Messages refused with `rate_limited`.
+    pub rate_limited: u64,
+    /// Connections closed with 1009 for an over-size message.
+    pub closed_oversize: u64,
+    /// Connections dropped because their replies piled up unread.
+    pub closed_unread: u64,
+    /// Connections dropped because their socket accepted nothing for `dashboard::session::WRITE_STALL`.
+    pub closed_write_stall: u64,
+    /// Tick records the hub missed.
+    pub records_missed: u64,
+    /// TCP connections closed at once because `dashboard::guard::EXTRA_CONNECTIONS` + `max_clients` were open.
+    pub tcp_refused: u64,
+    /// Connections closed because they stayed plain HTTP longer than `dashboard::guard::PRE_UPGRADE_LIMIT`.
+    pub closed_no_upgrade: u64,
+}

@@ -1,0 +1,453 @@
+//! `/metrics`: the server's figures in the Prometheus text exposition format, version 0.0.4.
+//!
+//! [`render`] is a pure function of a [`MetricsSnapshot`] (tick timing, the robot link as the newest tick
+//! record saw it, the websocket endpoint's counters, the recorder's queue and actuation's safety counters),
+//! so the format is tested without a server; [`crate::dashboard::http`] takes the snapshot and serves the text with
+//! [`CONTENT_TYPE`]. Every metric is listed in the README's "Metrics" section.
+
+use pavlov::record::LinkSummary;
+use pavlov::supervision::{LinkState, TripCause};
+
+use super::counters::{ActuationStats, DashboardStats};
+use super::exposition::Exposition;
+pub use super::exposition::HistogramSample;
+use super::{Health, RecorderFigures};
+
+/// The Content-Type of the exposition.
+pub const CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
+
+/// Upper bounds of the tick histograms' buckets, µs (the `le` labels are these in seconds).
+pub const TICK_BUCKETS_US: [u64; 13] = [
+    50, 100, 250, 500, 1_000, 2_500, 5_000, 10_000, 20_000, 50_000, 100_000, 250_000, 1_000_000,
+];
+
+/// Everything `/metrics` reports, read at one moment.
+#[derive(Debug, Clone, Default)]
+pub struct MetricsSnapshot {
+    /// Ticks fired since start.
+    pub ticks_fired: u64,
+    /// Ticks skipped because the ticker woke too late.
+    pub ticks_skipped: u64,
+    /// Tick lateness (fired − deadline).
+    pub tick_lateness: HistogramSample,
+    /// Tick deadline → motor command written.
+    pub tick_to_command: HistogramSample,
+    /// Serial write errors.
+    pub write_errors: u64,
+    /// The link as the newest tick record saw it (`None` before the first tick).
+    pub link: Option<LinkSummary>,
+    /// The websocket endpoint's counters.
+    pub ws: DashboardStats,
+    /// The recorder's queue (`None` without a recorder).
+    pub recorder: Option<RecorderFigures>,
+    /// Actuation's safety counters.
+    pub actuation: ActuationStats,
+    /// What the simulated robot's fault injector has done (`None` on a real robot).
+    pub sim_faults: Option<pavlov::sim::faults::FaultCounters>,
+}
+
+impl MetricsSnapshot {
+    /// Reads everything from the server's `health` and the endpoint's counters `ws`.
+    pub fn read(health: &Health, ws: DashboardStats) -> Self {
+        let f = health.figures();
+        let (lateness, to_command) = health.histograms();
+        MetricsSnapshot {
+            ticks_fired: f.ticks_fired,
+            ticks_skipped: f.ticks_skipped,
+            tick_lateness: HistogramSample::from_histogram(&lateness, &TICK_BUCKETS_US),
+            tick_to_command: HistogramSample::from_histogram(&to_command, &TICK_BUCKETS_US),
+            write_errors: f.write_errors,
+            link: f.link,
+            ws,
+            recorder: f.recorder,
+            actuation: f.actuation,
+            sim_faults: health.sim.as_ref().map(|s| s.borrow().faults.clone()),
+        }
+    }
+}
+
+/// The name of a trip cause in the `cause` label.
+fn cause_name(cause: TripCause) -> &'static str {
+    match cause {
+        TripCause::WheelDrop => "wheel_drop",
+        TripCause::Cliff => "cliff",
+        TripCause::Charger => "charger",
+        TripCause::Unknown => "unknown",
+    }
+}
+
+const TRIP_CAUSES: [TripCause; 4] = [
+    TripCause::WheelDrop,
+    TripCause::Cliff,
+    TripCause::Charger,
+    TripCause::Unknown,
+];
+
+/// Help text of an actuation counter, by its field name.
+fn actuation_help(field: &str) -> String {
+    match field {
+        "commands" => "Motor commands written by actuation.".into(),
+        "pipeline_stalls" => "Stops forced because no fresh decision arrived in time.".into(),
+        "stale_observations" => "Stops forced because the observation was too old.".into(),
+        "writer_full" => "Motor commands the serial writer's queue could not take.".into(),
+        other => format!("Actuation counter `{other}`."),
+    }
+}
+
+fn link_metrics(e: &mut Exposition, link: &LinkSummary) {
+    e.gauge(
+        "pavlov_link_up",
+        "1 while the robot link is open, 0 once it has failed or closed.",
+        f64::from(u8::from(link.up)),
+    );
+    e.family(
+        "pavlov_link_state",
+        "gauge",
+        "The supervisor's view of the robot link: 1 for the current state, 0 for the others.",
+    );
+    for state in LinkState::ALL {
+        e.sample(
+            "pavlov_link_state",
+            &[("state", state.name())],
+            f64::from(u8::from(state == link.state)),
+        );
+    }
+    e.family(
+        "pavlov_link_tripped",
+        "gauge",
+        "1 for the cause while the robot has tripped from Safe to Passive by itself, else 0.",
+    );
+    for cause in TRIP_CAUSES {
+        e.sample(
+            "pavlov_link_tripped",
+            &[("cause", cause_name(cause))],
+            f64::from(u8::from(link.trip == Some(cause))),
+        );
+    }
+    if let Some(mode) = link.mode {
+        e.gauge(
+            "pavlov_oi_mode",
+            "The robot's Open Interface mode from packet 35: 0 off, 1 passive, 2 safe, 3 full.",
+            f64::from(mode),
+        );
+    }
+    let counters: [(&str, &str, u64); 5] = [
+        (
+            "pavlov_link_good_frames_total",
+            "Sensor stream frames that passed every check.",
+            link.good_frames,
+        ),
+        (
+            "pavlov_link_bad_frames_total",
+            "Candidate sensor frames rejected (length, packet ids or checksum).",
+            link.bad_frames,
+        ),
+        (
+            "pavlov_link_skipped_bytes_total",
+            "Bytes skipped while searching for a sensor frame.",
+            link.skipped_bytes,
+        ),
+        (
+            "pavlov_link_reconnects_total",
+            "Times the serial port was reopened.",
+            link.reconnects,
+        ),
+        (
+            "pavlov_link_stale_events_total",
+            "Times the sensor stream went stale.",
+            link.stale_events,
+        ),
+    ];
+    for (name, help, value) in counters {
+        e.counter(name, help, value);
+    }
+}
+
+fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
+    e.gauge(
+        "pavlov_ws_clients",
+        "Websocket clients connected now.",
+        ws.clients as f64,
+    );
+    let counters: [(&str, &str, u64); 8] = [
+        (
+            "pavlov_ws_connections_total",
+            "Websocket connections accepted.",
+            ws.connections,
+        ),
+        (
+            "pavlov_ws_handshakes_rejected_total",
+            "Websocket handshakes refused (origin, token, too many clients).",
+            ws.rejected,
+        ),
+        (
+            "pavlov_ws_telemetry_dropped_total",
+            "Tick and status messages dropped for clients that did not keep up.",
+            ws.telemetry_dropped,
+        ),
+        (
+            "pavlov_ws_commands_total",
+            "Control commands forwarded from websocket clients to the server.",
+            ws.commands,
+        ),
+        (
+            "pavlov_ws_error_replies_total",
+            "Error replies sent to websocket clients (rate_limited included).",
+            ws.errors,
+        ),
+        (
+            "pavlov_ws_rate_limited_total",
+            "Websocket messages refused with rate_limited and not processed.",
+            ws.rate_limited,
+        ),
+        (
+            "pavlov_ws_tcp_refused_total",
+            "TCP connections to the dashboard port closed at once because too many were open.",
+            ws.tcp_refused,
+        ),
+        (
+            "pavlov_ws_hub_records_missed_total",
+            "Tick records the dashboard hub missed because it fell behind the tick feed.",
+            ws.records_missed,
+        ),
+    ];
+    for (name, help, value) in counters {
+        e.counter(name, help, value);
+    }
+    e.family(
+        "pavlov_ws_closed_total",
+        "counter",
+        "Connections the server closed for misbehaving: oversize (1009), unread_replies, write_stall, no_upgrade (plain HTTP too long).",
+    );
+    for (reason, value) in [
+        ("oversize", ws.closed_oversize),
+        ("unread_replies", ws.closed_unread),
+        ("write_stall", ws.closed_write_stall),
+        ("no_upgrade", ws.closed_no_upgrade),
+    ] {
+        e.sample(
+            "pavlov_ws_closed_total",
+            &[("reason", reason)],
+            value as f64,
+        );
+    }
+}
+
+/// The exposition text of `s`.
+pub fn render(s: &MetricsSnapshot) -> String {
+    let mut e = Exposition::default();
+    e.histogram(
+        "pavlov_tick_lateness_seconds",
+        "How late each tick fired after its deadline.",
+        &s.tick_lateness,
+    );
+    e.counter("pavlov_ticks_fired_total", "Ticks fired.", s.ticks_fired);
+    e.counter(
+        "pavlov_ticks_skipped_total",
+        "Ticks skipped because the ticker woke too late.",
+        s.ticks_skipped,
+    );
+    e.histogram(
+        "pavlov_tick_to_command_seconds",
+        "Time from a tick's deadline to its motor command written to the serial port.",
+        &s.tick_to_command,
+    );
+    e.counter(
+        "pavlov_serial_write_errors_total",
+        "Serial write errors.",
+        s.write_errors,
+    );
+    if let Some(link) = &s.link {
+        link_metrics(&mut e, link);
+    }
+    ws_metrics(&mut e, &s.ws);
+    if let Some(r) = s.recorder {
+        e.gauge(
+            "pavlov_recorder_backlog",
+            "Tick records queued for the recorder and not yet written.",
+            r.backlog as f64,
+        );
+        e.counter(
+            "pavlov_recorder_dropped_total",
+            "Tick records the recorder dropped because its queue was full.",
+            r.dropped,
+        );
+    }
+    if let Ok(serde_json::Value::Object(fields)) = serde_json::to_value(s.actuation) {
+        for (field, value) in fields {
+            if let Some(v) = value.as_u64() {
+                let name = format!("pavlov_actuation_{field}_total");
+                e.counter(&name, &actuation_help(&field), v);
+            }
+        }
+    }
+    if let Some(faults) = &s.sim_faults
+        && let Ok(serde_json::Value::Object(fields)) = serde_json::to_value(faults)
+    {
+        let name = "pavlov_sim_faults_total";
+        e.family(
+            name,
+            "counter",
+            "What the simulated Create's fault injector has done (--faults), by kind: bytes for *_bytes and \
+             host_*, events otherwise.",
+        );
+        for (kind, value) in fields {
+            if let Some(v) = value.as_u64() {
+                e.sample(name, &[("kind", &kind)], v as f64);
+            }
+        }
+    }
+    e.into_text()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::prometheus_check::{Family, parse};
+    use super::*;
+    use crate::telemetry::histogram::LatencyHistogram;
+    use std::time::Duration;
+
+    fn histogram(us: &[u64]) -> LatencyHistogram {
+        let mut h = LatencyHistogram::new();
+        for &u in us {
+            h.record(Duration::from_micros(u));
+        }
+        h
+    }
+
+    fn snapshot() -> MetricsSnapshot {
+        MetricsSnapshot {
+            ticks_fired: 1000,
+            ticks_skipped: 3,
+            tick_lateness: HistogramSample::from_histogram(
+                &histogram(&[10, 40, 120, 900, 3000, 70_000_000]),
+                &TICK_BUCKETS_US,
+            ),
+            tick_to_command: HistogramSample::from_histogram(
+                &histogram(&[300, 400, 2000]),
+                &TICK_BUCKETS_US,
+            ),
+            write_errors: 1,
+            link: Some(LinkSummary {
+                up: true,
+                good_frames: 990,
+                bad_frames: 2,
+                skipped_bytes: 17,
+                state: LinkState::Tripped,
+                mode: Some(1),
+                trip: Some(TripCause::Cliff),
+                reconnects: 4,
+                stale_events: 5,
+            }),
+            ws: DashboardStats {
+                clients: 2,
+                connections: 9,
+                rejected: 7,
+                rate_limited: 11,
+                closed_oversize: 1,
+                ..DashboardStats::default()
+            },
+            recorder: Some(RecorderFigures {
+                backlog: 12,
+                dropped: 0,
+            }),
+            actuation: ActuationStats {
+                commands: 990,
+                pipeline_stalls: 6,
+                ..ActuationStats::default()
+            },
+            sim_faults: Some(pavlov::sim::faults::FaultCounters {
+                hangs: 3,
+                flipped_bytes: 8,
+                ..Default::default()
+            }),
+        }
+    }
+
+    #[test]
+    fn every_family_is_valid_and_carries_its_figures() {
+        let text = render(&snapshot());
+        let families = parse(&text).unwrap_or_else(|e| panic!("{e}\n{text}"));
+        let value = |name: &str, labels: &[(&str, &str)]| {
+            families
+                .values()
+                .flat_map(|f: &Family| f.samples.iter())
+                .find(|s| {
+                    s.name == name
+                        && labels
+                            .iter()
+                            .all(|(k, v)| s.labels.get(*k).map(String::as_str) == Some(*v))
+                })
+                .map(|s| s.value)
+                .unwrap_or_else(|| panic!("no {name} {labels:?} in\n{text}"))
+        };
+        assert_eq!(value("pavlov_ticks_fired_total", &[]), 1000.0);
+        assert_eq!(value("pavlov_ticks_skipped_total", &[]), 3.0);
+        assert_eq!(value("pavlov_link_bad_frames_total", &[]), 2.0);
+        assert_eq!(value("pavlov_link_skipped_bytes_total", &[]), 17.0);
+        assert_eq!(value("pavlov_link_reconnects_total", &[]), 4.0);
+        assert_eq!(value("pavlov_link_stale_events_total", &[]), 5.0);
+        assert_eq!(value("pavlov_link_state", &[("state", "tripped")]), 1.0);
+        assert_eq!(value("pavlov_link_state", &[("state", "up")]), 0.0);
+        assert_eq!(value("pavlov_link_tripped", &[("cause", "cliff")]), 1.0);
+        assert_eq!(value("pavlov_oi_mode", &[]), 1.0);
+        assert_eq!(value("pavlov_ws_rate_limited_total", &[]), 11.0);
+        assert_eq!(
+            value("pavlov_ws_closed_total", &[("reason", "oversize")]),
+            1.0
+        );
+        assert_eq!(value("pavlov_ws_handshakes_rejected_total", &[]), 7.0);
+        assert_eq!(value("pavlov_recorder_backlog", &[]), 12.0);
+        assert_eq!(value("pavlov_actuation_pipeline_stalls_total", &[]), 6.0);
+        assert_eq!(value("pavlov_serial_write_errors_total", &[]), 1.0);
+        assert_eq!(value("pavlov_sim_faults_total", &[("kind", "hangs")]), 3.0);
+        assert_eq!(
+            value("pavlov_sim_faults_total", &[("kind", "flipped_bytes")]),
+            8.0
+        );
+        let states = families["pavlov_link_state"].samples.len();
+        assert_eq!(states, LinkState::ALL.len());
+        assert_eq!(families["pavlov_tick_lateness_seconds"].kind, "histogram");
+    }
+
+    #[test]
+    fn histograms_are_cumulative_and_end_at_the_count() {
+        let text = render(&snapshot());
+        let families = parse(&text).unwrap();
+        let h = &families["pavlov_tick_lateness_seconds"];
+        let buckets: Vec<(String, f64)> = h
+            .samples
+            .iter()
+            .filter(|s| s.name.ends_with("_bucket"))
+            .map(|s| (s.labels["le"].clone(), s.value))
+            .collect();
+        assert_eq!(buckets.len(), TICK_BUCKETS_US.len() + 1);
+        // 10 and 40 µs ≤ 50 µs; 120 ≤ 250 µs; 900 ≤ 1 ms; 3000 ≤ 5 ms; 70 s only in +Inf.
+        assert_eq!(buckets[0], ("0.00005".into(), 2.0));
+        assert_eq!(buckets[2], ("0.00025".into(), 3.0));
+        assert_eq!(buckets[4], ("0.001".into(), 4.0));
+        assert_eq!(buckets[6], ("0.005".into(), 5.0));
+        assert_eq!(buckets[12], ("1".into(), 5.0));
+        assert_eq!(buckets[13], ("+Inf".into(), 6.0));
+        let sum = h
+            .samples
+            .iter()
+            .find(|s| s.name == "pavlov_tick_lateness_seconds_sum")
+            .unwrap()
+            .value;
+        assert!((sum - 70.00407).abs() < 1e-9, "{sum}");
+    }
+
+    #[test]
+    fn before_the_first_tick_and_without_a_recorder_those_families_are_absent() {
+        let s = MetricsSnapshot::default();
+        let text = render(&s);
+        let families = parse(&text).unwrap();
+        assert!(!families.contains_key("pavlov_link_state"));
+        assert!(!families.contains_key("pavlov_recorder_backlog"));
+        assert!(!families.contains_key("pavlov_sim_faults_total"));
+        assert!(families.contains_key("pavlov_ws_clients"));
+        let h = &families["pavlov_tick_to_command_seconds"];
+        assert!(h.samples.iter().all(|s| s.value == 0.0));
+    }
+}

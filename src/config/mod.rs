@@ -1,0 +1,511 @@
+//! The server's configuration: one TOML file, validated at start-up.
+//!
+//! Every table rejects unknown keys (`deny_unknown_fields`), and [`Config::validate`] checks values, so a
+//! typo or a bad number stops the server at start-up with a message that names the key. Every key is
+//! documented in `config/README.md`.
+
+use serde::{Deserialize, Serialize};
+
+use crate::control::{Mode, Policy};
+use crate::learn::PredictionSpec;
+use crate::oi::Model;
+
+mod link;
+pub use link::LinkConfig;
+
+/// A configuration error, naming the offending key.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ConfigError {
+    /// The file is not valid TOML, has an unknown key, or a value of the wrong type.
+    #[error("{0}")]
+    Parse(String),
+    /// A value is out of range; the first field is the key path.
+    #[error("{key}: {message}")]
+    Invalid {
+        /// Dotted key path, e.g. `predictions[0].tau`.
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+fn invalid(key: impl Into<String>, message: impl Into<String>) -> ConfigError {
+    ConfigError::Invalid {
+        key: key.into(),
+        message: message.into(),
+    }
+}
+
+pub use crate::oi::mode::DriveMode;
+
+/// `[robot]`: which robot and how to talk to it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RobotConfig {
+    /// `create1` or `create2`.
+    pub model: Model,
+    /// `safe` or `full`.
+    pub oi_mode: DriveMode,
+    /// Packet ids to stream; empty = the model's all-sensors group (6 or 100).
+    pub stream: Vec<u8>,
+}
+
+impl Default for RobotConfig {
+    fn default() -> Self {
+        RobotConfig {
+            model: Model::Create1,
+            oi_mode: DriveMode::Safe,
+            stream: Vec::new(),
+        }
+    }
+}
+
+impl RobotConfig {
+    /// The packet ids to stream.
+    pub fn stream_ids(&self) -> Vec<u8> {
+        if self.stream.is_empty() {
+            vec![self.model.all_sensors_group()]
+        } else {
+            self.stream.clone()
+        }
+    }
+}
+
+/// `[tick]`: the control clock.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TickConfig {
+    /// Tick period in milliseconds (the paper: 20).
+    pub period_ms: u64,
+}
+
+impl Default for TickConfig {
+    fn default() -> Self {
+        TickConfig { period_ms: 20 }
+    }
+}
+
+/// `[safety]`: when actuation stops the wheels on its own.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SafetyConfig {
+    /// Stop when no fresh action has arrived for this many ticks.
+    pub max_action_age_ticks: u32,
+    /// Stop when the newest observation is older than this many ticks.
+    pub max_obs_age_ticks: u32,
+}
+
+impl Default for SafetyConfig {
+    fn default() -> Self {
+        SafetyConfig {
+            max_action_age_ticks: 3,
+            max_obs_age_ticks: 5,
+        }
+    }
+}
+
+/// The stimulus event E.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum StimulusSpec {
+    /// A motor stall: a leaky integrator of the wheels' over-current flags (+1 on, −1 off, clamped to
+    /// `[0, max]`) exceeds `above` (the paper: 3 and 5).
+    Stall {
+        /// E when the integrator is strictly above this level.
+        above: u8,
+        /// The integrator's upper clamp.
+        max: u8,
+    },
+    /// A command gesture: the left elbow's interior angle is valid and below `below_deg` (the paper: 90).
+    LeftElbow {
+        /// Threshold angle, degrees.
+        below_deg: f64,
+    },
+}
+
+/// `[control]`: the gate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControlConfig {
+    /// `reactive`, `pavlovian` or `manual` at start-up; changeable while running.
+    pub mode: Mode,
+    /// The stimulus E.
+    pub stimulus: StimulusSpec,
+    /// The default policy π.
+    pub default_policy: Policy,
+    /// The fixed response ϱ.
+    pub response: Policy,
+    /// The prediction (by name) that drives the Pavlovian gate.
+    pub gate_prediction: String,
+}
+
+/// `[sim]`: the simulated robot and human.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimConfig {
+    /// Seed of every random draw in the simulation.
+    pub seed: u64,
+    /// Faults the simulated Create injects (see `pavlov::sim::faults::FaultSpec`), e.g. `none`, `soak`, or
+    /// `drop=1e-4,flip=1e-4,hang=2e-5`.
+    pub faults: String,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        SimConfig {
+            seed: 1,
+            faults: "none".into(),
+        }
+    }
+}
+
+impl SimConfig {
+    /// The parsed fault specification.
+    pub fn fault_spec(&self) -> Result<crate::sim::faults::FaultSpec, ConfigError> {
+        self.faults
+            .parse()
+            .map_err(|e: crate::sim::faults::FaultSpecError| invalid("sim.faults", e.to_string()))
+    }
+}
+
+/// `[dashboard]`: the HTTP/websocket endpoint that serves the dashboard and takes commands.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DashboardConfig {
+    /// Address to listen on. Binding anything but loopback requires `token`.
+    pub bind: String,
+    /// Shared secret a client presents in the websocket handshake before any command is accepted.
+    pub token: Option<String>,
+    /// Whether a client without the token may watch (receive ticks) without sending commands.
+    pub watch_without_token: bool,
+    /// Extra allowed `Origin` values (the server's own origin and loopback origins are always allowed).
+    pub allowed_origins: Vec<String>,
+    /// Largest websocket message accepted, bytes.
+    pub max_message_bytes: usize,
+    /// Per-client queue of outgoing messages; when full, the oldest ticks are dropped.
+    pub client_queue: usize,
+    /// Most websocket clients at once.
+    pub max_clients: usize,
+}
+
+impl Default for DashboardConfig {
+    fn default() -> Self {
+        DashboardConfig {
+            bind: "127.0.0.1:8080".into(),
+            token: None,
+            watch_without_token: true,
+            allowed_origins: Vec::new(),
+            max_message_bytes: 64 * 1024,
+            client_queue: 256,
+            max_clients: 64,
+        }
+    }
+}
+
+/// `[skeleton]`: the body-skeleton stream (OSC over UDP) of the gesture-command experiment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SkeletonConfig {
+    /// Whether `pavlov serve` listens for skeletons; unset means "when the stimulus is `left_elbow`".
+    pub enabled: Option<bool>,
+    /// UDP address to listen on (OSCeleton's default target is 127.0.0.1:7110).
+    pub listen: String,
+    /// What the streamer sends (see [`SkeletonFormat`]).
+    pub format: SkeletonFormat,
+    /// Swap left and right joint labels (mirrored streamers).
+    pub swap_lr: bool,
+    /// A joint older than this counts as missing, ms.
+    pub max_joint_age_ms: u64,
+}
+
+/// The skeleton wire format and its coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SkeletonFormat {
+    /// OSCeleton `/joint ,sifff` in raw millimetres (`-xr`).
+    #[default]
+    OsceletonMm,
+    /// OSCeleton `/joint ,sifff` in its default normalized coordinates, transformed back to millimetres.
+    OsceletonNormalized,
+    /// KinectV2-OSC `/bodies/<id>/joints/<JointType> ,fffs` in metres.
+    KinectV2,
+}
+
+impl Default for SkeletonConfig {
+    fn default() -> Self {
+        SkeletonConfig {
+            enabled: None,
+            listen: "127.0.0.1:7110".into(),
+            format: SkeletonFormat::OsceletonMm,
+            swap_lr: false,
+            max_joint_age_ms: 100,
+        }
+    }
+}
+
+impl SkeletonConfig {
+    /// Whether the skeleton ingest runs under `stimulus`: `enabled` when set, else only for `left_elbow`.
+    pub fn is_enabled(&self, stimulus: &StimulusSpec) -> bool {
+        self.enabled
+            .unwrap_or(matches!(stimulus, StimulusSpec::LeftElbow { .. }))
+    }
+
+    fn validate(&self) -> Result<(), ConfigError> {
+        if self.listen.parse::<std::net::SocketAddr>().is_err() {
+            return Err(invalid(
+                "skeleton.listen",
+                format!("`{}` is not an address like 127.0.0.1:7110", self.listen),
+            ));
+        }
+        if !(1..=10_000).contains(&self.max_joint_age_ms) {
+            return Err(invalid(
+                "skeleton.max_joint_age_ms",
+                "must be between 1 and 10000",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// `[checkpoint]`: where learned weights are saved.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CheckpointConfig {
+    /// Directory that `save_weights` and the periodic checkpoints write into; a client names only the file.
+    pub dir: String,
+    /// Seconds of ticks between periodic checkpoints (0: only at shutdown).
+    pub every_s: u64,
+    /// How many periodic checkpoints to keep (the oldest are deleted).
+    pub keep: usize,
+    /// Restore the newest checkpoint in `dir` before the first tick (`pavlov serve --resume`).
+    pub resume: bool,
+    /// Write periodic and shut-down checkpoints (`pavlov serve` turns this on; experiments leave it off).
+    pub autosave: bool,
+}
+
+impl Default for CheckpointConfig {
+    fn default() -> Self {
+        CheckpointConfig {
+            dir: "weights".into(),
+            every_s: 60,
+            keep: 5,
+            resume: false,
+            autosave: false,
+        }
+    }
+}
+
+/// The whole configuration file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// `[robot]`.
+    #[serde(default)]
+    pub robot: RobotConfig,
+    /// `[tick]`.
+    #[serde(default)]
+    pub tick: TickConfig,
+    /// `[safety]`.
+    #[serde(default)]
+    pub safety: SafetyConfig,
+    /// `[link]`.
+    #[serde(default)]
+    pub link: LinkConfig,
+    /// `[control]`.
+    pub control: ControlConfig,
+    /// `[[predictions]]`, learned side by side.
+    pub predictions: Vec<PredictionSpec>,
+    /// `[sim]`.
+    #[serde(default)]
+    pub sim: SimConfig,
+    /// `[dashboard]`.
+    #[serde(default)]
+    pub dashboard: DashboardConfig,
+    /// `[checkpoint]`.
+    #[serde(default)]
+    pub checkpoint: CheckpointConfig,
+    /// `[skeleton]`.
+    #[serde(default)]
+    pub skeleton: SkeletonConfig,
+}
+
+impl Config {
+    /// Parses and validates a TOML document.
+    pub fn from_toml(text: &str) -> Result<Config, ConfigError> {
+        let cfg: Config = toml::from_str(text).map_err(|e| ConfigError::Parse(e.to_string()))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Checks every value that types alone cannot.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if !(1..=1000).contains(&self.tick.period_ms) {
+            return Err(invalid("tick.period_ms", "must be between 1 and 1000"));
+        }
+        if self.safety.max_action_age_ticks == 0 {
+            return Err(invalid("safety.max_action_age_ticks", "must be at least 1"));
+        }
+        if self.safety.max_obs_age_ticks == 0 {
+            return Err(invalid("safety.max_obs_age_ticks", "must be at least 1"));
+        }
+        let model = self.robot.model;
+        for (i, &id) in self.robot.stream.iter().enumerate() {
+            if !crate::oi::packets::available_on(id, model) {
+                return Err(invalid(
+                    format!("robot.stream[{i}]"),
+                    format!("packet {id} does not exist on the {model}"),
+                ));
+            }
+        }
+        crate::oi::frame::check_stream_budget(&self.robot.stream_ids(), model.baud())
+            .map_err(|e| invalid("robot.stream", e.to_string()))?;
+        match self.control.stimulus {
+            StimulusSpec::Stall { above, max } => {
+                if max == 0 || above >= max {
+                    return Err(invalid(
+                        "control.stimulus",
+                        format!("need 0 <= above < max, got above = {above}, max = {max}"),
+                    ));
+                }
+            }
+            StimulusSpec::LeftElbow { below_deg } => {
+                if !(below_deg > 0.0 && below_deg < 180.0) {
+                    return Err(invalid(
+                        "control.stimulus.below_deg",
+                        "must be between 0 and 180 degrees",
+                    ));
+                }
+            }
+        }
+        self.skeleton.validate()?;
+        self.link.validate()?;
+        self.sim.fault_spec()?;
+        if self.checkpoint.dir.trim().is_empty() {
+            return Err(invalid("checkpoint.dir", "must name a directory"));
+        }
+        if self.checkpoint.keep == 0 {
+            return Err(invalid(
+                "checkpoint.keep",
+                "must keep at least 1 checkpoint",
+            ));
+        }
+        let d = &self.dashboard;
+        let bind: std::net::SocketAddr = d.bind.parse().map_err(|_| {
+            invalid(
+                "dashboard.bind",
+                format!("`{}` is not an address like 127.0.0.1:8080", d.bind),
+            )
+        })?;
+        if !bind.ip().is_loopback() && d.token.as_deref().is_none_or(str::is_empty) {
+            return Err(invalid(
+                "dashboard.token",
+                format!("binding {} (not loopback) requires a token", d.bind),
+            ));
+        }
+        if !(1024..=16 * 1024 * 1024).contains(&d.max_message_bytes) {
+            return Err(invalid(
+                "dashboard.max_message_bytes",
+                "must be between 1024 and 16777216",
+            ));
+        }
+        if d.client_queue == 0 {
+            return Err(invalid("dashboard.client_queue", "must be at least 1"));
+        }
+        if d.max_clients == 0 {
+            return Err(invalid("dashboard.max_clients", "must be at least 1"));
+        }
+        if self.predictions.is_empty() {
+            return Err(invalid("predictions", "at least one prediction is needed"));
+        }
+        for (i, p) in self.predictions.iter().enumerate() {
+            p.validate()
+                .map_err(|e| invalid(format!("predictions[{i}]"), e.to_string()))?;
+            if self.predictions[..i].iter().any(|q| q.name == p.name) {
+                return Err(invalid(
+                    format!("predictions[{i}].name"),
+                    format!("`{}` is used twice", p.name),
+                ));
+            }
+        }
+        if !self
+            .predictions
+            .iter()
+            .any(|p| p.name == self.control.gate_prediction)
+        {
+            return Err(invalid(
+                "control.gate_prediction",
+                format!("no prediction is named `{}`", self.control.gate_prediction),
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const STALL: &str = include_str!("../../config/stall.toml");
+    const INTERACTION: &str = include_str!("../../config/interaction.toml");
+
+    #[test]
+    fn shipped_configurations_load_with_the_papers_parameters() {
+        let s = Config::from_toml(STALL).unwrap();
+        assert_eq!(s.robot.model, Model::Create1);
+        assert_eq!(s.predictions[0].lambda, 0.5);
+        assert!((s.predictions[0].alpha - 1.0 / 44.0).abs() < 1e-12);
+        assert_eq!(s.predictions[0].threshold_value(), 0.5);
+        let i = Config::from_toml(INTERACTION).unwrap();
+        let p = &i.predictions[0];
+        assert_eq!((p.lambda, p.initial_weight, p.tau), (0.8, -1.0, 25.0));
+        assert!((p.threshold_value() - 0.96f64.powi(15)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn an_unknown_key_is_named() {
+        let text = STALL.replace("period_ms = 20", "period_ms = 20\nperoid = 3");
+        let e = Config::from_toml(&text).unwrap_err().to_string();
+        assert!(e.contains("peroid"), "{e}");
+    }
+
+    #[test]
+    fn bad_values_name_their_key() {
+        let cases = [
+            ("period_ms = 20", "period_ms = 0", "tick.period_ms"),
+            ("tau = 25.0", "tau = 0.5", "predictions[0]"),
+            (
+                "gate_prediction = \"stall\"",
+                "gate_prediction = \"nope\"",
+                "control.gate_prediction",
+            ),
+            ("stream = [6]", "stream = [6, 6]", "robot.stream"),
+            ("stream = [6]", "stream = [50]", "robot.stream[0]"),
+            (
+                "above = 3, max = 5",
+                "above = 5, max = 5",
+                "control.stimulus",
+            ),
+        ];
+        for (from, to, key) in cases {
+            let text = STALL.replace(from, to);
+            assert_ne!(text, STALL, "{from} not found");
+            match Config::from_toml(&text) {
+                Err(ConfigError::Invalid { key: k, .. }) => {
+                    assert!(k.starts_with(key), "{k} vs {key}")
+                }
+                other => panic!("{to}: expected an invalid {key}, got {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn a_public_bind_needs_a_token() {
+        let text = format!("{STALL}\n[dashboard]\nbind = \"0.0.0.0:8080\"\n");
+        match Config::from_toml(&text) {
+            Err(ConfigError::Invalid { key, .. }) => assert_eq!(key, "dashboard.token"),
+            other => panic!("{other:?}"),
+        }
+        let ok = format!("{STALL}\n[dashboard]\nbind = \"0.0.0.0:8080\"\ntoken = \"s3cret\"\n");
+        assert!(Config::from_toml(&ok).is_ok());
+    }
+}

@@ -1,0 +1,568 @@
+//! Websocket abuse against a real server (simulated robot, dashboard on an ephemeral loopback port): while a
+//! well-behaved client reads every tick and sends a command now and then, abusers throw thousands of
+//! malformed and wrong-typed messages, floods of valid commands from several connections, over-size
+//! messages, a connection storm beyond `max_clients`, and clients that never read. The well-behaved client
+//! must lose no tick and get every reply; every abuser must get its precise error or close code; the
+//! endpoint's counters (and `/metrics`) must match what was thrown; and the ticker must keep firing.
+//!
+//! The clients run on their own runtimes (one for the good client, one for the abusers), like browsers in
+//! other processes: they compete with the server for the CPU, not for its runtime.
+
+use super::abusers as abuse;
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use futures_util::{SinkExt, StreamExt};
+use pavlov::config::Config;
+use pavlov_actors::dashboard::Dashboard;
+use pavlov_actors::dashboard::rate::DEFAULT_RATE_LIMIT;
+use pavlov_actors::dashboard::session::UNREAD_PATIENCE;
+use pavlov_actors::server::{RobotTarget, Server};
+use pavlov_actors::telemetry::prometheus_check;
+use serde_json::{Value, json};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::sync::watch;
+use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::tungstenite::protocol::frame::coding::CloseCode;
+
+use abuse::{FloodOutcome, PATIENCE};
+
+const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
+const MAX_CLIENTS: usize = 12;
+const MAX_MESSAGE_BYTES: usize = 4096;
+const MALFORMED: u64 = 3000;
+const FLOODERS: usize = 4;
+const VALID_PER_FLOODER: u64 = 3000;
+const STORM: usize = 40;
+const OVERSIZE: usize = 10;
+const PINGERS: usize = 2;
+
+/// What the well-behaved client saw.
+#[derive(Debug, Default)]
+struct GoodLog {
+    seqs: Vec<u64>,
+    sent: u64,
+    acked: u64,
+    control_acked: u64,
+    other_replies: Vec<Value>,
+}
+
+/// Reads everything; every 200 ms sends a ping, every fifth time a control command instead.
+async fn good_client(addr: SocketAddr, mut stop: watch::Receiver<bool>) -> GoodLog {
+    let ws = abuse::connect(addr)
+        .await
+        .expect("the good client connects");
+    let (mut tx, mut rx) = ws.split();
+    let mut log = GoodLog::default();
+    let mut pending: HashMap<u64, bool> = HashMap::new();
+    let mut every = tokio::time::interval(Duration::from_millis(200));
+    let mut stopping: Option<Instant> = None;
+    loop {
+        if let Some(t) = stopping
+            && (pending.is_empty() || t.elapsed() > Duration::from_secs(5))
+        {
+            break;
+        }
+        tokio::select! {
+            _ = stop.changed(), if stopping.is_none() => stopping = Some(Instant::now()),
+            _ = every.tick(), if stopping.is_none() => {
+                let id = 1_000_000 + log.sent;
+                let control = log.sent % 5 == 4;
+                let msg = if control {
+                    json!({"id": id, "cmd": "set_mode", "mode": "pavlovian"})
+                } else {
+                    json!({"id": id, "cmd": "ping"})
+                };
+                tx.send(Message::text(msg.to_string())).await.expect("the good client sends");
+                pending.insert(id, control);
+                log.sent += 1;
+            }
+            msg = tokio::time::timeout(Duration::from_secs(5), rx.next()) => {
+                let msg = msg.expect("the good client got nothing for 5 s")
+                    .expect("the good client's connection ended")
+                    .expect("a websocket error on the good client");
+                let Message::Text(t) = msg else { continue };
+                let v: Value = serde_json::from_str(&t).expect("JSON");
+                match v["type"].as_str() {
+                    Some("tick") => log.seqs.push(v["seq"].as_u64().expect("seq")),
+                    Some("status") => {}
+                    Some("ack") => match v["id"].as_u64().and_then(|id| pending.remove(&id)) {
+                        Some(control) => {
+                            log.acked += 1;
+                            log.control_acked += u64::from(control);
+                        }
+                        None => log.other_replies.push(v),
+                    },
+                    _ => log.other_replies.push(v),
+                }
+            }
+        }
+    }
+    log
+}
+
+/// What the abusers got.
+#[derive(Debug, Default)]
+struct AbuseLog {
+    pingers_dropped: Vec<bool>,
+    malformed: FloodOutcome,
+    floods: Vec<FloodOutcome>,
+    storm_accepted: usize,
+    storm_refusals: Vec<u16>,
+    oversize: Vec<Result<Option<CloseCode>, u16>>,
+    /// Counters after the first phase (never-reading clients).
+    phase_two_started: Option<Instant>,
+}
+
+/// Phase one: clients that never read (one silent, some that also send); phase two, with the silent one
+/// still connected: the floods, the storm and the over-size messages, all at once.
+async fn abusers(addr: SocketAddr, phase_two: tokio::sync::oneshot::Sender<()>) -> AbuseLog {
+    let mut log = AbuseLog::default();
+    let silent = abuse::never_reading(addr).await;
+    let pingers: Vec<_> = (0..PINGERS)
+        .map(|_| {
+            tokio::spawn(abuse::never_reading_pinger(
+                addr,
+                // Long enough for the unread ticks to fill the socket buffers (about 50 kB/s).
+                Duration::from_secs(4),
+                400,
+                UNREAD_PATIENCE + Duration::from_secs(2),
+            ))
+        })
+        .collect();
+    for p in pingers {
+        log.pingers_dropped.push(p.await.expect("pinger"));
+    }
+    let _ = phase_two.send(());
+    log.phase_two_started = Some(Instant::now());
+    let malformed_ws = abuse::connect(addr).await.expect("connect");
+    let mut flooders = Vec::new();
+    for _ in 0..FLOODERS {
+        flooders.push(abuse::connect(addr).await.expect("connect"));
+    }
+    let malformed = tokio::spawn(abuse::flood(
+        malformed_ws,
+        MALFORMED,
+        abuse::malformed,
+        |_| false,
+    ));
+    let floods: Vec<_> = flooders
+        .into_iter()
+        .map(|ws| {
+            tokio::spawn(abuse::flood(
+                ws,
+                VALID_PER_FLOODER,
+                abuse::valid,
+                abuse::valid_is_control,
+            ))
+        })
+        .collect();
+    let storm = tokio::spawn(async move {
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        abuse::storm(addr, STORM, Duration::from_secs(1)).await
+    });
+    let oversize = tokio::spawn(async move {
+        let mut codes = Vec::new();
+        for _ in 0..OVERSIZE {
+            codes.push(abuse::oversize(addr, MAX_MESSAGE_BYTES + 1000).await);
+        }
+        codes
+    });
+    log.malformed = malformed.await.expect("malformed flood");
+    for f in floods {
+        log.floods.push(f.await.expect("flood"));
+    }
+    (log.storm_accepted, log.storm_refusals) = storm.await.expect("storm");
+    log.oversize = oversize.await.expect("oversize");
+    drop(silent);
+    log
+}
+
+fn runtime(name: &str) -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .thread_name(name)
+        .enable_all()
+        .build()
+        .expect("runtime")
+}
+
+async fn http_get(addr: SocketAddr, path: &str) -> (String, String) {
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    s.write_all(
+        format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").as_bytes(),
+    )
+    .await
+    .unwrap();
+    let mut buf = Vec::new();
+    tokio::time::timeout(PATIENCE, s.read_to_end(&mut buf))
+        .await
+        .unwrap()
+        .unwrap();
+    let text = String::from_utf8_lossy(&buf).to_string();
+    let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
+    (head.to_ascii_lowercase(), body.to_string())
+}
+
+fn sample(
+    families: &std::collections::BTreeMap<String, prometheus_check::Family>,
+    name: &str,
+    label: Option<(&str, &str)>,
+) -> f64 {
+    families
+        .values()
+        .flat_map(|f| f.samples.iter())
+        .find(|s| {
+            s.name == name
+                && label.is_none_or(|(k, v)| s.labels.get(k).map(String::as_str) == Some(v))
+        })
+        .unwrap_or_else(|| panic!("no {name} {label:?}"))
+        .value
+}
+
+fn fired(server: &Server) -> (u64, u64) {
+    let t = server.health().figures();
+    (t.ticks_fired, t.ticks_skipped)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn abusers_neither_delay_the_tick_nor_starve_a_well_behaved_client() {
+    let mut cfg = Config::from_toml(STALL_CONFIG).unwrap();
+    cfg.dashboard.bind = "127.0.0.1:0".into();
+    cfg.dashboard.max_clients = MAX_CLIENTS;
+    cfg.dashboard.max_message_bytes = MAX_MESSAGE_BYTES;
+    cfg.validate().unwrap();
+    let server = Server::builder(cfg, RobotTarget::Simulated)
+        .start()
+        .await
+        .unwrap();
+    let dash = Dashboard::start(&server, PathBuf::from("web"))
+        .await
+        .unwrap();
+    let addr = dash.local_addr();
+
+    // Every record the server publishes, to compare with what the good client got.
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let mut feed = server.feed.subscribe();
+    let mut feed_stop = stop_rx.clone();
+    let feed_seqs = tokio::spawn(async move {
+        let mut seqs = Vec::new();
+        loop {
+            tokio::select! {
+                _ = feed_stop.changed() => break,
+                r = feed.recv() => seqs.push(r.expect("the test's feed subscription lagged").seq),
+            }
+        }
+        seqs
+    });
+    let good_rt = runtime("good-client");
+    let abuse_rt = runtime("abusers");
+    let good = good_rt.spawn(good_client(addr, stop_rx));
+    tokio::time::sleep(Duration::from_millis(500)).await;
+
+    let t0 = Instant::now();
+    let (fired0, skipped0) = fired(&server);
+    let (phase_tx, phase_rx) = tokio::sync::oneshot::channel();
+    let abuse = abuse_rt.spawn(abusers(addr, phase_tx));
+    phase_rx.await.expect("phase one ends");
+    let after_phase_one = dash.stats();
+    let log = tokio::time::timeout(Duration::from_secs(120), abuse)
+        .await
+        .expect("the abuse ends within 2 min")
+        .expect("the abusers did not panic");
+    let elapsed = t0.elapsed();
+    let (fired1, skipped1) = fired(&server);
+    // The good client keeps reading a little after the abuse, then stops.
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    stop_tx.send(true).unwrap();
+    let good = good.await.expect("the good client did not panic");
+    let feed_seqs = feed_seqs.await.unwrap();
+    let stats = dash.stats();
+
+    let thrown_valid: u64 = log.floods.iter().map(|f| f.sent).sum();
+    let flood_secs = log
+        .floods
+        .iter()
+        .map(|f| f.elapsed.as_secs_f64())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "abuse: {} malformed, {thrown_valid} valid commands in {flood_secs:.2} s ({:.0}/s), storm {} accepted / {} refused, \
+         {} over-size; ticks fired {} in {:.2} s, skipped {}; {stats:?}",
+        log.malformed.sent,
+        thrown_valid as f64 / flood_secs.max(1e-9),
+        log.storm_accepted,
+        log.storm_refusals.len(),
+        log.oversize.len(),
+        fired1 - fired0,
+        elapsed.as_secs_f64(),
+        skipped1 - skipped0,
+    );
+
+    // The good client lost no tick: it got exactly the records the server published over its run.
+    let (first, last) = (good.seqs[0], *good.seqs.last().unwrap());
+    let published: Vec<u64> = feed_seqs
+        .iter()
+        .copied()
+        .filter(|s| (first..=last).contains(s))
+        .collect();
+    assert!(
+        good.seqs == published,
+        "the good client missed ticks: got {} of {} published between {first} and {last}; first gap after {:?}",
+        good.seqs.len(),
+        published.len(),
+        good.seqs.iter().zip(&published).find(|(a, b)| a != b)
+    );
+    assert!(
+        last - first >= (elapsed.as_millis() / 20 / 2) as u64,
+        "the good client's ticks span only {first}..{last} over {elapsed:?}"
+    );
+    // …and every one of its commands was answered with an ack.
+    assert!(good.other_replies.is_empty(), "{:?}", good.other_replies);
+    assert_eq!(good.acked, good.sent, "{good:?}");
+
+    // The ticker kept firing (generously: half the rate).
+    let expected = elapsed.as_secs_f64() / 0.020;
+    assert!(
+        (fired1 - fired0) as f64 >= expected * 0.5,
+        "only {} ticks fired in {elapsed:?}",
+        fired1 - fired0
+    );
+
+    // Never-reading clients: the ones that also sent were dropped for their unread replies; the silent one
+    // lost telemetry.
+    assert_eq!(log.pingers_dropped, vec![true; PINGERS]);
+    assert_eq!(after_phase_one.closed_unread, PINGERS as u64);
+    assert!(stats.telemetry_dropped > 0, "{stats:?}");
+
+    // Floods: every reply was the message's own answer or rate_limited, and the limit held.
+    let limit = DEFAULT_RATE_LIMIT;
+    let allowance = |f: &FloodOutcome| {
+        f64::from(limit.burst) + limit.per_second * f.elapsed.as_secs_f64() + 1.0
+    };
+    for f in log.floods.iter().chain([&log.malformed]) {
+        assert_eq!(f.answered + f.rate_limited, f.sent, "{f:?}");
+        assert!(
+            f.answered >= u64::from(limit.burst) && f.answered as f64 <= allowance(f),
+            "{f:?} against {limit:?}"
+        );
+        assert!(f.rate_limited > 0, "{f:?}");
+    }
+    assert_eq!(log.malformed.sent, MALFORMED);
+    assert_eq!(thrown_valid, VALID_PER_FLOODER * FLOODERS as u64);
+
+    // Storm: the limit held and every refusal was a 503.
+    assert_eq!(log.storm_accepted + log.storm_refusals.len(), STORM);
+    assert!(
+        (1..MAX_CLIENTS).contains(&log.storm_accepted),
+        "{} accepted",
+        log.storm_accepted
+    );
+    assert!(
+        log.storm_refusals.iter().all(|&s| s == 503),
+        "{:?}",
+        log.storm_refusals
+    );
+
+    // Over-size messages: 1009 each (unless the handshake itself was refused in the storm).
+    let oversize_refused = log.oversize.iter().filter(|r| r.is_err()).count() as u64;
+    for r in &log.oversize {
+        assert!(matches!(r, Ok(Some(CloseCode::Size)) | Err(503)), "{r:?}");
+    }
+
+    // The counters match what was thrown.
+    let rate_limited_phase_two = stats.rate_limited - after_phase_one.rate_limited;
+    let thrown_limited =
+        log.malformed.rate_limited + log.floods.iter().map(|f| f.rate_limited).sum::<u64>();
+    assert_eq!(rate_limited_phase_two, thrown_limited, "{stats:?}");
+    assert_eq!(
+        stats.errors - after_phase_one.errors,
+        thrown_limited + log.malformed.answered,
+        "{stats:?}"
+    );
+    let control_answered: u64 = log.floods.iter().map(|f| f.control_answered).sum();
+    assert_eq!(
+        stats.commands,
+        control_answered + good.control_acked,
+        "{stats:?}"
+    );
+    assert_eq!(
+        stats.rejected,
+        log.storm_refusals.len() as u64 + oversize_refused,
+        "{stats:?}"
+    );
+    assert_eq!(
+        stats.closed_oversize,
+        OVERSIZE as u64 - oversize_refused,
+        "{stats:?}"
+    );
+    assert_eq!(stats.closed_unread, PINGERS as u64, "{stats:?}");
+    assert_eq!(stats.records_missed, 0, "{stats:?}");
+
+    // /metrics says the same.
+    let (head, body) = http_get(addr, "/metrics").await;
+    assert!(
+        head.contains("content-type: text/plain; version=0.0.4; charset=utf-8"),
+        "{head}"
+    );
+    let families = prometheus_check::parse(&body).unwrap_or_else(|e| panic!("{e}\n{body}"));
+    let now = dash.stats();
+    assert_eq!(
+        sample(&families, "pavlov_ws_rate_limited_total", None),
+        now.rate_limited as f64
+    );
+    assert_eq!(
+        sample(&families, "pavlov_ws_handshakes_rejected_total", None),
+        now.rejected as f64
+    );
+    assert_eq!(
+        sample(
+            &families,
+            "pavlov_ws_closed_total",
+            Some(("reason", "oversize"))
+        ),
+        now.closed_oversize as f64
+    );
+    assert_eq!(
+        sample(
+            &families,
+            "pavlov_ws_closed_total",
+            Some(("reason", "unread_replies"))
+        ),
+        PINGERS as f64
+    );
+    assert_eq!(
+        sample(&families, "pavlov_ws_commands_total", None),
+        now.commands as f64
+    );
+
+    good_rt.shutdown_background();
+    abuse_rt.shutdown_background();
+    dash.shutdown().await;
+    let _ = tokio::time::timeout(Duration::from_secs(5), server.shutdown()).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_over_the_rate_limit_is_told_and_served_again_once_tokens_return() {
+    let mut cfg = Config::from_toml(STALL_CONFIG).unwrap();
+    cfg.dashboard.bind = "127.0.0.1:0".into();
+    let server = Server::builder(cfg, RobotTarget::Simulated)
+        .start()
+        .await
+        .unwrap();
+    let dash = Dashboard::start(&server, PathBuf::from("web"))
+        .await
+        .unwrap();
+    let mut ws = abuse::connect(dash.local_addr()).await.unwrap();
+    let burst = u64::from(DEFAULT_RATE_LIMIT.burst);
+    let n = burst + 20;
+    for i in 0..n {
+        ws.send(Message::text(json!({"id": i, "cmd": "ping"}).to_string()))
+            .await
+            .unwrap();
+    }
+    let mut codes = Vec::new();
+    while (codes.len() as u64) < n {
+        let Some(Ok(Message::Text(t))) = ws.next().await else {
+            panic!("the connection ended")
+        };
+        let v: Value = serde_json::from_str(&t).unwrap();
+        if v["type"] == "ack" || v["type"] == "error" {
+            assert_eq!(v["id"], codes.len() as u64, "{v}");
+            codes.push(v["code"].as_str().unwrap_or("ack").to_string());
+        }
+    }
+    let acks = codes.iter().filter(|c| *c == "ack").count() as u64;
+    assert!(acks >= burst && acks < n, "{codes:?}");
+    assert!(
+        codes[..burst as usize].iter().all(|c| c == "ack"),
+        "{codes:?}"
+    );
+    assert_eq!(codes.last().map(String::as_str), Some("rate_limited"));
+    // Tokens come back: after a pause the connection is served again.
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    ws.send(Message::text(r#"{"id":"again","cmd":"ping"}"#))
+        .await
+        .unwrap();
+    loop {
+        let Some(Ok(Message::Text(t))) = ws.next().await else {
+            panic!("the connection ended")
+        };
+        let v: Value = serde_json::from_str(&t).unwrap();
+        if v["id"] == "again" {
+            assert_eq!(v["type"], "ack", "{v}");
+            break;
+        }
+    }
+    assert_eq!(dash.stats().rate_limited, n - acks);
+    dash.shutdown().await;
+    let _ = tokio::time::timeout(Duration::from_secs(5), server.shutdown()).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn idle_tcp_connections_are_bounded_and_closed_while_a_websocket_keeps_streaming() {
+    use pavlov_actors::dashboard::guard::{EXTRA_CONNECTIONS, PRE_UPGRADE_LIMIT};
+    let mut cfg = Config::from_toml(STALL_CONFIG).unwrap();
+    cfg.dashboard.bind = "127.0.0.1:0".into();
+    cfg.dashboard.max_clients = 2;
+    let server = Server::builder(cfg, RobotTarget::Simulated)
+        .start()
+        .await
+        .unwrap();
+    let dash = Dashboard::start(&server, PathBuf::from("web"))
+        .await
+        .unwrap();
+    let addr = dash.local_addr();
+    let mut ws = abuse::connect(addr).await.unwrap();
+    // Fill every TCP slot (one is the websocket's) and five more, sending nothing.
+    let limit = 2 + EXTRA_CONNECTIONS;
+    let mut idle = Vec::new();
+    for _ in 0..limit + 4 {
+        idle.push(tokio::net::TcpStream::connect(addr).await.unwrap());
+    }
+    let deadline = Instant::now() + PRE_UPGRADE_LIMIT + Duration::from_secs(5);
+    let mut last_seq = None;
+    let mut ticks = 0u64;
+    // The websocket keeps streaming while the idle connections run out their time.
+    while dash.stats().closed_no_upgrade < (limit - 1) as u64 {
+        assert!(Instant::now() < deadline, "{:?}", dash.stats());
+        let msg = tokio::time::timeout(Duration::from_secs(5), ws.next())
+            .await
+            .expect("a message within 5 s")
+            .expect("the websocket is open")
+            .expect("no websocket error");
+        if let Message::Text(t) = msg {
+            let v: Value = serde_json::from_str(&t).unwrap();
+            if v["type"] == "tick" {
+                let seq = v["seq"].as_u64().unwrap();
+                if let Some(last) = last_seq {
+                    assert_eq!(seq, last + 1, "the websocket lost ticks");
+                }
+                last_seq = Some(seq);
+                ticks += 1;
+            }
+        }
+    }
+    let stats = dash.stats();
+    assert_eq!(stats.tcp_refused, 5, "{stats:?}");
+    assert_eq!(stats.closed_no_upgrade, (limit - 1) as u64, "{stats:?}");
+    assert!(
+        ticks as f64 >= PRE_UPGRADE_LIMIT.as_secs_f64() * 50.0 * 0.5,
+        "{ticks}"
+    );
+    // Every idle connection has been closed by the server.
+    for mut s in idle {
+        let mut buf = [0u8; 16];
+        let n = tokio::time::timeout(Duration::from_secs(5), s.read(&mut buf))
+            .await
+            .expect("closed")
+            .unwrap_or(0);
+        assert_eq!(n, 0);
+    }
+    // The port serves again.
+    assert!(abuse::connect(addr).await.is_ok());
+    dash.shutdown().await;
+    let _ = tokio::time::timeout(Duration::from_secs(5), server.shutdown()).await;
+}

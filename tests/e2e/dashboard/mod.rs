@@ -1,0 +1,7 @@
+//! The dashboard endpoint: the websocket protocol, the browser page, abuse, and `/metrics`.
+
+mod abuse;
+mod abusers;
+mod browser;
+mod metrics;
+mod protocol;

@@ -1,0 +1,144 @@
+//! The interaction experiment, short: one run per policy × 1 minute with the simulated operator driving the
+//! pose channel under virtual time. Same seed → same outcome; the response follows the operator's commands;
+//! the recordings (which carry the elbow features) replay exactly.
+
+use pavlov::config::Config;
+use pavlov::control::Mode;
+use pavlov_actors::experiment::interaction::report::{table, write_all};
+use pavlov_actors::experiment::interaction::{InteractionOptions, run_study};
+
+fn interaction_config() -> Config {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../config/interaction.toml"
+    ))
+    .expect("config/interaction.toml");
+    Config::from_toml(&text).expect("valid interaction config")
+}
+
+fn options(out: &std::path::Path, record: bool) -> InteractionOptions {
+    InteractionOptions {
+        runs_per_policy: 1,
+        minutes: 1.0,
+        aligned_commands: 40,
+        seed: 4,
+        record,
+        threads: 2,
+        out: out.to_path_buf(),
+    }
+}
+
+#[test]
+fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
+    let out = std::env::temp_dir().join(format!("pavlov-interaction-{}", std::process::id()));
+    let a = run_study(&interaction_config(), &options(&out, true)).expect("study runs");
+    let b = run_study(&interaction_config(), &options(&out.join("again"), false)).expect("again");
+    let key = |s: &pavlov_actors::experiment::interaction::InteractionSummary| {
+        serde_json::to_value((
+            &s.timing,
+            &s.aligned,
+            s.runs
+                .iter()
+                .map(|r| (&r.metrics, &r.commands, &r.physical))
+                .collect::<Vec<_>>(),
+        ))
+        .unwrap()
+    };
+    assert_eq!(key(&a), key(&b), "same seed, same outcome");
+    assert_eq!(
+        a.runs.iter().map(|r| r.mode).collect::<Vec<_>>(),
+        vec![Mode::Reactive, Mode::Pavlovian]
+    );
+    for r in &a.runs {
+        assert_eq!(r.records.len(), 3000);
+        assert!(!r.commands.is_empty(), "the operator commanded in a minute");
+        // Most commands are answered by the response (the reactive gate follows the observed elbow).
+        let answered = r.metrics.latencies_ms().len();
+        assert!(
+            answered * 2 >= r.commands.len(),
+            "{answered} of {} commands answered",
+            r.commands.len()
+        );
+        let rec = pavlov_actors::storage::recording::load(r.recording.as_ref().expect("recorded"))
+            .unwrap();
+        assert!(rec.records.iter().any(|t| t.elbow.is_some()));
+        let report = pavlov_actors::storage::replay::replay(&rec).unwrap();
+        assert!(
+            report.exact(),
+            "{}",
+            pavlov_actors::storage::replay::describe(&report)
+        );
+    }
+    write_all(&out, &a).expect("outputs");
+    for f in [
+        "summary.json",
+        "commands.csv",
+        "aligned.csv",
+        "fig3_timing.svg",
+        "fig4_aligned.svg",
+    ] {
+        assert!(
+            std::fs::metadata(out.join(f))
+                .map(|m| m.len() > 50)
+                .unwrap_or(false),
+            "{f}"
+        );
+    }
+    assert!(table(&a).contains("pavlovian"));
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// With the paper's parameters the logistic learner starts from σ(−5), where σ′ ≈ 0.007, so it learns slowly:
+/// after an hour of commands the Pavlovian control answers earlier than the reactive one on average, with few
+/// false starts. (After 10 minutes, the paper's duration, it does not yet: see the README's Results.)
+#[test]
+fn after_an_hour_the_pavlovian_control_responds_earlier_with_few_false_starts() {
+    let out = std::env::temp_dir().join(format!("pavlov-interaction-hour-{}", std::process::id()));
+    let opts = InteractionOptions {
+        runs_per_policy: 1,
+        minutes: 60.0,
+        aligned_commands: 40,
+        seed: 1,
+        record: false,
+        threads: 2,
+        out,
+    };
+    let s = run_study(&interaction_config(), &opts).expect("study runs");
+    let of = |p: &str| {
+        s.timing
+            .iter()
+            .find(|t| t.policy == p)
+            .expect("policy timing")
+            .clone()
+    };
+    let (reactive, pavlovian) = (of("reactive"), of("pavlovian"));
+    println!("{}", table(&s));
+    assert!(reactive.commands > 200 && pavlovian.commands > 200);
+    assert!(
+        pavlovian.latency_ms.mean < reactive.latency_ms.mean,
+        "Pavlovian {:.1} ms vs reactive {:.1} ms",
+        pavlovian.latency_ms.mean,
+        reactive.latency_ms.mean
+    );
+    assert!(pavlovian.anticipated > reactive.anticipated);
+    assert!(
+        pavlovian.false_starts_per_minute < 0.5,
+        "{} false starts per minute",
+        pavlovian.false_starts_per_minute
+    );
+    assert_eq!(pavlovian.missed, 0);
+    // The physical response (battery current drop) follows the decision: earlier too.
+    println!(
+        "current latency: Pavlovian {:.1} ± {:.1} ms vs reactive {:.1} ± {:.1} ms; motion latency: \
+         Pavlovian {:.1} ± {:.1} ms vs reactive {:.1} ± {:.1} ms",
+        pavlovian.current_latency_ms.mean,
+        pavlovian.current_latency_ms.se,
+        reactive.current_latency_ms.mean,
+        reactive.current_latency_ms.se,
+        pavlovian.motion_latency_ms.mean,
+        pavlovian.motion_latency_ms.se,
+        reactive.motion_latency_ms.mean,
+        reactive.motion_latency_ms.se
+    );
+    assert!(pavlovian.current_latency_ms.mean < reactive.current_latency_ms.mean);
+}

@@ -1,0 +1,4 @@
+//! The paper's two experiments through the real runtime under virtual time.
+
+mod interaction;
+mod stall;

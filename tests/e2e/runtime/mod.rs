@@ -1,0 +1,6 @@
+//! The runtime: actors under virtual time, the stale-stream stop, link supervision and a real PTY.
+
+mod link_supervision;
+mod serial_pty;
+mod stale_stream;
+mod virtual_time;
