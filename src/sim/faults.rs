@@ -45,7 +45,7 @@ use std::collections::VecDeque;
 
 use crate::rng::Rng;
 use crate::sim::robot::SimRobot;
-use crate::sim::world::STEP_SECONDS;
+use crate::sim::STEP_SECONDS;
 
 pub use bytes::{ByteRates, ByteTally};
 pub use counters::FaultCounters;

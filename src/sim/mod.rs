@@ -10,3 +10,6 @@ pub mod params;
 pub mod readings;
 pub mod robot;
 pub mod world;
+
+/// The OI sensor period and the world's step, s [C1 p13; C2 p21].
+pub const STEP_SECONDS: f64 = 0.015;

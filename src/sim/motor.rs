@@ -57,7 +57,7 @@ pub struct MotorConstants {
 impl MotorConstants {
     pub fn new(p: &SimParams) -> Self {
         let back_emf = p.motor_back_emf_v_per_m_s();
-        let dt_s = super::world::STEP_SECONDS / f64::from(p.substeps.max(1));
+        let dt_s = super::STEP_SECONDS / f64::from(p.substeps.max(1));
         let sense_alpha = if p.current_sense_tau_s > 0.0 {
             1.0 - (-dt_s / p.current_sense_tau_s).exp()
         } else {

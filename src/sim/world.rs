@@ -17,8 +17,7 @@ use super::motor::{MotorConstants, WheelCommand, WheelMotor};
 use super::params::SimParams;
 use crate::rng::Rng;
 
-/// The OI sensor period and the world's step, s [C1 p13; C2 p21].
-pub const STEP_SECONDS: f64 = 0.015;
+pub use super::STEP_SECONDS;
 /// Index of the left wheel in per-wheel arrays.
 pub const LEFT: usize = 0;
 /// Index of the right wheel in per-wheel arrays.

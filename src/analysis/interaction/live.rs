@@ -21,11 +21,7 @@ use serde::Serialize;
 use super::live_physical::LivePhysical;
 use crate::record::TickRecord;
 
-/// Half-width of a command's window, ms.
-pub const LIVE_WINDOW_MS: f64 = 1000.0;
-
-/// How many recent commands the mean lead covers.
-pub const RECENT_COMMANDS: usize = 40;
+pub use super::{LIVE_WINDOW_MS, RECENT_COMMANDS};
 
 /// The figures so far.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]

@@ -11,7 +11,7 @@ use std::collections::VecDeque;
 
 use serde::Serialize;
 
-use super::live::RECENT_COMMANDS;
+use super::RECENT_COMMANDS;
 use crate::control::Mode;
 use crate::record::TickRecord;
 

@@ -8,7 +8,7 @@
 
 use std::collections::VecDeque;
 
-use super::live::{LIVE_WINDOW_MS, RECENT_COMMANDS};
+use super::{LIVE_WINDOW_MS, RECENT_COMMANDS};
 use super::physical::{PhysicalParams, PhysicalSample, onsets_in_window};
 use crate::record::TickRecord;
 

@@ -18,6 +18,12 @@
 
 use serde::Serialize;
 
+/// Half-width of a command's window in the live figures, ms.
+pub const LIVE_WINDOW_MS: f64 = 1000.0;
+
+/// How many recent commands the live mean lead covers.
+pub const RECENT_COMMANDS: usize = 40;
+
 pub mod live;
 pub mod live_aligned;
 pub mod live_physical;

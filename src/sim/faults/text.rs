@@ -8,7 +8,7 @@
 use crate::oi::packets::id;
 use crate::rng::Rng;
 use crate::sim::robot::SimRobot;
-use crate::sim::world::STEP_SECONDS;
+use crate::sim::STEP_SECONDS;
 
 /// A `bat:` line with the robot's present battery readings; `min`/`sec` count the robot's running
 /// time.

@@ -15,7 +15,8 @@
 use crate::oi::Model;
 use crate::oi::command::{Command, max_packet_list_len};
 use crate::oi::packets::available_on;
-use crate::sim::world::{DriveTarget, STEP_SECONDS};
+use crate::sim::STEP_SECONDS;
+use crate::sim::world::DriveTarget;
 
 use crate::oi::model::BAUD_RATES;
 
