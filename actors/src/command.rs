@@ -140,7 +140,7 @@ pub enum ControlCommand {
 
 impl ControlCommand {
     /// Every command's wire name, by owner.
-    pub fn names() -> impl Iterator<Item = &'static str> {
+    pub(crate) fn names() -> impl Iterator<Item = &'static str> {
         [
             LatchCommand::VARIANTS,
             GatingCommand::VARIANTS,
@@ -154,7 +154,7 @@ impl ControlCommand {
     }
 
     /// Whether `name` is a command's wire name.
-    pub fn is_name(name: &str) -> bool {
+    pub(crate) fn is_name(name: &str) -> bool {
         Self::names().any(|n| n == name)
     }
 }
@@ -279,7 +279,7 @@ pub enum CommandError {
 
 impl CommandError {
     /// The machine-readable code of the websocket's error reply.
-    pub fn code(&self) -> &'static str {
+    pub(crate) fn code(&self) -> &'static str {
         match self {
             CommandError::Rejected(_) => "rejected",
             CommandError::Busy(_) => "busy",
@@ -292,15 +292,15 @@ impl CommandError {
 pub type Outcome = Result<Applied, CommandError>;
 
 /// Where an owner sends a command's outcome.
-pub type Reply = oneshot::Sender<Outcome>;
+pub(crate) type Reply = oneshot::Sender<Outcome>;
 
 /// A command with the channel its outcome goes back on.
 #[derive(Debug)]
 pub struct ControlRequest {
     /// The command.
-    pub command: ControlCommand,
+    pub(crate) command: ControlCommand,
     /// Where the outcome goes.
-    pub reply: Reply,
+    pub(crate) reply: Reply,
 }
 
 impl ControlRequest {
@@ -319,42 +319,42 @@ impl ControlRequest {
 
 /// One owner's command with its reply channel: what an inbox carries.
 #[derive(Debug)]
-pub struct Envelope<C> {
+pub(crate) struct Envelope<C> {
     /// The command.
-    pub command: C,
+    pub(crate) command: C,
     /// Where the outcome goes.
-    pub reply: Reply,
+    pub(crate) reply: Reply,
 }
 
 impl<C> Envelope<C> {
     /// Sends the outcome (a requester that has gone away is not an error).
-    pub fn answer(self, outcome: Outcome) {
+    pub(crate) fn answer(self, outcome: Outcome) {
         let _ = self.reply.send(outcome);
     }
 }
 
 /// An owner's inbox.
-pub type Inbox<C> = mpsc::Receiver<Envelope<C>>;
+pub(crate) type Inbox<C> = mpsc::Receiver<Envelope<C>>;
 
 /// Capacity of each owner's inbox.
-pub const INBOX_CAPACITY: usize = 16;
+pub(crate) const INBOX_CAPACITY: usize = 16;
 
 /// Where the router sends things.
-pub struct Routes {
+pub(crate) struct Routes {
     /// The e-stop latch that actuation and gating watch.
-    pub estop: watch::Sender<bool>,
+    pub(crate) estop: watch::Sender<bool>,
     /// Gating's inbox.
-    pub gating: mpsc::Sender<Envelope<GatingCommand>>,
+    pub(crate) gating: mpsc::Sender<Envelope<GatingCommand>>,
     /// Learning's inbox.
-    pub learning: mpsc::Sender<Envelope<LearningCommand>>,
+    pub(crate) learning: mpsc::Sender<Envelope<LearningCommand>>,
     /// Link supervision's inbox.
-    pub link: mpsc::Sender<Envelope<LinkCommand>>,
+    pub(crate) link: mpsc::Sender<Envelope<LinkCommand>>,
     /// The recorder's inbox, when this server records.
-    pub recorder: Option<mpsc::Sender<Envelope<RecorderCommand>>>,
+    pub(crate) recorder: Option<mpsc::Sender<Envelope<RecorderCommand>>>,
 }
 
 /// Routes requests until the inbox closes or `cancel` fires.
-pub async fn route(
+pub(crate) async fn route(
     mut inbox: mpsc::Receiver<ControlRequest>,
     routes: Routes,
     cancel: CancellationToken,

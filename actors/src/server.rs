@@ -332,11 +332,6 @@ impl Server {
         self.health.clone()
     }
 
-    /// A token that, when cancelled, stops the server's actors (the caller still awaits [`Server::shutdown`]).
-    pub fn cancel_token(&self) -> CancellationToken {
-        self.cancel.clone()
-    }
-
     /// Stops every actor, sends the shut-down sequence to the robot and waits for it to be written.
     pub async fn shutdown(mut self) -> ShutdownReport {
         self.cancel.cancel();

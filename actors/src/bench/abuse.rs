@@ -24,15 +24,15 @@ const CLOSE_WAIT: Duration = Duration::from_secs(2);
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Abuse {
     /// Connections flooding valid commands (ping, set_rate, set_mode to the configured mode).
-    pub flooders: usize,
+    pub(crate) flooders: usize,
     /// Connections flooding malformed and wrong-typed messages.
-    pub malformed: usize,
+    pub(crate) malformed: usize,
     /// Clients that never read (each also sends 150 pings once, which it never reads the replies to).
-    pub never_readers: usize,
+    pub(crate) never_readers: usize,
     /// Connections opened at once, once a second.
-    pub storm: usize,
+    pub(crate) storm: usize,
     /// Whether one client keeps connecting and sending over-size messages.
-    pub oversize: bool,
+    pub(crate) oversize: bool,
 }
 
 impl Default for Abuse {
@@ -49,34 +49,34 @@ impl Default for Abuse {
 
 impl Abuse {
     /// Connections the abuse keeps open at once (before storms).
-    pub fn connections(&self) -> usize {
+    pub(crate) fn connections(&self) -> usize {
         self.flooders + self.malformed + self.never_readers + usize::from(self.oversize)
     }
 }
 
 /// What the abusers threw and got back.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct Thrown {
+pub(crate) struct Thrown {
     /// Valid commands sent.
-    pub valid: u64,
+    pub(crate) valid: u64,
     /// Malformed or wrong-typed messages sent.
-    pub malformed: u64,
+    pub(crate) malformed: u64,
     /// Acks received.
-    pub acks: u64,
+    pub(crate) acks: u64,
     /// `rate_limited` errors received.
-    pub rate_limited: u64,
+    pub(crate) rate_limited: u64,
     /// Other error replies received.
-    pub errors: u64,
+    pub(crate) errors: u64,
     /// Over-size messages sent.
-    pub oversize: u64,
+    pub(crate) oversize: u64,
     /// Connections closed with 1009 after an over-size message.
-    pub closed_1009: u64,
+    pub(crate) closed_1009: u64,
     /// Storm connection attempts.
-    pub storm_attempts: u64,
+    pub(crate) storm_attempts: u64,
     /// Storm attempts refused at the handshake.
-    pub storm_refused: u64,
+    pub(crate) storm_refused: u64,
     /// Pings sent by clients that never read.
-    pub unread_pings: u64,
+    pub(crate) unread_pings: u64,
 }
 
 impl std::fmt::Display for Thrown {
@@ -280,7 +280,7 @@ async fn never_reader(addr: SocketAddr, tally: Arc<Tally>, mut stop: watch::Rece
 /// Runs `abuse` against the endpoint at `addr` until `stop` turns true. `control` is the JSON text of a
 /// harmless control command (it goes to the server's command router); over-size messages are
 /// `max_message_bytes` + 1 KiB.
-pub async fn run(
+pub(crate) async fn run(
     addr: SocketAddr,
     abuse: Abuse,
     control: String,

@@ -49,13 +49,13 @@ pub enum LoadError {
 #[derive(Debug, Clone)]
 pub struct LoadReport {
     /// The load applied.
-    pub load: Load,
+    pub(crate) load: Load,
     /// Tick figures while the clients were connected.
     pub bench: BenchReport,
     /// Ticks each reading client received, sorted.
-    pub ticks_per_client: Vec<u64>,
+    pub(crate) ticks_per_client: Vec<u64>,
     /// The endpoint's counters at the end.
-    pub dashboard: DashboardStats,
+    pub(crate) dashboard: DashboardStats,
 }
 
 impl fmt::Display for LoadReport {
@@ -87,13 +87,13 @@ impl fmt::Display for LoadReport {
 #[derive(Debug, Clone)]
 pub struct AbuseReport {
     /// The abuse applied.
-    pub abuse: Abuse,
+    pub(crate) abuse: Abuse,
     /// The run without abuse.
-    pub baseline: LoadReport,
+    pub(crate) baseline: LoadReport,
     /// The run with abuse.
-    pub abused: LoadReport,
+    pub(crate) abused: LoadReport,
     /// What the abusers threw and got back.
-    pub thrown: Thrown,
+    pub(crate) thrown: Thrown,
 }
 
 impl fmt::Display for AbuseReport {

@@ -20,17 +20,17 @@ use crate::telemetry::histogram::LatencySummary;
 #[derive(Debug, Clone)]
 pub struct BenchReport {
     /// Wall-clock duration of the run.
-    pub duration: Duration,
+    pub(crate) duration: Duration,
     /// Ticks fired.
-    pub ticks: u64,
+    pub(crate) ticks: u64,
     /// Ticks skipped.
-    pub skipped: u64,
+    pub(crate) skipped: u64,
     /// Lateness of each tick.
     pub lateness: LatencySummary,
     /// Tick deadline to motor command written.
-    pub tick_to_command: LatencySummary,
+    pub(crate) tick_to_command: LatencySummary,
     /// Records published.
-    pub records: u64,
+    pub(crate) records: u64,
 }
 
 impl fmt::Display for BenchReport {
@@ -73,7 +73,7 @@ pub async fn run_realtime(config: Config, duration: Duration) -> Result<BenchRep
 }
 
 /// Measures a running server for `duration` of real time (the histograms cover the whole run so far).
-pub async fn measure(server: &Server, duration: Duration) -> BenchReport {
+pub(crate) async fn measure(server: &Server, duration: Duration) -> BenchReport {
     let mut feed = server.feed.subscribe();
     let records = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
     let count = records.clone();

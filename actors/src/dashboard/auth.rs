@@ -18,7 +18,7 @@ use super::protocol::TOKEN_PROTOCOL_PREFIX;
 
 /// What a connection may do.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Access {
+pub(crate) enum Access {
     /// Receive ticks and send commands.
     Command,
     /// Receive ticks only; commands get an `unauthorized` error.
@@ -27,7 +27,7 @@ pub enum Access {
 
 /// Why a handshake was refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum Denied {
+pub(crate) enum Denied {
     /// `Origin` not on the allowlist (HTTP 403).
     #[error("origin `{0}` is not allowed; add it to [dashboard] allowed_origins")]
     Origin(String),
@@ -41,7 +41,7 @@ pub enum Denied {
 
 /// The rules, fixed when the endpoint starts.
 #[derive(Debug, Clone)]
-pub struct AccessPolicy {
+pub(crate) struct AccessPolicy {
     token: Option<String>,
     watch_without_token: bool,
     origins: Vec<String>,
@@ -57,7 +57,7 @@ fn normalise_origin(origin: &str) -> String {
 
 impl AccessPolicy {
     /// The policy for an endpoint bound to `local`.
-    pub fn new(config: &DashboardConfig, local: SocketAddr) -> Self {
+    pub(crate) fn new(config: &DashboardConfig, local: SocketAddr) -> Self {
         let port = local.port();
         let mut origins = vec![
             origin_of("127.0.0.1", port),
@@ -80,12 +80,16 @@ impl AccessPolicy {
     }
 
     /// Whether commands need a token.
-    pub fn token_required(&self) -> bool {
+    pub(crate) fn token_required(&self) -> bool {
         self.token.is_some()
     }
 
     /// Checks the `Origin` header (`None` = absent) against the allowlist; `host` is the `Host` header.
-    pub fn check_origin(&self, origin: Option<&str>, host: Option<&str>) -> Result<(), Denied> {
+    pub(crate) fn check_origin(
+        &self,
+        origin: Option<&str>,
+        host: Option<&str>,
+    ) -> Result<(), Denied> {
         let Some(origin) = origin else {
             return Ok(());
         };
@@ -103,7 +107,7 @@ impl AccessPolicy {
     }
 
     /// Decides access from the token presented in the handshake, if any.
-    pub fn check_token(&self, presented: Option<&str>) -> Result<Access, Denied> {
+    pub(crate) fn check_token(&self, presented: Option<&str>) -> Result<Access, Denied> {
         let Some(expected) = &self.token else {
             return Ok(Access::Command);
         };
@@ -117,7 +121,7 @@ impl AccessPolicy {
 }
 
 /// The token a client presented: the `token.<t>` subprotocol entry wins over the `token` query parameter.
-pub fn presented_token<'a>(
+pub(crate) fn presented_token<'a>(
     query_token: Option<&'a str>,
     protocols: impl IntoIterator<Item = &'a str>,
 ) -> Option<&'a str> {

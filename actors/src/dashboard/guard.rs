@@ -27,15 +27,15 @@ pub const EXTRA_CONNECTIONS: usize = 64;
 
 /// What the guard refused, shared with the endpoint's counters.
 #[derive(Debug, Default)]
-pub struct GuardCounters {
+pub(crate) struct GuardCounters {
     /// Connections closed at once because the limit was reached.
-    pub refused: AtomicU64,
+    pub(crate) refused: AtomicU64,
     /// Connections closed because they did not become a websocket in time.
-    pub timed_out: AtomicU64,
+    pub(crate) timed_out: AtomicU64,
 }
 
 /// A listener that holds at most `limit` connections open.
-pub struct GuardedListener<L> {
+pub(crate) struct GuardedListener<L> {
     inner: L,
     slots: Arc<Semaphore>,
     counters: Arc<GuardCounters>,
@@ -44,7 +44,7 @@ pub struct GuardedListener<L> {
 
 impl<L> GuardedListener<L> {
     /// Wraps `inner`: at most `limit` connections at once, each plain HTTP for at most `pre_upgrade_limit`.
-    pub fn new(
+    pub(crate) fn new(
         inner: L,
         limit: usize,
         pre_upgrade_limit: Duration,
@@ -91,7 +91,7 @@ impl<L: Listener> Listener for GuardedListener<L> {
 }
 
 /// A connection holding its slot; plain HTTP only until its deadline.
-pub struct GuardedIo<T> {
+pub(crate) struct GuardedIo<T> {
     inner: T,
     _permit: OwnedSemaphorePermit,
     /// `None` once the connection is a websocket.

@@ -36,57 +36,57 @@ const LIB_JS: &str = include_str!("../../../web/lib.js");
 const STYLE_CSS: &str = include_str!("../../../web/style.css");
 
 /// The files of the uPlot package the page loads, relative to the web directory.
-pub const UPLOT_DIST: &str = "node_modules/uplot/dist";
+pub(crate) const UPLOT_DIST: &str = "node_modules/uplot/dist";
 /// What to run when uPlot is missing.
-pub const INSTALL_HINT: &str =
+pub(crate) const INSTALL_HINT: &str =
     "run `npm ci --prefix web` in the repository, then restart the server";
 
 const CSP: &str = "default-src 'self'; connect-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'; \
 frame-ancestors 'none'; base-uri 'none'; form-action 'none'";
 
 /// Shared by every request.
-pub struct AppState {
+pub(crate) struct AppState {
     /// Origin and token rules.
-    pub policy: AccessPolicy,
+    pub(crate) policy: AccessPolicy,
     /// Telemetry source.
-    pub hub: HubHandle,
+    pub(crate) hub: HubHandle,
     /// The server's command inbox.
-    pub commands: mpsc::Sender<ControlRequest>,
+    pub(crate) commands: mpsc::Sender<ControlRequest>,
     /// The tick period, ms.
-    pub tick_period_ms: u64,
+    pub(crate) tick_period_ms: u64,
     /// Announced signals.
-    pub signals: Signals,
+    pub(crate) signals: Signals,
     /// The configuration in force, token redacted.
-    pub config: serde_json::Value,
+    pub(crate) config: serde_json::Value,
     /// Message size cap, bytes.
-    pub max_message_bytes: usize,
+    pub(crate) max_message_bytes: usize,
     /// Per-client telemetry queue.
-    pub client_queue: usize,
+    pub(crate) client_queue: usize,
     /// Most clients at once.
-    pub max_clients: usize,
+    pub(crate) max_clients: usize,
     /// Each connection's message rate limit.
-    pub rate: RateLimit,
+    pub(crate) rate: RateLimit,
     /// The server's health figures (for `/metrics`).
-    pub health: Health,
+    pub(crate) health: Health,
     /// Where `node_modules/uplot` lives.
-    pub web_dir: PathBuf,
+    pub(crate) web_dir: PathBuf,
     /// Connected clients (shared with the hub's status).
-    pub hub_counters: Arc<HubCounters>,
+    pub(crate) hub_counters: Arc<HubCounters>,
     /// Session counters.
-    pub session_counters: Arc<SessionCounters>,
+    pub(crate) session_counters: Arc<SessionCounters>,
     /// What the TCP guard refused.
-    pub guard_counters: Arc<super::guard::GuardCounters>,
+    pub(crate) guard_counters: Arc<super::guard::GuardCounters>,
     /// Handshakes accepted.
-    pub connections: AtomicU64,
+    pub(crate) connections: AtomicU64,
     /// Handshakes refused (origin, token, too many clients).
-    pub rejected: AtomicU64,
+    pub(crate) rejected: AtomicU64,
     /// Fires on shut-down.
-    pub cancel: CancellationToken,
+    pub(crate) cancel: CancellationToken,
 }
 
 impl AppState {
     /// The endpoint's counters now.
-    pub fn stats(&self) -> DashboardStats {
+    pub(crate) fn stats(&self) -> DashboardStats {
         let c = &self.session_counters;
         let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
         DashboardStats {
@@ -107,7 +107,7 @@ impl AppState {
     }
 
     /// Everything `/metrics` reports, now.
-    pub fn metrics(&self) -> MetricsSnapshot {
+    pub(crate) fn metrics(&self) -> MetricsSnapshot {
         MetricsSnapshot::read(&self.health, self.stats())
     }
 }
@@ -125,7 +125,7 @@ async fn metrics(State(state): State<Arc<AppState>>) -> Response {
 }
 
 /// The router of the endpoint.
-pub fn router(state: Arc<AppState>) -> Router {
+pub(crate) fn router(state: Arc<AppState>) -> Router {
     Router::new()
         .route(
             "/",
@@ -173,7 +173,7 @@ fn asset(content_type: &'static str, body: impl IntoResponse) -> Response {
 }
 
 /// Whether uPlot's files are where the server serves them from.
-pub fn uplot_installed(web_dir: &std::path::Path) -> bool {
+pub(crate) fn uplot_installed(web_dir: &std::path::Path) -> bool {
     web_dir.join(UPLOT_DIST).join("uPlot.iife.min.js").is_file()
 }
 
@@ -210,9 +210,9 @@ async fn uplot_css(State(state): State<Arc<AppState>>) -> Response {
 
 /// Query parameters of `/ws`.
 #[derive(Debug, Deserialize)]
-pub struct WsQuery {
+pub(crate) struct WsQuery {
     /// The access token (alternatively sent as the subprotocol `token.<token>`).
-    pub token: Option<String>,
+    pub(crate) token: Option<String>,
 }
 
 /// Frees a client slot when the connection ends (or never starts).

@@ -22,15 +22,15 @@ use super::protocol::STATUS_EVERY_TICKS;
 use crate::telemetry::Health;
 
 /// Capacity of the hub's broadcast to the clients' forwarders, in messages (about 4 s of ticks).
-pub const HUB_CAPACITY: usize = 256;
+pub(crate) const HUB_CAPACITY: usize = 256;
 
 /// Statuses carry `interaction.aligned` every this many ticks (a multiple of [`STATUS_EVERY_TICKS`]; once a
 /// second at 50 Hz): the curves are about 76 points × 2 series × 2 modes, too many for every status.
-pub const ALIGNED_EVERY_TICKS: u64 = 5 * STATUS_EVERY_TICKS;
+pub(crate) const ALIGNED_EVERY_TICKS: u64 = 5 * STATUS_EVERY_TICKS;
 
 /// One message for the clients.
 #[derive(Debug, Clone)]
-pub enum Outgoing {
+pub(crate) enum Outgoing {
     /// A `tick` message (subject to the client's rate).
     Tick {
         /// The tick's sequence number.
@@ -44,29 +44,29 @@ pub enum Outgoing {
 
 /// Counters the hub shares with the endpoint.
 #[derive(Debug, Default)]
-pub struct HubCounters {
+pub(crate) struct HubCounters {
     /// Websocket clients connected now.
-    pub clients: AtomicUsize,
+    pub(crate) clients: AtomicUsize,
     /// Tick records the hub itself missed (it lagged behind the feed).
-    pub records_missed: AtomicU64,
+    pub(crate) records_missed: AtomicU64,
 }
 
 /// The hub's output side: clients subscribe here.
 #[derive(Clone)]
-pub struct HubHandle {
+pub(crate) struct HubHandle {
     tx: broadcast::Sender<Outgoing>,
 }
 
 impl HubHandle {
     /// A new subscription, starting with the next message.
-    pub fn subscribe(&self) -> broadcast::Receiver<Outgoing> {
+    pub(crate) fn subscribe(&self) -> broadcast::Receiver<Outgoing> {
         self.tx.subscribe()
     }
 }
 
 /// The hub's state: the run counters over every record seen, and the live interaction metrics (with the
 /// aligned averages) when the stimulus is the gesture command.
-pub struct Hub {
+pub(crate) struct Hub {
     metrics: RunMetrics,
     interaction: Option<(LiveInteraction, LiveAligned)>,
     tx: broadcast::Sender<Outgoing>,
@@ -75,7 +75,7 @@ pub struct Hub {
 impl Hub {
     /// A hub for a run ticking every `period_ms`, and the handle clients subscribe with. With
     /// `track_interaction` (the stimulus is the left-elbow command) the statuses carry `interaction`.
-    pub fn new(period_ms: f64, track_interaction: bool) -> (Hub, HubHandle) {
+    pub(crate) fn new(period_ms: f64, track_interaction: bool) -> (Hub, HubHandle) {
         let (tx, _) = broadcast::channel(HUB_CAPACITY);
         (
             Hub {
@@ -89,7 +89,7 @@ impl Hub {
     }
 
     /// Handles one record: updates the counters and broadcasts its messages.
-    pub fn on_record(
+    pub(crate) fn on_record(
         &mut self,
         record: &TickRecord,
         health: impl FnOnce() -> StatusHealth,
@@ -122,15 +122,10 @@ impl Hub {
             let _ = self.tx.send(Outgoing::Status(Utf8Bytes::from(status)));
         }
     }
-
-    /// The run counters so far.
-    pub fn metrics(&self) -> &RunMetrics {
-        &self.metrics
-    }
 }
 
 /// Runs the hub until `cancel` fires or the feed closes.
-pub async fn run(
+pub(crate) async fn run(
     mut hub: Hub,
     mut feed: broadcast::Receiver<Arc<TickRecord>>,
     health: Health,
@@ -202,7 +197,7 @@ mod tests {
         assert_eq!(last["clients"], 3);
         assert_eq!(last["counters"]["ticks"], 21);
         assert_eq!(last["counters"]["overcurrent_observations"], 11);
-        assert_eq!(hub.metrics().ticks, 21);
+        assert_eq!(hub.metrics.summary().ticks, 21);
         assert!(last.get("interaction").is_none(), "{last}");
     }
 

@@ -17,11 +17,11 @@ use crate::telemetry::counters::ActuationStats;
 
 /// Left and right wheel speeds, mm/s.
 #[derive(Debug, Clone, Copy, Serialize)]
-pub struct Wheels {
+pub(crate) struct Wheels {
     /// Left wheel.
-    pub left: i16,
+    pub(crate) left: i16,
     /// Right wheel.
-    pub right: i16,
+    pub(crate) right: i16,
 }
 
 impl From<Action> for Wheels {
@@ -35,7 +35,7 @@ impl From<Action> for Wheels {
 
 /// A `tick` message, borrowed from the record it describes.
 #[derive(Serialize)]
-pub struct TickMessage<'a> {
+pub(crate) struct TickMessage<'a> {
     #[serde(rename = "type")]
     kind: &'static str,
     seq: u64,
@@ -58,7 +58,7 @@ pub struct TickMessage<'a> {
 
 impl<'a> TickMessage<'a> {
     /// The message for one record.
-    pub fn new(r: &'a TickRecord) -> Self {
+    pub(crate) fn new(r: &'a TickRecord) -> Self {
         TickMessage {
             kind: "tick",
             seq: r.seq,
@@ -81,30 +81,30 @@ impl<'a> TickMessage<'a> {
     }
 
     /// The JSON text.
-    pub fn to_json(&self) -> String {
+    pub(crate) fn to_json(&self) -> String {
         serde_json::to_string(self).unwrap_or_default()
     }
 }
 
 /// Tick health in a `status` message.
 #[derive(Debug, Clone, Default, Serialize)]
-pub struct StatusHealth {
+pub(crate) struct StatusHealth {
     /// Median tick lateness since start, µs.
-    pub lateness_p50_us: u64,
+    pub(crate) lateness_p50_us: u64,
     /// 99th percentile of tick lateness since start, µs.
-    pub lateness_p99_us: u64,
+    pub(crate) lateness_p99_us: u64,
     /// Worst tick lateness since start, µs.
-    pub lateness_max_us: u64,
+    pub(crate) lateness_max_us: u64,
     /// Ticks fired.
-    pub ticks_fired: u64,
+    pub(crate) ticks_fired: u64,
     /// Ticks skipped because the ticker woke too late.
-    pub ticks_skipped: u64,
+    pub(crate) ticks_skipped: u64,
     /// 99th percentile of tick deadline → motor command written, µs.
-    pub tick_to_command_p99_us: u64,
+    pub(crate) tick_to_command_p99_us: u64,
     /// Serial write errors.
-    pub write_errors: u64,
+    pub(crate) write_errors: u64,
     /// Actuation's counters (forced stops, full writer queue).
-    pub actuation: ActuationStats,
+    pub(crate) actuation: ActuationStats,
 }
 
 impl From<&HealthFigures> for StatusHealth {
@@ -125,7 +125,7 @@ impl From<&HealthFigures> for StatusHealth {
 /// A `status` message: health, run counters, the number of connected clients and, in the gesture-command
 /// experiment, the live interaction metrics.
 #[derive(Serialize)]
-pub struct StatusMessage<'a> {
+pub(crate) struct StatusMessage<'a> {
     #[serde(rename = "type")]
     kind: &'static str,
     seq: u64,
@@ -147,7 +147,7 @@ struct InteractionStatus<'a> {
 
 impl<'a> StatusMessage<'a> {
     /// The status as of tick `seq`.
-    pub fn new(
+    pub(crate) fn new(
         seq: u64,
         health: &'a StatusHealth,
         counters: &'a MetricsSummary,
@@ -164,7 +164,10 @@ impl<'a> StatusMessage<'a> {
     }
 
     /// Adds the live interaction metrics (absent from the JSON when `None`).
-    pub fn with_interaction(mut self, interaction: Option<&'a LiveInteractionSummary>) -> Self {
+    pub(crate) fn with_interaction(
+        mut self,
+        interaction: Option<&'a LiveInteractionSummary>,
+    ) -> Self {
         self.interaction = interaction.map(|summary| InteractionStatus {
             summary,
             aligned: None,
@@ -173,7 +176,7 @@ impl<'a> StatusMessage<'a> {
     }
 
     /// Adds the aligned averages to `interaction` (no effect without it; absent from the JSON when `None`).
-    pub fn with_aligned(mut self, aligned: Option<&'a AlignedSummary>) -> Self {
+    pub(crate) fn with_aligned(mut self, aligned: Option<&'a AlignedSummary>) -> Self {
         if let Some(i) = &mut self.interaction {
             i.aligned = aligned;
         }
@@ -181,63 +184,63 @@ impl<'a> StatusMessage<'a> {
     }
 
     /// The JSON text.
-    pub fn to_json(&self) -> String {
+    pub(crate) fn to_json(&self) -> String {
         serde_json::to_string(self).unwrap_or_default()
     }
 }
 
 /// The signals a client can plot, announced in `hello`.
 #[derive(Debug, Clone, Serialize)]
-pub struct Signals {
+pub(crate) struct Signals {
     /// Names of the `obs` array's entries, in order.
-    pub obs: Vec<String>,
+    pub(crate) obs: Vec<String>,
     /// Names of the predictions, in the `predictions` array's order.
-    pub predictions: Vec<String>,
+    pub(crate) predictions: Vec<String>,
     /// The prediction that drives the Pavlovian gate.
-    pub gate_prediction: String,
+    pub(crate) gate_prediction: String,
 }
 
 /// The `hello` message.
 #[derive(Debug, Clone, Serialize)]
-pub struct Hello {
+pub(crate) struct Hello {
     #[serde(rename = "type")]
     kind: &'static str,
     /// [`PROTOCOL_VERSION`].
-    pub protocol: u32,
+    pub(crate) protocol: u32,
     /// Server name and version.
-    pub server: String,
+    pub(crate) server: String,
     /// The tick period, ms.
-    pub tick_period_ms: u64,
+    pub(crate) tick_period_ms: u64,
     /// Ticks per second the client receives (the tick rate until it asks for less).
-    pub rate_hz: f64,
+    pub(crate) rate_hz: f64,
     /// `status` messages come every this many ticks.
-    pub status_every_ticks: u64,
+    pub(crate) status_every_ticks: u64,
     /// Whether this connection may send control commands (it presented the token, or none is needed).
-    pub can_command: bool,
+    pub(crate) can_command: bool,
     /// What the `tick` arrays hold.
-    pub signals: Signals,
+    pub(crate) signals: Signals,
     /// Every command name.
-    pub commands: Vec<&'static str>,
+    pub(crate) commands: Vec<&'static str>,
     /// Message size limit and per-client queue, as configured.
-    pub limits: Limits,
+    pub(crate) limits: Limits,
     /// The configuration in force (the token redacted).
-    pub config: Value,
+    pub(crate) config: Value,
 }
 
 /// Limits announced in `hello`.
 #[derive(Debug, Clone, Copy, Serialize)]
-pub struct Limits {
+pub(crate) struct Limits {
     /// Largest message the server accepts, bytes.
-    pub max_message_bytes: usize,
+    pub(crate) max_message_bytes: usize,
     /// Ticks queued for this client before the oldest are dropped.
-    pub client_queue: usize,
+    pub(crate) client_queue: usize,
     /// The message rate limit (`{"burst":…,"per_second":…}`); messages beyond it get `rate_limited`.
-    pub rate: super::rate::RateLimit,
+    pub(crate) rate: super::rate::RateLimit,
 }
 
 impl Hello {
     /// A hello for a connection.
-    pub fn new(
+    pub(crate) fn new(
         tick_period_ms: u64,
         can_command: bool,
         signals: Signals,
@@ -260,7 +263,7 @@ impl Hello {
     }
 
     /// The JSON text.
-    pub fn to_json(&self) -> String {
+    pub(crate) fn to_json(&self) -> String {
         serde_json::to_string(self).unwrap_or_default()
     }
 }

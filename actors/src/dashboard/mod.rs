@@ -19,13 +19,13 @@
 //! hub's lossy broadcast into its own bounded queue, and only the client's own writer waits on its socket.
 //! All of it runs on a separate single-worker runtime, so it never occupies the control actors' workers.
 
-pub mod auth;
+pub(crate) mod auth;
 pub mod guard;
-pub mod http;
-pub mod hub;
-pub mod messages;
-pub mod out_queue;
-pub mod protocol;
+pub(crate) mod http;
+pub(crate) mod hub;
+pub(crate) mod messages;
+pub(crate) mod out_queue;
+pub(crate) mod protocol;
 pub mod rate;
 pub mod session;
 
@@ -40,7 +40,7 @@ use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 
 use crate::server::Server;
-pub use crate::telemetry::counters::DashboardStats;
+pub(crate) use crate::telemetry::counters::DashboardStats;
 use auth::AccessPolicy;
 use hub::{Hub, HubCounters};
 use messages::Signals;
@@ -220,11 +220,6 @@ impl Dashboard {
     /// The endpoint's counters now.
     pub fn stats(&self) -> DashboardStats {
         self.state.stats()
-    }
-
-    /// Everything `/metrics` reports, now.
-    pub fn metrics(&self) -> crate::telemetry::prometheus::MetricsSnapshot {
-        self.state.metrics()
     }
 
     /// Closes every connection (code 1001) and stops listening.

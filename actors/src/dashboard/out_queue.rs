@@ -16,12 +16,12 @@ use std::time::Duration;
 use tokio::sync::Notify;
 
 /// Replies (acks, errors, hello, close) queued before the client is considered hopeless.
-pub const CONTROL_CAPACITY: usize = 64;
+pub(crate) const CONTROL_CAPACITY: usize = 64;
 
 /// The reply queue is full: the client has not read its replies for a long time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 #[error("the client's reply queue is full ({CONTROL_CAPACITY} unread replies)")]
-pub struct QueueFull;
+pub(crate) struct QueueFull;
 
 struct QueueState<T> {
     control: VecDeque<T>,
@@ -30,7 +30,7 @@ struct QueueState<T> {
 }
 
 /// A bounded, drop-oldest queue of outgoing messages for one client, with one consumer.
-pub struct OutQueue<T> {
+pub(crate) struct OutQueue<T> {
     state: Mutex<QueueState<T>>,
     ready: Notify,
     room: Notify,
@@ -40,7 +40,7 @@ pub struct OutQueue<T> {
 
 impl<T> OutQueue<T> {
     /// A queue holding at most `telemetry_capacity` (at least 1) telemetry messages.
-    pub fn new(telemetry_capacity: usize) -> Self {
+    pub(crate) fn new(telemetry_capacity: usize) -> Self {
         OutQueue {
             state: Mutex::new(QueueState {
                 control: VecDeque::new(),
@@ -64,7 +64,7 @@ impl<T> OutQueue<T> {
     }
 
     /// Queues a tick or status message, dropping the oldest one when full. Returns how many were dropped.
-    pub fn push_telemetry(&self, msg: T) -> u64 {
+    pub(crate) fn push_telemetry(&self, msg: T) -> u64 {
         let dropped = self.with_state(|s| {
             if s.closed {
                 return 0;
@@ -85,7 +85,7 @@ impl<T> OutQueue<T> {
     }
 
     /// Counts telemetry that was lost before it reached this queue (e.g. a lagging broadcast).
-    pub fn count_dropped(&self, n: u64) {
+    pub(crate) fn count_dropped(&self, n: u64) {
         self.dropped.fetch_add(n, Ordering::Relaxed);
     }
 
@@ -106,12 +106,16 @@ impl<T> OutQueue<T> {
     }
 
     /// Queues a reply; it goes out before any queued telemetry.
-    pub fn push_control(&self, msg: T) -> Result<(), QueueFull> {
+    pub(crate) fn push_control(&self, msg: T) -> Result<(), QueueFull> {
         self.try_push_control(msg).map_err(|_| QueueFull)
     }
 
     /// Queues a reply, waiting up to `patience` for room when [`CONTROL_CAPACITY`] replies are unread.
-    pub async fn push_control_waiting(&self, msg: T, patience: Duration) -> Result<(), QueueFull> {
+    pub(crate) async fn push_control_waiting(
+        &self,
+        msg: T,
+        patience: Duration,
+    ) -> Result<(), QueueFull> {
         let deadline = tokio::time::Instant::now() + patience;
         let mut msg = msg;
         loop {
@@ -129,6 +133,7 @@ impl<T> OutQueue<T> {
         }
     }
 
+    #[cfg(test)]
     fn pop_now(&self) -> Option<T> {
         let (next, was_reply) = self.with_state(|s| match s.control.pop_front() {
             Some(reply) => (Some(reply), true),
@@ -141,12 +146,13 @@ impl<T> OutQueue<T> {
     }
 
     /// Takes the next message without waiting: replies first, then telemetry, oldest first.
-    pub fn try_pop(&self) -> Option<T> {
+    #[cfg(test)]
+    pub(crate) fn try_pop(&self) -> Option<T> {
         self.pop_now()
     }
 
     /// Waits for the next message; `None` once the queue is closed and empty of replies.
-    pub async fn pop(&self) -> Option<T> {
+    pub(crate) async fn pop(&self) -> Option<T> {
         loop {
             let (next, was_reply, closed) = self.with_state(|s| match s.control.pop_front() {
                 Some(reply) => (Some(reply), true, s.closed),
@@ -168,7 +174,7 @@ impl<T> OutQueue<T> {
     }
 
     /// Stops accepting telemetry; queued replies still drain, then [`OutQueue::pop`] returns `None`.
-    pub fn close(&self) {
+    pub(crate) fn close(&self) {
         self.with_state(|s| {
             s.closed = true;
             s.telemetry.clear();
@@ -177,31 +183,28 @@ impl<T> OutQueue<T> {
     }
 
     /// Telemetry dropped so far.
-    pub fn dropped(&self) -> u64 {
+    #[cfg(test)]
+    pub(crate) fn dropped(&self) -> u64 {
         self.dropped.load(Ordering::Relaxed)
     }
 
     /// Messages waiting (replies + telemetry).
-    pub fn len(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn len(&self) -> usize {
         self.with_state(|s| s.control.len() + s.telemetry.len())
-    }
-
-    /// Whether nothing is waiting.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
     }
 }
 
 /// Passes every `n`-th tick: a client's requested rate turned into a stride over tick sequence numbers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Decimator {
+pub(crate) struct Decimator {
     every: u64,
     next_seq: Option<u64>,
 }
 
 impl Decimator {
     /// Passes every tick.
-    pub fn all() -> Self {
+    pub(crate) fn all() -> Self {
         Decimator {
             every: 1,
             next_seq: None,
@@ -210,7 +213,7 @@ impl Decimator {
 
     /// The stride for `hz` when ticks come at `tick_hz`: at least 1, so asking for more than the tick
     /// rate gives every tick.
-    pub fn stride_for(hz: f64, tick_hz: f64) -> u64 {
+    pub(crate) fn stride_for(hz: f64, tick_hz: f64) -> u64 {
         if hz.is_nan() || tick_hz.is_nan() || hz <= 0.0 || tick_hz <= 0.0 {
             return 1;
         }
@@ -223,18 +226,18 @@ impl Decimator {
     }
 
     /// Changes the stride; the next tick passes.
-    pub fn set_every(&mut self, every: u64) {
+    pub(crate) fn set_every(&mut self, every: u64) {
         self.every = every.max(1);
         self.next_seq = None;
     }
 
     /// The current stride.
-    pub fn every(&self) -> u64 {
+    pub(crate) fn every(&self) -> u64 {
         self.every
     }
 
     /// Whether tick `seq` goes to the client. Gaps (skipped or dropped ticks) never cause a burst.
-    pub fn pass(&mut self, seq: u64) -> bool {
+    pub(crate) fn pass(&mut self, seq: u64) -> bool {
         match self.next_seq {
             Some(next) if seq < next => false,
             _ => {

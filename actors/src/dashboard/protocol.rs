@@ -13,20 +13,20 @@ use serde_json::{Map, Value};
 use crate::command::ControlCommand;
 
 /// Version of this protocol, announced in `hello`.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub(crate) const PROTOCOL_VERSION: u32 = 1;
 /// The websocket subprotocol the server selects when a client offers it.
-pub const SUBPROTOCOL: &str = "pavlov.v1";
+pub(crate) const SUBPROTOCOL: &str = "pavlov.v1";
 /// Prefix of a subprotocol entry that carries the access token (`token.<token>`).
-pub const TOKEN_PROTOCOL_PREFIX: &str = "token.";
+pub(crate) const TOKEN_PROTOCOL_PREFIX: &str = "token.";
 /// A `status` message goes out on every tick whose sequence number is a multiple of this (5 Hz at 50 Hz).
-pub const STATUS_EVERY_TICKS: u64 = 10;
+pub(crate) const STATUS_EVERY_TICKS: u64 = 10;
 
 /// Commands about the connection itself, answered by the websocket actor (allowed without the token).
-pub const SESSION_COMMANDS: [&str; 2] = ["set_rate", "ping"];
+pub(crate) const SESSION_COMMANDS: [&str; 2] = ["set_rate", "ping"];
 
 /// A command about the connection itself.
 #[derive(Debug, Clone, PartialEq)]
-pub enum SessionCommand {
+pub(crate) enum SessionCommand {
     /// Receive at most `hz` ticks per second.
     SetRate {
         /// Requested rate, Hz.
@@ -38,7 +38,7 @@ pub enum SessionCommand {
 
 /// What a client asked for.
 #[derive(Debug, Clone, PartialEq)]
-pub enum ClientCommand {
+pub(crate) enum ClientCommand {
     /// Handled by the websocket actor.
     Session(SessionCommand),
     /// Forwarded to the server.
@@ -47,18 +47,18 @@ pub enum ClientCommand {
 
 /// A parsed client message.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ClientRequest {
+pub(crate) struct ClientRequest {
     /// The client's `id`, echoed in the reply (a string or a number).
-    pub id: Option<Value>,
+    pub(crate) id: Option<Value>,
     /// The `cmd` name.
-    pub cmd: String,
+    pub(crate) cmd: String,
     /// The command.
-    pub command: ClientCommand,
+    pub(crate) command: ClientCommand,
 }
 
 /// Why a client message was refused. The `code` goes out in the error reply.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum ProtocolError {
+pub(crate) enum ProtocolError {
     /// Not JSON.
     #[error("malformed JSON: {0}")]
     BadJson(String),
@@ -89,7 +89,7 @@ pub enum ProtocolError {
 
 impl ProtocolError {
     /// The machine-readable error code.
-    pub fn code(&self) -> &'static str {
+    pub(crate) fn code(&self) -> &'static str {
         match self {
             ProtocolError::BadJson(_) => "bad_json",
             ProtocolError::NotAnObject(_) => "bad_message",
@@ -104,15 +104,15 @@ impl ProtocolError {
 
 /// A refused message: the error and whatever `id` could be recovered for the reply.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Rejection {
+pub(crate) struct Rejection {
     /// The client's `id`, if the message had a usable one.
-    pub id: Option<Value>,
+    pub(crate) id: Option<Value>,
     /// Why.
-    pub error: ProtocolError,
+    pub(crate) error: ProtocolError,
 }
 
 /// Every command name: the server's ([`ControlCommand::names`]), then the session's.
-pub fn known_commands() -> Vec<&'static str> {
+pub(crate) fn known_commands() -> Vec<&'static str> {
     ControlCommand::names()
         .chain(SESSION_COMMANDS.iter().copied())
         .collect()
@@ -130,7 +130,7 @@ fn json_kind(v: &Value) -> &'static str {
 }
 
 /// Parses one text frame from a client.
-pub fn parse_request(text: &str) -> Result<ClientRequest, Rejection> {
+pub(crate) fn parse_request(text: &str) -> Result<ClientRequest, Rejection> {
     let reject = |id: Option<Value>, error| Rejection { id, error };
     let value: Value = serde_json::from_str(text)
         .map_err(|e| reject(None, ProtocolError::BadJson(e.to_string())))?;
@@ -234,7 +234,7 @@ struct ErrorReply<'a> {
 
 /// The `id` of a message that will not be processed (over the rate limit), if it is a JSON object with a
 /// string or number `id`; nothing else of the message is kept.
-pub fn peek_id(text: &str) -> Option<Value> {
+pub(crate) fn peek_id(text: &str) -> Option<Value> {
     #[derive(serde::Deserialize)]
     struct IdOnly {
         #[serde(default)]
@@ -253,7 +253,7 @@ pub fn peek_id(text: &str) -> Option<Value> {
 }
 
 /// `{"type":"ack","id":…,"cmd":…,"result":…}`.
-pub fn ack_json(id: &Option<Value>, cmd: &str, result: &Value) -> String {
+pub(crate) fn ack_json(id: &Option<Value>, cmd: &str, result: &Value) -> String {
     let ack = Ack {
         kind: "ack",
         id,
@@ -264,7 +264,7 @@ pub fn ack_json(id: &Option<Value>, cmd: &str, result: &Value) -> String {
 }
 
 /// `{"type":"error","id":…,"code":…,"message":…}`.
-pub fn error_json(id: &Option<Value>, code: &str, message: &str) -> String {
+pub(crate) fn error_json(id: &Option<Value>, code: &str, message: &str) -> String {
     let reply = ErrorReply {
         kind: "error",
         id,

@@ -27,7 +27,7 @@ pub const DEFAULT_RATE_LIMIT: RateLimit = RateLimit {
 
 /// A token bucket for one connection.
 #[derive(Debug, Clone)]
-pub struct TokenBucket {
+pub(crate) struct TokenBucket {
     limit: RateLimit,
     tokens: f64,
     last: Instant,
@@ -35,7 +35,7 @@ pub struct TokenBucket {
 
 impl TokenBucket {
     /// A full bucket at `now`.
-    pub fn new(limit: RateLimit, now: Instant) -> Self {
+    pub(crate) fn new(limit: RateLimit, now: Instant) -> Self {
         TokenBucket {
             limit,
             tokens: f64::from(limit.burst),
@@ -44,7 +44,7 @@ impl TokenBucket {
     }
 
     /// Takes one token if there is one at `now`; false means the message is over the limit.
-    pub fn try_take(&mut self, now: Instant) -> bool {
+    pub(crate) fn try_take(&mut self, now: Instant) -> bool {
         let elapsed = now.saturating_duration_since(self.last).as_secs_f64();
         self.last = self.last.max(now);
         let rate = if self.limit.per_second.is_finite() {
@@ -59,11 +59,6 @@ impl TokenBucket {
         } else {
             false
         }
-    }
-
-    /// The limit this bucket enforces.
-    pub fn limit(&self) -> RateLimit {
-        self.limit
     }
 }
 

@@ -31,12 +31,12 @@ use super::rate::{RateLimit, TokenBucket};
 use crate::command::ControlRequest;
 
 /// A client whose socket accepts nothing for this long is disconnected.
-pub const WRITE_STALL: Duration = Duration::from_secs(10);
+pub(crate) const WRITE_STALL: Duration = Duration::from_secs(10);
 /// How long a full reply queue may stay full before the client is disconnected.
 pub const UNREAD_PATIENCE: Duration = Duration::from_secs(5);
 /// While a connection is over its rate limit, the server reads at most this many of its messages a second;
 /// the rest wait in TCP buffers, so a flood costs the server little CPU and no memory.
-pub const OVER_LIMIT_READS_PER_SECOND: u32 = 1000;
+pub(crate) const OVER_LIMIT_READS_PER_SECOND: u32 = 1000;
 /// Messages over the limit between two pauses of the reader.
 const PACE_BATCH: u32 = 10;
 /// How long a command may wait for room in the router's inbox.
@@ -48,49 +48,49 @@ const CLOSE_GRACE: Duration = Duration::from_secs(1);
 
 /// Whether the `n`-th occurrence of an abuse event is worth a log line: the first three, then every power of
 /// two, so a flood is visible in the log without the log becoming the flood (the counters have every one).
-pub fn worth_logging(n: u64) -> bool {
+pub(crate) fn worth_logging(n: u64) -> bool {
     n <= 3 || n.is_power_of_two()
 }
 
 /// Endpoint-wide counters the sessions update.
 #[derive(Debug, Default)]
-pub struct SessionCounters {
+pub(crate) struct SessionCounters {
     /// Telemetry messages dropped for slow clients, all clients together.
-    pub telemetry_dropped: AtomicU64,
+    pub(crate) telemetry_dropped: AtomicU64,
     /// Commands forwarded to the server.
-    pub commands: AtomicU64,
+    pub(crate) commands: AtomicU64,
     /// Error replies sent (including `rate_limited`).
-    pub errors: AtomicU64,
+    pub(crate) errors: AtomicU64,
     /// Messages refused with `rate_limited`.
-    pub rate_limited: AtomicU64,
+    pub(crate) rate_limited: AtomicU64,
     /// Connections closed with 1009 for an over-size message.
-    pub closed_oversize: AtomicU64,
+    pub(crate) closed_oversize: AtomicU64,
     /// Connections dropped because their replies piled up unread.
-    pub closed_unread: AtomicU64,
+    pub(crate) closed_unread: AtomicU64,
     /// Connections dropped because their socket accepted nothing for [`WRITE_STALL`].
-    pub closed_write_stall: AtomicU64,
+    pub(crate) closed_write_stall: AtomicU64,
 }
 
 /// Everything a session needs.
-pub struct Session {
+pub(crate) struct Session {
     /// Where the telemetry comes from.
-    pub hub: HubHandle,
+    pub(crate) hub: HubHandle,
     /// The server's command inbox.
-    pub commands: mpsc::Sender<ControlRequest>,
+    pub(crate) commands: mpsc::Sender<ControlRequest>,
     /// What this client may do.
-    pub access: Access,
+    pub(crate) access: Access,
     /// The `hello` text.
-    pub hello: String,
+    pub(crate) hello: String,
     /// Telemetry queued before the oldest is dropped.
-    pub queue: usize,
+    pub(crate) queue: usize,
     /// The tick rate, Hz.
-    pub tick_hz: f64,
+    pub(crate) tick_hz: f64,
     /// The message rate limit.
-    pub rate: RateLimit,
+    pub(crate) rate: RateLimit,
     /// Shared counters.
-    pub counters: Arc<SessionCounters>,
+    pub(crate) counters: Arc<SessionCounters>,
     /// Fires when the endpoint shuts down.
-    pub cancel: CancellationToken,
+    pub(crate) cancel: CancellationToken,
 }
 
 enum Out {
@@ -100,7 +100,7 @@ enum Out {
 
 impl Session {
     /// Serves one connection until either side ends it.
-    pub async fn run(self, socket: WebSocket) {
+    pub(crate) async fn run(self, socket: WebSocket) {
         let (sink, stream) = socket.split();
         let queue = Arc::new(OutQueue::new(self.queue));
         let stride = Arc::new(AtomicU64::new(1));

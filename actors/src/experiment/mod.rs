@@ -8,16 +8,16 @@
 //! - [`interaction`]: "Reducing Lag By Predicting the Next Command" (Figures 3 and 4).
 
 pub mod interaction;
-pub mod runner;
+pub(crate) mod runner;
 pub mod stall;
 
 use pavlov::control::Mode;
 use pavlov::rng::Rng;
 
-pub use runner::{Collect, Finished, RunError, RunRequest, run_all, run_paused};
+pub(crate) use runner::run_all;
 
 /// The policy's name in file names and tables.
-pub fn mode_name(mode: Mode) -> &'static str {
+pub(crate) fn mode_name(mode: Mode) -> &'static str {
     match mode {
         Mode::Reactive => "reactive",
         Mode::Pavlovian => "pavlovian",
@@ -26,7 +26,7 @@ pub fn mode_name(mode: Mode) -> &'static str {
 }
 
 /// The policy of run `index` in an interleaved study: even runs reactive, odd runs Pavlovian.
-pub fn interleaved_mode(index: usize) -> Mode {
+pub(crate) fn interleaved_mode(index: usize) -> Mode {
     if index % 2 == 0 {
         Mode::Reactive
     } else {
@@ -35,12 +35,12 @@ pub fn interleaved_mode(index: usize) -> Mode {
 }
 
 /// The random stream of run `index` of a study with seed `seed`; every seed a run uses is drawn from it.
-pub fn run_rng(seed: u64, index: usize) -> Rng {
+pub(crate) fn run_rng(seed: u64, index: usize) -> Rng {
     Rng::new(seed).fork(index as u64)
 }
 
 /// The progress bar both studies show on stderr (hidden when `visible` is false).
-pub fn progress_bar(runs: usize, visible: bool) -> indicatif::ProgressBar {
+pub(crate) fn progress_bar(runs: usize, visible: bool) -> indicatif::ProgressBar {
     let bar = if visible {
         indicatif::ProgressBar::new(runs as u64)
     } else {

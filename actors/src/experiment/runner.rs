@@ -45,17 +45,17 @@ pub enum RunError {
 
 /// One run to make.
 #[derive(Debug, Clone)]
-pub struct RunRequest {
+pub(crate) struct RunRequest {
     /// The configuration (mode and seeds already set for this run).
-    pub config: Config,
+    pub(crate) config: Config,
     /// Ticks to collect.
-    pub ticks: u64,
+    pub(crate) ticks: u64,
     /// Record every tick into this directory, with this label in the recording's header.
-    pub record: Option<(PathBuf, String)>,
+    pub(crate) record: Option<(PathBuf, String)>,
 }
 
 /// What an experiment does with a run's ticks.
-pub trait Collect {
+pub(crate) trait Collect {
     /// What it makes of them.
     type Output;
     /// Called once the server runs, before the first record (e.g. to start a simulated operator).
@@ -68,23 +68,23 @@ pub trait Collect {
 
 /// A finished run.
 #[derive(Debug, Clone)]
-pub struct Finished<T> {
+pub(crate) struct Finished<T> {
     /// What the collector made of it.
-    pub output: T,
+    pub(crate) output: T,
     /// The recording, if one was written.
-    pub recording: Option<PathBuf>,
+    pub(crate) recording: Option<PathBuf>,
     /// Records the recorder wrote.
-    pub recorded: u64,
+    pub(crate) recorded: u64,
     /// Records the feed could not hand to the recorder (queue full).
-    pub recorder_dropped: u64,
+    pub(crate) recorder_dropped: u64,
     /// Records the collector's subscription missed (should be 0).
-    pub lagged: u64,
+    pub(crate) lagged: u64,
     /// Wall-clock time the run took, s.
-    pub wall_s: f64,
+    pub(crate) wall_s: f64,
 }
 
 /// Runs `request` under a paused clock and hands every record to `collector`.
-pub fn run_paused<C: Collect>(
+pub(crate) fn run_paused<C: Collect>(
     request: RunRequest,
     collector: C,
 ) -> Result<Finished<C::Output>, RunError> {
@@ -163,7 +163,7 @@ async fn collect<C: Collect>(
 
 /// Runs `run` on every spec, on `threads` OS threads, and returns the results in spec order.
 /// `progress` is called as runs finish; the first failure stops further runs from starting.
-pub fn run_all<S: Sync, R: Send>(
+pub(crate) fn run_all<S: Sync, R: Send>(
     specs: &[S],
     threads: usize,
     run: &(dyn Fn(&S) -> Result<R, RunError> + Sync),

@@ -6,17 +6,17 @@
 //! - [`opener`]: what link supervision reopens a port through, with the baud rescue.
 //! - [`supervisor`]: stale-stream detection, re-sync, reconnect with backoff, trips (see `pavlov::supervision`).
 
-pub mod opener;
-pub mod serial;
-pub mod supervisor;
-pub mod writer;
+pub(crate) mod opener;
+pub(crate) mod serial;
+pub(crate) mod supervisor;
+pub(crate) mod writer;
 
 use tokio::io::{AsyncRead, AsyncWrite};
 
 /// The robot-to-host half of a link.
-pub type LinkReader = Box<dyn AsyncRead + Send + Unpin>;
+pub(crate) type LinkReader = Box<dyn AsyncRead + Send + Unpin>;
 /// The host-to-robot half of a link.
-pub type LinkWriter = Box<dyn AsyncWrite + Send + Unpin>;
+pub(crate) type LinkWriter = Box<dyn AsyncWrite + Send + Unpin>;
 
 /// An open link and, when it can be reopened, how.
 pub struct OpenLink {

@@ -1,6 +1,6 @@
 //! Reopening the robot link: the supervisor closes a dead or silent port and opens it again through a
 //! [`LinkOpener`], so the same code reconnects a USB/Bluetooth serial device
-//! ([`super::serial::SerialOpener`]) and the simulated Create ([`crate::simulated::SimDevice`]).
+//! ([`super::serial::SerialOpener`]) and the simulated Create ([`crate::simulated::device::SimDevice`]).
 //!
 //! Both can also run a **baud rescue**: a damaged byte on the way to the robot can form a Baud command and
 //! move the robot to another rate, where the host can no longer reach it. The rescue opens the port at

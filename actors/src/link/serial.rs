@@ -11,7 +11,7 @@ use super::opener::{AFTER_BAUD, LinkOpener};
 use super::{LinkError, LinkReader, LinkWriter};
 
 /// Opens `path` raw 8N1, no flow control, at the model's baud.
-pub fn open_serial(path: &str, model: Model) -> Result<(LinkReader, LinkWriter), LinkError> {
+pub(crate) fn open_serial(path: &str, model: Model) -> Result<(LinkReader, LinkWriter), LinkError> {
     let port = tokio_serial::new(path, model.baud())
         .data_bits(DataBits::Eight)
         .parity(Parity::None)
@@ -27,14 +27,14 @@ pub fn open_serial(path: &str, model: Model) -> Result<(LinkReader, LinkWriter),
 }
 
 /// Reopens a serial device.
-pub struct SerialOpener {
+pub(crate) struct SerialOpener {
     path: String,
     model: Model,
 }
 
 impl SerialOpener {
     /// An opener for `path` at `model`'s baud.
-    pub fn new(path: impl Into<String>, model: Model) -> Self {
+    pub(crate) fn new(path: impl Into<String>, model: Model) -> Self {
         SerialOpener {
             path: path.into(),
             model,

@@ -10,7 +10,7 @@ use pavlov::oi::parser::ParserStats;
 use pavlov::oi::{Model, SensorValues};
 use pavlov::record::LinkSummary;
 use pavlov::supervision::LinkState;
-use pavlov::supervision::monitor::{LinkAction, LinkMonitor, MonitorCounters};
+use pavlov::supervision::monitor::{LinkAction, LinkMonitor};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
@@ -30,7 +30,7 @@ const CLOSE_WAIT: std::time::Duration = std::time::Duration::from_millis(500);
 type Reopen = JoinHandle<Result<(LinkReader, LinkWriter), LinkError>>;
 
 /// Link supervision for one server run.
-pub struct Supervisor {
+pub(crate) struct Supervisor {
     monitor: LinkMonitor,
     opener: Option<Box<dyn LinkOpener>>,
     control: mpsc::Sender<WriterControl>,
@@ -45,7 +45,7 @@ pub struct Supervisor {
 impl Supervisor {
     /// Supervision per `config`; the start-up sequence went out at `base`. Without an `opener` the port
     /// cannot be reopened, and a dead link is re-synced with backoff instead.
-    pub fn new(
+    pub(crate) fn new(
         config: &Config,
         opener: Option<Box<dyn LinkOpener>>,
         control: mpsc::Sender<WriterControl>,
@@ -78,21 +78,21 @@ impl Supervisor {
     }
 
     /// A valid frame arrived.
-    pub fn on_frame(&mut self, values: &SensorValues) {
+    pub(crate) fn on_frame(&mut self, values: &SensorValues) {
         let before = (self.monitor.state(), self.monitor.trip());
         self.monitor.on_frame(self.now_ms(), values);
         self.log_change(before);
     }
 
     /// The link reached end-of-file or failed.
-    pub fn on_lost(&mut self) {
+    pub(crate) fn on_lost(&mut self) {
         let before = (self.monitor.state(), self.monitor.trip());
         self.monitor.on_link_lost(self.now_ms());
         self.log_change(before);
     }
 
     /// Once per tick: acts on what the monitor asks.
-    pub fn on_tick(&mut self) {
+    pub(crate) fn on_tick(&mut self) {
         let before = (self.monitor.state(), self.monitor.trip());
         let now = self.now_ms();
         match self.monitor.on_tick(now) {
@@ -146,13 +146,13 @@ impl Supervisor {
     }
 
     /// True while a reopen runs.
-    pub fn reopening(&self) -> bool {
+    pub(crate) fn reopening(&self) -> bool {
         self.reopening.is_some()
     }
 
     /// Waits for the running reopen (the caller has dropped the old reader); on success hands the new port's writer (with the start-up sequence)
     /// to the writer and returns the reader. Pending forever when no reopen runs.
-    pub async fn reopen_finished(&mut self) -> Option<LinkReader> {
+    pub(crate) async fn reopen_finished(&mut self) -> Option<LinkReader> {
         let Some(task) = self.reopening.as_mut() else {
             return std::future::pending().await;
         };
@@ -201,7 +201,7 @@ impl Supervisor {
     }
 
     /// Applies a link command.
-    pub fn command(&mut self, envelope: Envelope<LinkCommand>) {
+    pub(crate) fn command(&mut self, envelope: Envelope<LinkCommand>) {
         let Envelope { command, reply } = envelope;
         match command {
             LinkCommand::Rearm {} => {
@@ -269,7 +269,7 @@ impl Supervisor {
     }
 
     /// The link's state for the tick record.
-    pub fn summary(&self, parser: ParserStats) -> LinkSummary {
+    pub(crate) fn summary(&self, parser: ParserStats) -> LinkSummary {
         let c = self.monitor.counters();
         LinkSummary {
             up: self.monitor.state() == LinkState::Up,
@@ -282,10 +282,5 @@ impl Supervisor {
             reconnects: c.reconnects,
             stale_events: c.stale_events,
         }
-    }
-
-    /// The monitor's counters.
-    pub fn counters(&self) -> MonitorCounters {
-        self.monitor.counters()
     }
 }

@@ -18,18 +18,18 @@ use crate::telemetry::counters::SharedWriterStats;
 
 /// One write request.
 #[derive(Debug)]
-pub struct WriteRequest {
+pub(crate) struct WriteRequest {
     /// The encoded command.
-    pub bytes: Vec<u8>,
+    pub(crate) bytes: Vec<u8>,
     /// The deadline of the tick that produced it, for the tick-to-command histogram.
-    pub tick_deadline: Option<Instant>,
+    pub(crate) tick_deadline: Option<Instant>,
 }
 
 /// A write that takes longer than this is abandoned (the port is hung; supervision will reopen it).
-pub const WRITE_TIMEOUT: Duration = Duration::from_millis(200);
+pub(crate) const WRITE_TIMEOUT: Duration = Duration::from_millis(200);
 
 /// Link supervision's requests, served before any motor command.
-pub enum WriterControl {
+pub(crate) enum WriterControl {
     /// Send these bytes now (Start and Stream again, or the mode after a re-arm).
     Send(Vec<u8>),
     /// Close the port now (a serial device is opened exclusively, so it must be closed before it can be
@@ -45,7 +45,7 @@ pub enum WriterControl {
 }
 
 /// Runs until the request channel closes, then writes `shutdown` and closes the link.
-pub async fn run(
+pub(crate) async fn run(
     mut link: LinkWriter,
     mut requests: mpsc::Receiver<WriteRequest>,
     mut control: mpsc::Receiver<WriterControl>,

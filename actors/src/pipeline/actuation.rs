@@ -27,7 +27,7 @@ use crate::link::writer::WriteRequest;
 use crate::telemetry::counters::ActuationStats;
 
 /// Actuation's state.
-pub struct Actuation {
+pub(crate) struct Actuation {
     model: Model,
     safety: SafetyConfig,
     last_decision_seq: Option<u64>,
@@ -37,7 +37,7 @@ pub struct Actuation {
 
 impl Actuation {
     /// Actuation for `model` with the given safety limits.
-    pub fn new(model: Model, safety: SafetyConfig) -> Self {
+    pub(crate) fn new(model: Model, safety: SafetyConfig) -> Self {
         Actuation {
             model,
             safety,
@@ -70,7 +70,7 @@ impl Actuation {
     }
 
     /// Handles one decision: writes the command and returns the tick's record.
-    pub fn on_decision(
+    pub(crate) fn on_decision(
         &mut self,
         d: Decision,
         estop: bool,
@@ -121,7 +121,7 @@ impl Actuation {
     }
 
     /// Called on every tick: stops the wheels when the pipeline has not delivered a decision in time.
-    pub fn on_tick(&mut self, tick: &Tick, writer: &mpsc::Sender<WriteRequest>) -> bool {
+    pub(crate) fn on_tick(&mut self, tick: &Tick, writer: &mpsc::Sender<WriteRequest>) -> bool {
         let behind = safety::pipeline_stalled(
             tick.seq,
             self.last_decision_seq,
@@ -140,29 +140,33 @@ impl Actuation {
     }
 
     /// Counters so far.
-    pub fn stats(&self) -> ActuationStats {
+    pub(crate) fn stats(&self) -> ActuationStats {
         self.stats
     }
 }
 
 /// The channels actuation reads and writes.
-pub struct ActuationChannels {
+pub(crate) struct ActuationChannels {
     /// Gating's decisions.
-    pub decisions: mpsc::Receiver<Decision>,
+    pub(crate) decisions: mpsc::Receiver<Decision>,
     /// The ticker, for the stalled-pipeline watchdog.
-    pub ticks: watch::Receiver<Option<Tick>>,
+    pub(crate) ticks: watch::Receiver<Option<Tick>>,
     /// The e-stop latch.
-    pub estop: watch::Receiver<bool>,
+    pub(crate) estop: watch::Receiver<bool>,
     /// The link writer's queue.
-    pub writer: mpsc::Sender<WriteRequest>,
+    pub(crate) writer: mpsc::Sender<WriteRequest>,
     /// Where tick records go.
-    pub feed: TickFeed,
+    pub(crate) feed: TickFeed,
     /// Actuation's counters, published after each decision.
-    pub stats: watch::Sender<ActuationStats>,
+    pub(crate) stats: watch::Sender<ActuationStats>,
 }
 
 /// Runs until `cancel` fires or the decision channel closes; the writer then sends the shut-down sequence.
-pub async fn run(mut actuation: Actuation, channels: ActuationChannels, cancel: CancellationToken) {
+pub(crate) async fn run(
+    mut actuation: Actuation,
+    channels: ActuationChannels,
+    cancel: CancellationToken,
+) {
     let ActuationChannels {
         mut decisions,
         mut ticks,

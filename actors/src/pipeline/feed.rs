@@ -14,7 +14,7 @@ use crate::telemetry::counters::RecorderGauge;
 use tokio::sync::{broadcast, mpsc, watch};
 
 /// Capacity of the live broadcast, in records (20 s at 50 Hz).
-pub const LIVE_CAPACITY: usize = 1024;
+pub(crate) const LIVE_CAPACITY: usize = 1024;
 
 /// The publishing side of the feed.
 #[derive(Clone)]
@@ -27,7 +27,7 @@ pub struct TickFeed {
 
 impl TickFeed {
     /// A feed with no recorder attached.
-    pub fn new() -> Self {
+    pub(crate) fn new() -> Self {
         let (live, _) = broadcast::channel(LIVE_CAPACITY);
         TickFeed {
             live,
@@ -38,13 +38,13 @@ impl TickFeed {
     }
 
     /// Attaches a recorder queue.
-    pub fn with_recorder(mut self, tx: mpsc::Sender<Arc<TickRecord>>) -> Self {
+    pub(crate) fn with_recorder(mut self, tx: mpsc::Sender<Arc<TickRecord>>) -> Self {
         self.recorder = Some(tx);
         self
     }
 
     /// Sends a record to every consumer without waiting.
-    pub fn publish(&self, record: Arc<TickRecord>) {
+    pub(crate) fn publish(&self, record: Arc<TickRecord>) {
         if let Some(rec) = &self.recorder
             && rec.try_send(record.clone()).is_err()
         {
@@ -61,25 +61,18 @@ impl TickFeed {
     }
 
     /// The link summary of the newest record (`None` before the first).
-    pub fn latest_link(&self) -> watch::Receiver<Option<LinkSummary>> {
+    pub(crate) fn latest_link(&self) -> watch::Receiver<Option<LinkSummary>> {
         self.latest_link.subscribe()
     }
 
     /// Records the recorder could not take.
-    pub fn recorder_dropped(&self) -> u64 {
+    pub(crate) fn recorder_dropped(&self) -> u64 {
         self.recorder_dropped.load(Ordering::Relaxed)
-    }
-
-    /// Records queued for the recorder and not yet taken by it (`None` without a recorder).
-    pub fn recorder_backlog(&self) -> Option<usize> {
-        self.recorder
-            .as_ref()
-            .map(|tx| tx.max_capacity().saturating_sub(tx.capacity()))
     }
 
     /// A read-only view of the recorder's queue for metrics. It holds no sender, so it does not keep the
     /// recorder running after the server has gone.
-    pub fn recorder_gauge(&self) -> RecorderGauge {
+    pub(crate) fn recorder_gauge(&self) -> RecorderGauge {
         RecorderGauge::new(
             self.recorder.as_ref().map(|tx| tx.downgrade()),
             self.recorder_dropped.clone(),
@@ -111,7 +104,6 @@ mod tests {
         for seq in 0..6 {
             feed.publish(record(seq));
         }
-        assert_eq!(feed.recorder_backlog(), Some(4));
         assert_eq!(gauge.backlog(), 4);
         assert_eq!(gauge.dropped(), 2);
         assert!(rx.try_recv().is_ok());
@@ -126,7 +118,6 @@ mod tests {
     #[test]
     fn without_a_recorder_there_is_no_backlog() {
         let feed = TickFeed::new();
-        assert_eq!(feed.recorder_backlog(), None);
         assert!(!feed.recorder_gauge().attached());
         assert_eq!(feed.recorder_gauge().backlog(), 0);
     }

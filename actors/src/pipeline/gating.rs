@@ -13,15 +13,15 @@ use super::learning::Learned;
 use crate::command::{Applied, CommandError, Envelope, GatingCommand, Inbox, Outcome};
 
 /// The fastest wheel speed a teleop command may ask for, mm/s: the Drive Direct range of both models.
-pub const TELEOP_LIMIT_MM_S: i16 = 500;
+pub(crate) const TELEOP_LIMIT_MM_S: i16 = 500;
 
 /// What gating decided on one tick, with everything learning produced for it.
 #[derive(Debug, Clone)]
-pub struct Decision {
+pub(crate) struct Decision {
     /// Learning's output for the tick.
-    pub learned: Learned,
+    pub(crate) learned: Learned,
     /// The gate's output.
-    pub gate: GateOutput,
+    pub(crate) gate: GateOutput,
 }
 
 fn apply(stage: &mut GatingStage, cmd: GatingCommand, seq: u64) -> Outcome {
@@ -54,19 +54,23 @@ fn apply(stage: &mut GatingStage, cmd: GatingCommand, seq: u64) -> Outcome {
 }
 
 /// The channels gating reads and writes.
-pub struct GatingChannels {
+pub(crate) struct GatingChannels {
     /// Learning's output.
-    pub learned: mpsc::Receiver<Learned>,
+    pub(crate) learned: mpsc::Receiver<Learned>,
     /// Gating's commands.
-    pub commands: Inbox<GatingCommand>,
+    pub(crate) commands: Inbox<GatingCommand>,
     /// The e-stop latch.
-    pub estop: watch::Receiver<bool>,
+    pub(crate) estop: watch::Receiver<bool>,
     /// Where decisions go (to actuation).
-    pub out: mpsc::Sender<Decision>,
+    pub(crate) out: mpsc::Sender<Decision>,
 }
 
 /// Runs until its input closes or `cancel` fires.
-pub async fn run(mut stage: GatingStage, channels: GatingChannels, cancel: CancellationToken) {
+pub(crate) async fn run(
+    mut stage: GatingStage,
+    channels: GatingChannels,
+    cancel: CancellationToken,
+) {
     let GatingChannels {
         mut learned,
         mut commands,

@@ -21,19 +21,19 @@ use crate::storage::checkpoint_files::CheckpointWriter;
 
 /// Learning's output for one tick.
 #[derive(Debug, Clone)]
-pub struct Learned {
+pub(crate) struct Learned {
     /// The observation it was computed from.
-    pub observation: Observation,
+    pub(crate) observation: Observation,
     /// The tick's scheduled time since the run started, ms.
-    pub t_ms: f64,
+    pub(crate) t_ms: f64,
     /// Stimulus, predictions and the gate's inputs.
-    pub output: LearnOutput,
+    pub(crate) output: LearnOutput,
     /// Whether an injected human request forced the stimulus on (recorded for replay).
-    pub forced_stimulus: bool,
+    pub(crate) forced_stimulus: bool,
 }
 
 /// Learning's state.
-pub struct Learning {
+pub(crate) struct Learning {
     stage: LearningStage,
     elbows: Option<ElbowFeatureTracker>,
     request_until: u64,
@@ -68,7 +68,7 @@ fn is_plain_file_name(name: &str) -> bool {
 
 impl Learning {
     /// Learning for `config`.
-    pub fn new(config: &Config) -> Result<Self, LearnError> {
+    pub(crate) fn new(config: &Config) -> Result<Self, LearnError> {
         let uses_skeleton = matches!(
             config.control.stimulus,
             pavlov::config::StimulusSpec::LeftElbow { .. }
@@ -87,7 +87,7 @@ impl Learning {
     }
 
     /// Checkpoints into `[checkpoint] dir` every `every_s` seconds of ticks and when the loop ends.
-    pub fn with_autosave(mut self, config: &Config) -> std::io::Result<Self> {
+    pub(crate) fn with_autosave(mut self, config: &Config) -> std::io::Result<Self> {
         let c = &config.checkpoint;
         let writer = CheckpointWriter::spawn(c.dir.clone().into(), c.keep)?;
         self.autosave = Some(Autosave {
@@ -100,7 +100,7 @@ impl Learning {
     }
 
     /// Continues from `checkpoint` (already checked against the configuration).
-    pub fn resume(&mut self, checkpoint: &Checkpoint) -> Result<(), LearnError> {
+    pub(crate) fn resume(&mut self, checkpoint: &Checkpoint) -> Result<(), LearnError> {
         self.stage.restore(&checkpoint.state)?;
         self.tick_offset = checkpoint.created_tick;
         Ok(())
@@ -149,7 +149,7 @@ impl Learning {
     }
 
     /// Names of the observation vector's dimensions.
-    pub fn obs_names(&self) -> Vec<String> {
+    pub(crate) fn obs_names(&self) -> Vec<String> {
         self.stage.layout().names().map(str::to_string).collect()
     }
 
@@ -213,19 +213,19 @@ impl Learning {
 }
 
 /// The channels learning reads and writes.
-pub struct LearningChannels {
+pub(crate) struct LearningChannels {
     /// Sensor ingest's observations.
-    pub observations: mpsc::Receiver<Observation>,
+    pub(crate) observations: mpsc::Receiver<Observation>,
     /// The newest pose from skeleton ingest.
-    pub pose: watch::Receiver<PoseTracker>,
+    pub(crate) pose: watch::Receiver<PoseTracker>,
     /// Learning's commands.
-    pub commands: Inbox<LearningCommand>,
+    pub(crate) commands: Inbox<LearningCommand>,
     /// Where each tick's output goes (to gating).
-    pub out: mpsc::Sender<Learned>,
+    pub(crate) out: mpsc::Sender<Learned>,
 }
 
 /// Runs until `cancel` fires or observations stop.
-pub async fn run(
+pub(crate) async fn run(
     mut learning: Learning,
     started: Instant,
     channels: LearningChannels,

@@ -19,13 +19,13 @@
 //! Every channel on the tick path is bounded and written with `try_send`: a stage that falls behind loses
 //! its oldest input (and actuation's watchdog stops the wheels), it never makes an earlier stage wait.
 
-pub mod actuation;
-pub mod feed;
-pub mod gating;
-pub mod learning;
-pub mod sensor_ingest;
+pub(crate) mod actuation;
+pub(crate) mod feed;
+pub(crate) mod gating;
+pub(crate) mod learning;
+pub(crate) mod sensor_ingest;
 pub mod skeleton_ingest;
-pub mod ticker;
+pub(crate) mod ticker;
 
 use std::time::Duration;
 
@@ -54,37 +54,37 @@ const STAGE_CAPACITY: usize = 4;
 const COMMAND_CAPACITY: usize = 64;
 
 /// What the pipeline is built from.
-pub struct PipelineParts {
+pub(crate) struct PipelineParts {
     /// Learning, ready to run (resumed and autosaving as configured).
-    pub learning: Learning,
+    pub(crate) learning: Learning,
     /// The link's reading side with its parser and supervisor.
-    pub ingest: IngestLink,
+    pub(crate) ingest: IngestLink,
     /// The link writer's command queue.
-    pub writer: mpsc::Sender<WriteRequest>,
+    pub(crate) writer: mpsc::Sender<WriteRequest>,
     /// Where tick records go.
-    pub feed: TickFeed,
+    pub(crate) feed: TickFeed,
     /// The recorder's inbox, when the server records.
-    pub recorder: Option<mpsc::Sender<Envelope<RecorderCommand>>>,
+    pub(crate) recorder: Option<mpsc::Sender<Envelope<RecorderCommand>>>,
     /// When the first tick is due.
-    pub started: Instant,
+    pub(crate) started: Instant,
 }
 
 /// The running pipeline.
-pub struct Pipeline {
+pub(crate) struct Pipeline {
     /// The command inbox (the router's).
-    pub commands: mpsc::Sender<ControlRequest>,
+    pub(crate) commands: mpsc::Sender<ControlRequest>,
     /// Publish skeleton poses here.
-    pub pose: watch::Sender<PoseTracker>,
+    pub(crate) pose: watch::Sender<PoseTracker>,
     /// The ticker's figures.
-    pub ticks: SharedTickStats,
+    pub(crate) ticks: SharedTickStats,
     /// Actuation's counters.
-    pub actuation: watch::Receiver<ActuationStats>,
+    pub(crate) actuation: watch::Receiver<ActuationStats>,
     /// The actor tasks, in start order.
-    pub tasks: Vec<JoinHandle<()>>,
+    pub(crate) tasks: Vec<JoinHandle<()>>,
 }
 
 /// Starts every actor of the tick graph for `config`; they stop when `cancel` fires.
-pub fn spawn(config: &Config, parts: PipelineParts, cancel: &CancellationToken) -> Pipeline {
+pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &CancellationToken) -> Pipeline {
     let PipelineParts {
         learning,
         ingest,

@@ -25,43 +25,43 @@ use crate::link::supervisor::Supervisor;
 
 /// The robot's state as seen at one tick.
 #[derive(Debug, Clone)]
-pub struct Observation {
+pub(crate) struct Observation {
     /// The tick this observation belongs to.
-    pub tick: Tick,
+    pub(crate) tick: Tick,
     /// The newest complete frame's values (`None` before the first frame).
-    pub values: Option<SensorValues>,
+    pub(crate) values: Option<SensorValues>,
     /// Age of that frame in whole ticks at the tick's deadline.
-    pub age_ticks: Option<u32>,
+    pub(crate) age_ticks: Option<u32>,
     /// Distance (mm) summed over every frame since the previous tick.
-    pub distance_mm: i32,
+    pub(crate) distance_mm: i32,
     /// Angle (degrees) summed over every frame since the previous tick.
-    pub angle_deg: i32,
+    pub(crate) angle_deg: i32,
     /// The link's state, mode, counters.
-    pub link: LinkSummary,
+    pub(crate) link: LinkSummary,
 }
 
 /// The channels and link parts the ingest works with.
-pub struct IngestLink {
+pub(crate) struct IngestLink {
     /// The robot-to-host half of the link.
-    pub reader: LinkReader,
+    pub(crate) reader: LinkReader,
     /// The stream parser for the requested packets.
-    pub parser: StreamParser,
+    pub(crate) parser: StreamParser,
     /// Link supervision (re-sync, reopen, trips).
-    pub supervisor: Supervisor,
+    pub(crate) supervisor: Supervisor,
 }
 
 /// The channels sensor ingest reads and writes.
-pub struct IngestChannels {
+pub(crate) struct IngestChannels {
     /// The ticker.
-    pub ticks: watch::Receiver<Option<Tick>>,
+    pub(crate) ticks: watch::Receiver<Option<Tick>>,
     /// Link commands from the router.
-    pub commands: Inbox<LinkCommand>,
+    pub(crate) commands: Inbox<LinkCommand>,
     /// Where observations go (to learning).
-    pub out: mpsc::Sender<Observation>,
+    pub(crate) out: mpsc::Sender<Observation>,
 }
 
 /// Runs until `cancel` fires or the tick channel closes.
-pub async fn run(
+pub(crate) async fn run(
     link: IngestLink,
     period: Duration,
     channels: IngestChannels,

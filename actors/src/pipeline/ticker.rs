@@ -15,24 +15,24 @@ use crate::telemetry::counters::SharedTickStats;
 
 /// One control tick.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Tick {
+pub(crate) struct Tick {
     /// Sequence number: `(deadline − start) / period`. Gaps mean skipped ticks.
-    pub seq: u64,
+    pub(crate) seq: u64,
     /// When the tick was due.
-    pub deadline: Instant,
+    pub(crate) deadline: Instant,
     /// When the ticker actually ran.
-    pub fired: Instant,
+    pub(crate) fired: Instant,
 }
 
 impl Tick {
     /// How late the tick fired.
-    pub fn lateness(&self) -> Duration {
+    pub(crate) fn lateness(&self) -> Duration {
         self.fired.saturating_duration_since(self.deadline)
     }
 }
 
 /// Runs the ticker until `cancel` fires. The first tick is due at `start`.
-pub async fn run(
+pub(crate) async fn run(
     start: Instant,
     period: Duration,
     tx: watch::Sender<Option<Tick>>,

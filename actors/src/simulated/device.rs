@@ -12,33 +12,33 @@ use crate::link::opener::{AFTER_BAUD, LinkOpener};
 use crate::link::{LinkError, LinkReader, LinkWriter};
 
 /// Capacity of each in-process connection, bytes each way (about 11 s of Create 2 stream frames).
-pub const SIM_LINK_BUFFER: usize = 64 * 1024;
+pub(crate) const SIM_LINK_BUFFER: usize = 64 * 1024;
 
 /// A connection plugged into the simulated robot, with the rate the host's side runs at.
-pub type SimSocket = (DuplexStream, u32);
+pub(crate) type SimSocket = (DuplexStream, u32);
 
 /// The plug of the in-process simulated Create: every [`SimDevice::connect`] hands the robot a new
 /// connection and drops the old one. Bytes pass only while the host's rate equals the robot's.
 #[derive(Clone)]
-pub struct SimDevice {
+pub(crate) struct SimDevice {
     plug: mpsc::Sender<SimSocket>,
     model: Model,
 }
 
 impl SimDevice {
     /// A device for a robot of `model` and the receiver the simulator task takes its connections from.
-    pub fn new(model: Model) -> (SimDevice, mpsc::Receiver<SimSocket>) {
+    pub(crate) fn new(model: Model) -> (SimDevice, mpsc::Receiver<SimSocket>) {
         let (plug, sockets) = mpsc::channel(4);
         (SimDevice { plug, model }, sockets)
     }
 
     /// Opens a new connection to the robot at the model's default rate.
-    pub fn connect(&self) -> Result<(LinkReader, LinkWriter), LinkError> {
+    pub(crate) fn connect(&self) -> Result<(LinkReader, LinkWriter), LinkError> {
         self.connect_at(self.model.baud())
     }
 
     /// Opens a new connection to the robot with the host's side at `baud`.
-    pub fn connect_at(&self, baud: u32) -> Result<(LinkReader, LinkWriter), LinkError> {
+    pub(crate) fn connect_at(&self, baud: u32) -> Result<(LinkReader, LinkWriter), LinkError> {
         let (host, device) = tokio::io::duplex(SIM_LINK_BUFFER);
         self.plug.try_send((device, baud)).map_err(|_| {
             LinkError::Io(std::io::Error::new(

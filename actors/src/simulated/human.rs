@@ -22,7 +22,7 @@ use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
 /// Kinect v2 tracking ids are large 64-bit numbers; the simulated body's id is this plus its user id.
-pub const KINECT_ID_BASE: u64 = 72_057_594_037_927_936;
+pub(crate) const KINECT_ID_BASE: u64 = 72_057_594_037_927_936;
 
 /// OSC's "immediately" time tag, which OSCeleton puts on its bundles.
 const IMMEDIATELY: OscTime = OscTime {
@@ -101,7 +101,7 @@ pub fn osceleton_joint(name: &str, user: i32, p: [f64; 3]) -> OscPacket {
 }
 
 /// OSCeleton's start of a session: a bundle of `/new_user` and `/new_skel` for `user`.
-pub fn session_start(user: i32) -> OscPacket {
+pub(crate) fn session_start(user: i32) -> OscPacket {
     bundle(vec![
         message("/new_user", vec![OscType::Int(user)]),
         message("/new_skel", vec![OscType::Int(user)]),
@@ -109,12 +109,12 @@ pub fn session_start(user: i32) -> OscPacket {
 }
 
 /// OSCeleton's end of a session: `/lost_user` for `user`.
-pub fn session_end(user: i32) -> OscPacket {
+pub(crate) fn session_end(user: i32) -> OscPacket {
     message("/lost_user", vec![OscType::Int(user)])
 }
 
 /// The packets (datagrams) of one frame in `format`.
-pub fn frame_packets(frame: &HumanFrame, format: SkeletonFormat) -> Vec<OscPacket> {
+pub(crate) fn frame_packets(frame: &HumanFrame, format: SkeletonFormat) -> Vec<OscPacket> {
     let f = |v: f64| OscType::Float(v as f32);
     match format {
         SkeletonFormat::OsceletonMm | SkeletonFormat::OsceletonNormalized => {

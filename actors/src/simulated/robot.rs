@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use futures_util::FutureExt;
 
-use pavlov::sim::faults::{FaultCounters, FaultInjector, FaultSpec, LinkFault};
+use pavlov::sim::faults::{FaultCounters, FaultInjector, LinkFault};
 use pavlov::sim::robot::SimRobot;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, ReadHalf, WriteHalf};
 use tokio::sync::{mpsc, watch};
@@ -22,13 +22,11 @@ use super::device::{SIM_LINK_BUFFER, SimDevice};
 use crate::link::{LinkError, LinkReader, LinkWriter};
 
 /// The OI sensor period: the robot steps and streams every 15 ms [C1 p13; C2 p21].
-pub const SIM_STEP: Duration = Duration::from_millis(15);
+pub(crate) const SIM_STEP: Duration = Duration::from_millis(15);
 
 /// What the simulator task publishes after every step, for tests, soak runs and `pavlov sim`'s report.
 #[derive(Debug, Clone, Default)]
 pub struct SimStatus {
-    /// 15 ms steps run.
-    pub steps: u64,
     /// The OI mode (packet 35 value, without any quirk).
     pub oi_mode: i32,
     /// Actual wheel speeds `[left, right]`, mm/s.
@@ -42,28 +40,23 @@ pub struct SimStatus {
 }
 
 /// A simulated robot running behind an in-process byte stream.
-pub struct SimLink {
+pub(crate) struct SimLink {
     /// Host side, robot-to-host bytes.
-    pub reader: LinkReader,
+    pub(crate) reader: LinkReader,
     /// Host side, host-to-robot bytes.
-    pub writer: LinkWriter,
+    pub(crate) writer: LinkWriter,
     /// The robot's plug: opens a new connection to the same running robot (link supervision uses it to
     /// reconnect after an end-of-file or a hang).
-    pub device: SimDevice,
+    pub(crate) device: SimDevice,
     /// The simulator task; it returns the robot when the host has closed its link and dropped every
     /// [`SimDevice`], or when `cancel` fires.
-    pub robot: JoinHandle<SimRobot>,
+    pub(crate) robot: JoinHandle<SimRobot>,
     /// The robot's state after each step.
-    pub status: watch::Receiver<SimStatus>,
-}
-
-/// Spawns `robot` behind a tokio duplex stream.
-pub fn spawn_sim(robot: SimRobot, cancel: CancellationToken) -> SimLink {
-    spawn_sim_with_faults(robot, FaultInjector::new(FaultSpec::none(), 0), cancel)
+    pub(crate) status: watch::Receiver<SimStatus>,
 }
 
 /// Spawns `robot` behind a tokio duplex stream, with `faults` injected on the line and into the robot.
-pub fn spawn_sim_with_faults(
+pub(crate) fn spawn_sim_with_faults(
     mut robot: SimRobot,
     faults: FaultInjector,
     cancel: CancellationToken,
@@ -91,30 +84,6 @@ pub fn spawn_sim_with_faults(
         robot: handle,
         status,
     }
-}
-
-/// Runs `robot` on `io`: command bytes in, stream frames out, one world step every 15 ms.
-///
-/// It stops when the host side reaches end-of-file (after the host's shut-down sequence has been applied)
-/// or when `cancel` fires, and hands the robot back so callers can inspect the final physical state.
-pub async fn run_sim<S>(robot: SimRobot, io: S, cancel: CancellationToken) -> SimRobot
-where
-    S: AsyncRead + AsyncWrite + Unpin + Send + 'static,
-{
-    drive_sim(
-        robot,
-        Plug {
-            first: Some((io, None)),
-            more: None,
-        },
-        (
-            FaultInjector::new(FaultSpec::none(), 0),
-            watch::channel(SimStatus::default()).0,
-        ),
-        cancel,
-        EndOfFile::Stop,
-    )
-    .await
 }
 
 /// What the simulator does when its host closes the link.
@@ -239,7 +208,6 @@ where
                 }
                 let world = robot.world();
                 status.send_replace(SimStatus {
-                    steps: robot.elapsed_steps(),
                     oi_mode: robot.oi_mode().code(),
                     wheel_speed_mm_s: [world.wheel_speed_mm_s(0), world.wheel_speed_mm_s(1)],
                     connected: conn.is_some(),

@@ -40,7 +40,7 @@ pub enum ResumeError {
 }
 
 /// The tick of a file named `checkpoint-<tick>.json`.
-pub fn tick_of_file_name(name: &str) -> Option<u64> {
+pub(crate) fn tick_of_file_name(name: &str) -> Option<u64> {
     name.strip_prefix("checkpoint-")?
         .strip_suffix(".json")?
         .parse()
@@ -79,7 +79,7 @@ pub fn write_atomic(dir: &Path, checkpoint: &Checkpoint) -> std::io::Result<Path
 }
 
 /// Deletes all but the newest `keep` checkpoint files in `dir`.
-pub fn prune(dir: &Path, keep: usize) -> std::io::Result<()> {
+pub(crate) fn prune(dir: &Path, keep: usize) -> std::io::Result<()> {
     let files = list(dir)?;
     let excess = files.len().saturating_sub(keep);
     for (_, path) in files.into_iter().take(excess) {
@@ -118,14 +118,14 @@ pub fn load_for_resume(config: &Config) -> Result<(PathBuf, Checkpoint), ResumeE
 }
 
 /// A thread that writes checkpoints handed to it, so the tick path never touches the disk.
-pub struct CheckpointWriter {
+pub(crate) struct CheckpointWriter {
     queue: Option<SyncSender<Checkpoint>>,
     thread: Option<JoinHandle<()>>,
 }
 
 impl CheckpointWriter {
     /// Starts the writer for `dir`, keeping the newest `keep` files.
-    pub fn spawn(dir: PathBuf, keep: usize) -> std::io::Result<Self> {
+    pub(crate) fn spawn(dir: PathBuf, keep: usize) -> std::io::Result<Self> {
         let (tx, rx) = sync_channel(2);
         let thread = std::thread::Builder::new()
             .name("checkpoint-writer".into())
@@ -137,7 +137,7 @@ impl CheckpointWriter {
     }
 
     /// Queues a checkpoint without waiting; if the writer is behind, this one is dropped.
-    pub fn submit(&self, checkpoint: Checkpoint) {
+    pub(crate) fn submit(&self, checkpoint: Checkpoint) {
         if let Some(q) = &self.queue {
             match q.try_send(checkpoint) {
                 Ok(()) => {}
@@ -153,7 +153,7 @@ impl CheckpointWriter {
     }
 
     /// Queues `last` (waiting for room), then waits until everything queued is on disk. Blocking.
-    pub fn finish(mut self, last: Option<Checkpoint>) {
+    pub(crate) fn finish(mut self, last: Option<Checkpoint>) {
         if let (Some(q), Some(c)) = (self.queue.take(), last)
             && q.send(c).is_err()
         {

@@ -19,7 +19,7 @@ use crate::command::{Applied, CommandError, Envelope, Inbox, Outcome, RecorderCo
 use crate::storage::recording::{RecordingHeader, TICKS_FILE};
 
 /// The longest time written records may stay in the buffer.
-pub const FLUSH_EVERY: Duration = Duration::from_secs(1);
+pub(crate) const FLUSH_EVERY: Duration = Duration::from_secs(1);
 
 /// The default queue length: 10 s of ticks at 50 Hz.
 pub const DEFAULT_CAPACITY: usize = 500;
@@ -28,9 +28,9 @@ pub const DEFAULT_CAPACITY: usize = 500;
 #[derive(Debug, Clone)]
 pub struct RecorderLink {
     /// The record queue ([`crate::pipeline::feed::TickFeed::with_recorder`]).
-    pub records: mpsc::Sender<Arc<TickRecord>>,
+    pub(crate) records: mpsc::Sender<Arc<TickRecord>>,
     /// Start/stop commands from the router.
-    pub commands: mpsc::Sender<Envelope<RecorderCommand>>,
+    pub(crate) commands: mpsc::Sender<Envelope<RecorderCommand>>,
 }
 
 /// What the recorder did, returned when its thread ends.
@@ -39,7 +39,7 @@ pub struct RecorderReport {
     /// Records written, over every recording.
     pub written: u64,
     /// Records received while no recording was open.
-    pub discarded: u64,
+    pub(crate) discarded: u64,
     /// The recordings written, in order.
     pub files: Vec<PathBuf>,
     /// Write errors (the recording is closed after the first one).

@@ -14,7 +14,7 @@ use pavlov::record::TickRecord;
 use serde::{Deserialize, Serialize};
 
 /// The format tag of the header line.
-pub const FORMAT: &str = "pavlov-recording/1";
+pub(crate) const FORMAT: &str = "pavlov-recording/1";
 
 /// The file name of a recording inside its directory.
 pub const TICKS_FILE: &str = "ticks.jsonl";
@@ -23,11 +23,11 @@ pub const TICKS_FILE: &str = "ticks.jsonl";
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RecordingHeader {
     /// Always [`FORMAT`].
-    pub format: String,
+    pub(crate) format: String,
     /// The configuration the run started with.
     pub config: Config,
     /// Names of the `obs` vector's dimensions, in order.
-    pub obs_names: Vec<String>,
+    pub(crate) obs_names: Vec<String>,
     /// A free label (e.g. the experiment run), empty if none.
     #[serde(default)]
     pub label: String,
@@ -124,7 +124,7 @@ pub fn parse(text: &str) -> Result<Recording, RecordingError> {
 }
 
 /// The recording file for `path`: the path itself if it is a file, else `path/ticks.jsonl`.
-pub fn ticks_path(path: &Path) -> PathBuf {
+pub(crate) fn ticks_path(path: &Path) -> PathBuf {
     if path.is_dir() {
         path.join(TICKS_FILE)
     } else {

@@ -23,11 +23,11 @@ pub struct Mismatch {
     /// The tick.
     pub seq: u64,
     /// Which field.
-    pub field: String,
+    pub(crate) field: String,
     /// What the recording says.
-    pub recorded: String,
+    pub(crate) recorded: String,
     /// What replay computed.
-    pub replayed: String,
+    pub(crate) replayed: String,
 }
 
 /// The outcome of a replay.
@@ -36,13 +36,13 @@ pub struct ReplayReport {
     /// Records replayed.
     pub ticks: usize,
     /// Prediction values compared.
-    pub predictions_compared: usize,
+    pub(crate) predictions_compared: usize,
     /// Safety stops compared (every tick).
-    pub stops_compared: usize,
+    pub(crate) stops_compared: usize,
     /// Commands compared (every tick but manual-mode ticks without a safety stop).
     pub commands_compared: usize,
     /// Ticks where `seq` jumped (records missing from the recording).
-    pub seq_gaps: usize,
+    pub(crate) seq_gaps: usize,
     /// Total mismatching fields.
     pub mismatch_count: usize,
     /// The first few mismatches.
@@ -68,7 +68,7 @@ pub enum ReplayError {
 }
 
 /// How many mismatches are kept in the report.
-pub const KEEP_MISMATCHES: usize = 20;
+pub(crate) const KEEP_MISMATCHES: usize = 20;
 
 impl ReplayReport {
     fn note(&mut self, seq: u64, field: &str, recorded: String, replayed: String) {

@@ -12,69 +12,72 @@ use super::histogram::LatencyHistogram;
 
 /// Tick health shared with the metrics reporter.
 #[derive(Default)]
-pub struct TickStats {
+pub(crate) struct TickStats {
     /// Lateness of every fired tick.
-    pub lateness: LatencyHistogram,
+    pub(crate) lateness: LatencyHistogram,
     /// Ticks fired.
-    pub fired: u64,
+    pub(crate) fired: u64,
     /// Ticks skipped because the ticker was woken too late.
-    pub skipped: u64,
+    pub(crate) skipped: u64,
 }
 
 /// Shared handle on the tick statistics.
-pub type SharedTickStats = Arc<Mutex<TickStats>>;
+pub(crate) type SharedTickStats = Arc<Mutex<TickStats>>;
 
 /// Counters of the writer.
 #[derive(Default)]
-pub struct WriterStats {
+pub(crate) struct WriterStats {
     /// Time from the tick's deadline to the motor command written to the OS.
-    pub tick_to_command: LatencyHistogram,
+    pub(crate) tick_to_command: LatencyHistogram,
     /// Write errors seen.
-    pub errors: u64,
+    pub(crate) errors: u64,
     /// Bytes written.
-    pub bytes: u64,
+    pub(crate) bytes: u64,
     /// Writes abandoned after [`crate::link::writer::WRITE_TIMEOUT`].
-    pub timeouts: u64,
+    pub(crate) timeouts: u64,
     /// Ports switched to after a reopen.
-    pub replaced: u64,
+    pub(crate) replaced: u64,
 }
 
 /// Shared handle on the writer's statistics.
-pub type SharedWriterStats = Arc<Mutex<WriterStats>>;
+pub(crate) type SharedWriterStats = Arc<Mutex<WriterStats>>;
 
 /// Actuation's counters.
 #[derive(Debug, Default, Clone, Copy, serde::Serialize)]
-pub struct ActuationStats {
+pub(crate) struct ActuationStats {
     /// Commands written.
-    pub commands: u64,
+    pub(crate) commands: u64,
     /// Stops forced because no fresh decision arrived.
-    pub pipeline_stalls: u64,
+    pub(crate) pipeline_stalls: u64,
     /// Stops forced by a stale observation.
-    pub stale_observations: u64,
+    pub(crate) stale_observations: u64,
     /// Commands the writer queue could not take.
-    pub writer_full: u64,
+    pub(crate) writer_full: u64,
 }
 
 /// The recorder queue's figures, readable without keeping the queue open.
 #[derive(Clone)]
-pub struct RecorderGauge {
+pub(crate) struct RecorderGauge {
     queue: Option<mpsc::WeakSender<Arc<TickRecord>>>,
     dropped: Arc<AtomicU64>,
 }
 
 impl RecorderGauge {
     /// A gauge on a recorder queue (`None`: no recorder) and its drop counter.
-    pub fn new(queue: Option<mpsc::WeakSender<Arc<TickRecord>>>, dropped: Arc<AtomicU64>) -> Self {
+    pub(crate) fn new(
+        queue: Option<mpsc::WeakSender<Arc<TickRecord>>>,
+        dropped: Arc<AtomicU64>,
+    ) -> Self {
         RecorderGauge { queue, dropped }
     }
 
     /// Whether the feed has a recorder attached.
-    pub fn attached(&self) -> bool {
+    pub(crate) fn attached(&self) -> bool {
         self.queue.is_some()
     }
 
     /// Records queued and not yet taken by the recorder (0 once the feed is gone).
-    pub fn backlog(&self) -> usize {
+    pub(crate) fn backlog(&self) -> usize {
         self.queue
             .as_ref()
             .and_then(|weak| weak.upgrade())
@@ -82,7 +85,7 @@ impl RecorderGauge {
     }
 
     /// Records the recorder could not take because its queue was full.
-    pub fn dropped(&self) -> u64 {
+    pub(crate) fn dropped(&self) -> u64 {
         self.dropped.load(Ordering::Relaxed)
     }
 }
@@ -93,7 +96,7 @@ pub struct DashboardStats {
     /// Clients connected now.
     pub clients: usize,
     /// Websocket connections accepted so far.
-    pub connections: u64,
+    pub(crate) connections: u64,
     /// Handshakes refused (origin, token, too many clients).
     pub rejected: u64,
     /// Telemetry messages dropped for slow clients (all clients).
@@ -109,7 +112,7 @@ pub struct DashboardStats {
     /// Connections dropped because their replies piled up unread.
     pub closed_unread: u64,
     /// Connections dropped because their socket accepted nothing for `dashboard::session::WRITE_STALL`.
-    pub closed_write_stall: u64,
+    pub(crate) closed_write_stall: u64,
     /// Tick records the hub missed.
     pub records_missed: u64,
     /// TCP connections closed at once because `dashboard::guard::EXTRA_CONNECTIONS` + `max_clients` were open.

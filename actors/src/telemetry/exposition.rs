@@ -8,25 +8,25 @@ use super::histogram::LatencyHistogram;
 
 /// Builds the text, one metric family at a time.
 #[derive(Default)]
-pub struct Exposition {
+pub(crate) struct Exposition {
     out: String,
 }
 
 impl Exposition {
     /// The text written so far.
-    pub fn into_text(self) -> String {
+    pub(crate) fn into_text(self) -> String {
         self.out
     }
 
     /// Starts a family: its `# HELP` and `# TYPE` lines.
-    pub fn family(&mut self, name: &str, kind: &str, help: &str) {
+    pub(crate) fn family(&mut self, name: &str, kind: &str, help: &str) {
         let help = help.replace('\\', "\\\\").replace('\n', "\\n");
         let _ = writeln!(self.out, "# HELP {name} {help}");
         let _ = writeln!(self.out, "# TYPE {name} {kind}");
     }
 
     /// One sample line (label values escaped).
-    pub fn sample(&mut self, name: &str, labels: &[(&str, &str)], value: f64) {
+    pub(crate) fn sample(&mut self, name: &str, labels: &[(&str, &str)], value: f64) {
         self.out.push_str(name);
         if !labels.is_empty() {
             self.out.push('{');
@@ -46,19 +46,19 @@ impl Exposition {
     }
 
     /// A counter family with one unlabelled sample.
-    pub fn counter(&mut self, name: &str, help: &str, value: u64) {
+    pub(crate) fn counter(&mut self, name: &str, help: &str, value: u64) {
         self.family(name, "counter", help);
         self.sample(name, &[], value as f64);
     }
 
     /// A gauge family with one unlabelled sample.
-    pub fn gauge(&mut self, name: &str, help: &str, value: f64) {
+    pub(crate) fn gauge(&mut self, name: &str, help: &str, value: f64) {
         self.family(name, "gauge", help);
         self.sample(name, &[], value);
     }
 
     /// A histogram family: cumulative `_bucket`s ending at `+Inf`, `_sum` and `_count`.
-    pub fn histogram(&mut self, name: &str, help: &str, h: &HistogramSample) {
+    pub(crate) fn histogram(&mut self, name: &str, help: &str, h: &HistogramSample) {
         self.family(name, "histogram", help);
         let bucket = format!("{name}_bucket");
         let mut running = 0;
@@ -74,7 +74,7 @@ impl Exposition {
 }
 
 /// A sample value as the format writes it (`+Inf`, `-Inf`, `NaN` for the special values).
-pub fn format_value(v: f64) -> String {
+pub(crate) fn format_value(v: f64) -> String {
     if v.is_nan() {
         "NaN".into()
     } else if v == f64::INFINITY {
@@ -88,19 +88,19 @@ pub fn format_value(v: f64) -> String {
 
 /// A histogram as Prometheus sees it: cumulative counts at increasing bounds, plus `+Inf`.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct HistogramSample {
+pub(crate) struct HistogramSample {
     /// `(upper bound in seconds, samples ≤ bound)`, bounds increasing.
-    pub buckets: Vec<(f64, u64)>,
+    pub(crate) buckets: Vec<(f64, u64)>,
     /// Every sample (the `+Inf` bucket and `_count`).
-    pub count: u64,
+    pub(crate) count: u64,
     /// Sum of the samples, seconds.
-    pub sum_seconds: f64,
+    pub(crate) sum_seconds: f64,
 }
 
 impl HistogramSample {
     /// Reads `h` at `bounds_us` (increasing). A sample lies in the bucket of its histogram bin's upper edge,
     /// so a count may lag the exact one by the bin width (about 4 %) near a bound, never exceed it.
-    pub fn from_histogram(h: &LatencyHistogram, bounds_us: &[u64]) -> Self {
+    pub(crate) fn from_histogram(h: &LatencyHistogram, bounds_us: &[u64]) -> Self {
         let counts = h.cumulative_at(bounds_us);
         HistogramSample {
             buckets: bounds_us

@@ -8,10 +8,10 @@ use tokio_util::sync::CancellationToken;
 use super::Health;
 
 /// How often the line is logged.
-pub const EVERY: Duration = Duration::from_secs(60);
+pub(crate) const EVERY: Duration = Duration::from_secs(60);
 
 /// Logs tick health every [`EVERY`] until `cancel` fires.
-pub async fn run(health: Health, cancel: CancellationToken) {
+pub(crate) async fn run(health: Health, cancel: CancellationToken) {
     let mut every = tokio::time::interval_at(Instant::now() + EVERY, EVERY);
     loop {
         tokio::select! {

@@ -13,7 +13,7 @@ const BUCKETS: usize = (LINEAR + SUB * OCTAVES) as usize;
 
 /// Counts of durations in logarithmic buckets.
 #[derive(Clone)]
-pub struct LatencyHistogram {
+pub(crate) struct LatencyHistogram {
     counts: Box<[u64; BUCKETS]>,
     total: u64,
     max_us: u64,
@@ -24,15 +24,15 @@ pub struct LatencyHistogram {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct LatencySummary {
     /// Number of samples.
-    pub count: u64,
+    pub(crate) count: u64,
     /// Median.
-    pub p50_us: u64,
+    pub(crate) p50_us: u64,
     /// 99th percentile.
     pub p99_us: u64,
     /// Largest sample.
-    pub max_us: u64,
+    pub(crate) max_us: u64,
     /// Mean.
-    pub mean_us: f64,
+    pub(crate) mean_us: f64,
 }
 
 impl Default for LatencyHistogram {
@@ -66,7 +66,7 @@ fn bucket_upper(idx: usize) -> u64 {
 
 impl LatencyHistogram {
     /// An empty histogram.
-    pub fn new() -> Self {
+    pub(crate) fn new() -> Self {
         LatencyHistogram {
             counts: Box::new([0; BUCKETS]),
             total: 0,
@@ -76,7 +76,7 @@ impl LatencyHistogram {
     }
 
     /// Adds one sample.
-    pub fn record(&mut self, d: Duration) {
+    pub(crate) fn record(&mut self, d: Duration) {
         let us = d.as_micros().min(u64::MAX as u128) as u64;
         self.counts[bucket_of(us)] += 1;
         self.total += 1;
@@ -85,7 +85,7 @@ impl LatencyHistogram {
     }
 
     /// The smallest bucket bound below which a fraction `q` of the samples lie (0 when empty).
-    pub fn quantile_us(&self, q: f64) -> u64 {
+    pub(crate) fn quantile_us(&self, q: f64) -> u64 {
         if self.total == 0 {
             return 0;
         }
@@ -101,7 +101,7 @@ impl LatencyHistogram {
     }
 
     /// p50, p99, max and mean.
-    pub fn summary(&self) -> LatencySummary {
+    pub(crate) fn summary(&self) -> LatencySummary {
         LatencySummary {
             count: self.total,
             p50_us: self.quantile_us(0.5),
@@ -116,7 +116,7 @@ impl LatencyHistogram {
     }
 
     /// Cumulative counts at the given upper bounds (µs), for a Prometheus histogram.
-    pub fn cumulative_at(&self, bounds_us: &[u64]) -> Vec<u64> {
+    pub(crate) fn cumulative_at(&self, bounds_us: &[u64]) -> Vec<u64> {
         bounds_us
             .iter()
             .map(|&b| {
@@ -131,13 +131,8 @@ impl LatencyHistogram {
     }
 
     /// Sum of all samples, µs.
-    pub fn sum_us(&self) -> u128 {
+    pub(crate) fn sum_us(&self) -> u128 {
         self.sum_us
-    }
-
-    /// Forgets every sample.
-    pub fn clear(&mut self) {
-        *self = Self::new();
     }
 }
 

@@ -8,11 +8,12 @@
 //!   [`prometheus_check`]: a strict reader of that format, for tests;
 //! - [`health_log`]: the tick-health line logged once a minute.
 
-pub mod counters;
-pub mod exposition;
-pub mod health_log;
-pub mod histogram;
-pub mod prometheus;
+pub(crate) mod counters;
+pub(crate) mod exposition;
+pub(crate) mod health_log;
+pub(crate) mod histogram;
+pub(crate) mod prometheus;
+#[cfg(any(test, feature = "test-support"))]
 pub mod prometheus_check;
 
 use pavlov::record::LinkSummary;
@@ -38,11 +39,11 @@ pub struct Health {
 
 /// The recorder queue's figures.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
-pub struct RecorderFigures {
+pub(crate) struct RecorderFigures {
     /// Records queued and not yet written.
-    pub backlog: u64,
+    pub(crate) backlog: u64,
     /// Records dropped because the queue was full.
-    pub dropped: u64,
+    pub(crate) dropped: u64,
 }
 
 /// The health figures at one moment.
@@ -53,17 +54,17 @@ pub struct HealthFigures {
     /// Ticks skipped because the ticker woke too late.
     pub ticks_skipped: u64,
     /// Tick lateness (fired − deadline).
-    pub lateness: LatencySummary,
+    pub(crate) lateness: LatencySummary,
     /// Tick deadline → motor command written.
-    pub tick_to_command: LatencySummary,
+    pub(crate) tick_to_command: LatencySummary,
     /// Serial write errors.
-    pub write_errors: u64,
+    pub(crate) write_errors: u64,
     /// Actuation's counters.
-    pub actuation: ActuationStats,
+    pub(crate) actuation: ActuationStats,
     /// The link as the newest tick record saw it (`None` before the first tick).
-    pub link: Option<LinkSummary>,
+    pub(crate) link: Option<LinkSummary>,
     /// The recorder's queue (`None` without a recorder).
-    pub recorder: Option<RecorderFigures>,
+    pub(crate) recorder: Option<RecorderFigures>,
 }
 
 impl Health {
@@ -89,7 +90,7 @@ impl Health {
     }
 
     /// Copies of the tick-lateness and tick-to-command histograms (taken under their locks, read outside).
-    pub fn histograms(&self) -> (LatencyHistogram, LatencyHistogram) {
+    pub(crate) fn histograms(&self) -> (LatencyHistogram, LatencyHistogram) {
         let ticks = self
             .ticks
             .lock()

@@ -10,45 +10,45 @@ use pavlov::supervision::{LinkState, TripCause};
 
 use super::counters::{ActuationStats, DashboardStats};
 use super::exposition::Exposition;
-pub use super::exposition::HistogramSample;
+pub(crate) use super::exposition::HistogramSample;
 use super::{Health, RecorderFigures};
 
 /// The Content-Type of the exposition.
-pub const CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
+pub(crate) const CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
 
 /// Upper bounds of the tick histograms' buckets, µs (the `le` labels are these in seconds).
-pub const TICK_BUCKETS_US: [u64; 13] = [
+pub(crate) const TICK_BUCKETS_US: [u64; 13] = [
     50, 100, 250, 500, 1_000, 2_500, 5_000, 10_000, 20_000, 50_000, 100_000, 250_000, 1_000_000,
 ];
 
 /// Everything `/metrics` reports, read at one moment.
 #[derive(Debug, Clone, Default)]
-pub struct MetricsSnapshot {
+pub(crate) struct MetricsSnapshot {
     /// Ticks fired since start.
-    pub ticks_fired: u64,
+    pub(crate) ticks_fired: u64,
     /// Ticks skipped because the ticker woke too late.
-    pub ticks_skipped: u64,
+    pub(crate) ticks_skipped: u64,
     /// Tick lateness (fired − deadline).
-    pub tick_lateness: HistogramSample,
+    pub(crate) tick_lateness: HistogramSample,
     /// Tick deadline → motor command written.
-    pub tick_to_command: HistogramSample,
+    pub(crate) tick_to_command: HistogramSample,
     /// Serial write errors.
-    pub write_errors: u64,
+    pub(crate) write_errors: u64,
     /// The link as the newest tick record saw it (`None` before the first tick).
-    pub link: Option<LinkSummary>,
+    pub(crate) link: Option<LinkSummary>,
     /// The websocket endpoint's counters.
-    pub ws: DashboardStats,
+    pub(crate) ws: DashboardStats,
     /// The recorder's queue (`None` without a recorder).
-    pub recorder: Option<RecorderFigures>,
+    pub(crate) recorder: Option<RecorderFigures>,
     /// Actuation's safety counters.
-    pub actuation: ActuationStats,
+    pub(crate) actuation: ActuationStats,
     /// What the simulated robot's fault injector has done (`None` on a real robot).
-    pub sim_faults: Option<pavlov::sim::faults::FaultCounters>,
+    pub(crate) sim_faults: Option<pavlov::sim::faults::FaultCounters>,
 }
 
 impl MetricsSnapshot {
     /// Reads everything from the server's `health` and the endpoint's counters `ws`.
-    pub fn read(health: &Health, ws: DashboardStats) -> Self {
+    pub(crate) fn read(health: &Health, ws: DashboardStats) -> Self {
         let f = health.figures();
         let (lateness, to_command) = health.histograms();
         MetricsSnapshot {
@@ -234,7 +234,7 @@ fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
 }
 
 /// The exposition text of `s`.
-pub fn render(s: &MetricsSnapshot) -> String {
+pub(crate) fn render(s: &MetricsSnapshot) -> String {
     let mut e = Exposition::default();
     e.histogram(
         "pavlov_tick_lateness_seconds",

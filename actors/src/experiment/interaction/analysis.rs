@@ -14,19 +14,19 @@ use crate::experiment::mode_name;
 #[derive(Debug, Clone, Serialize)]
 pub struct AlignedPoint {
     /// Ticks from the observed onset.
-    pub offset: i64,
+    pub(crate) offset: i64,
     /// Battery current, mA (negative = discharging), reactive.
-    pub current_reactive: Describe,
+    pub(crate) current_reactive: Describe,
     /// The same, Pavlovian.
-    pub current_pavlovian: Describe,
+    pub(crate) current_pavlovian: Describe,
     /// Welch's test of the current, Pavlovian vs reactive.
-    pub current_welch: Option<WelchTest>,
+    pub(crate) current_welch: Option<WelchTest>,
     /// Rotation reported by odometry, degrees per tick, reactive.
-    pub angle_reactive: Describe,
+    pub(crate) angle_reactive: Describe,
     /// The same, Pavlovian.
-    pub angle_pavlovian: Describe,
+    pub(crate) angle_pavlovian: Describe,
     /// Welch's test of the rotation.
-    pub angle_welch: Option<WelchTest>,
+    pub(crate) angle_welch: Option<WelchTest>,
 }
 
 fn aligned_values(
@@ -55,7 +55,7 @@ fn angle(r: &TickRecord) -> Option<f64> {
 }
 
 /// The aligned averages of every offset.
-pub fn aligned(runs: &[InteractionRun]) -> Vec<AlignedPoint> {
+pub(crate) fn aligned(runs: &[InteractionRun]) -> Vec<AlignedPoint> {
     (-BEFORE_TICKS..=AFTER_TICKS)
         .map(|offset| {
             let cr = aligned_values(runs, Mode::Reactive, offset, current);
@@ -95,11 +95,11 @@ pub struct PolicyTiming {
     /// Response onsets outside every command window, per minute.
     pub false_starts_per_minute: f64,
     /// Time the response ran outside every command window, s per minute.
-    pub responding_outside_s_per_minute: f64,
+    pub(crate) responding_outside_s_per_minute: f64,
 }
 
 /// The timing figures of `mode`'s runs.
-pub fn timing(runs: &[InteractionRun], mode: Mode) -> PolicyTiming {
+pub(crate) fn timing(runs: &[InteractionRun], mode: Mode) -> PolicyTiming {
     let mine: Vec<&InteractionRun> = runs.iter().filter(|r| r.mode == mode).collect();
     let latencies: Vec<f64> = mine.iter().flat_map(|r| r.metrics.latencies_ms()).collect();
     let physical = |pick: fn(&PhysicalLatency) -> Option<f64>| -> Vec<f64> {
@@ -127,7 +127,7 @@ pub fn timing(runs: &[InteractionRun], mode: Mode) -> PolicyTiming {
 }
 
 /// Latencies of both policies compared.
-pub fn latency_test(runs: &[InteractionRun]) -> Option<WelchTest> {
+pub(crate) fn latency_test(runs: &[InteractionRun]) -> Option<WelchTest> {
     let lat = |m: Mode| -> Vec<f64> {
         runs.iter()
             .filter(|r| r.mode == m)

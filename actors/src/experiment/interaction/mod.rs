@@ -9,10 +9,10 @@
 //! - [`run`]: one run; [`analysis`]: the statistics; [`report`]: files and the terminal table;
 //!   [`plots`]: the Figure 3 and Figure 4 analogues.
 
-pub mod analysis;
-pub mod plots;
+pub(crate) mod analysis;
+pub(crate) mod plots;
 pub mod report;
-pub mod run;
+pub(crate) mod run;
 
 use std::path::PathBuf;
 
@@ -50,19 +50,19 @@ pub struct InteractionOptions {
 #[derive(Debug, Clone, Serialize)]
 pub struct InteractionSummary {
     /// The settings.
-    pub options: InteractionOptions,
+    pub(crate) options: InteractionOptions,
     /// How the seeds are derived.
-    pub seed_derivation: String,
+    pub(crate) seed_derivation: String,
     /// Every run.
     pub runs: Vec<InteractionRun>,
     /// Per-policy response timing.
     pub timing: Vec<PolicyTiming>,
     /// Welch's test of the latencies, Pavlovian vs reactive.
-    pub latency_welch: Option<WelchTest>,
+    pub(crate) latency_welch: Option<WelchTest>,
     /// Aligned averages around the observed command onsets.
     pub aligned: Vec<AlignedPoint>,
     /// Wall time, s.
-    pub wall_s: f64,
+    pub(crate) wall_s: f64,
 }
 
 /// Runs every run (alternating reactive / Pavlovian) on `threads` threads, with no progress bar.

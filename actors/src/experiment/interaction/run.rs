@@ -28,23 +28,23 @@ use crate::experiment::runner::{Collect, RunError, RunRequest, run_paused};
 use crate::server::Server;
 
 /// Aligned window: ticks before the onset.
-pub const BEFORE_TICKS: i64 = 25;
+pub(crate) const BEFORE_TICKS: i64 = 25;
 /// Aligned window: ticks after the onset.
-pub const AFTER_TICKS: i64 = 50;
+pub(crate) const AFTER_TICKS: i64 = 50;
 /// An onset counts only after this many ticks without the stimulus (one gesture can flicker).
-pub const DEBOUNCE_TICKS: usize = 50;
+pub(crate) const DEBOUNCE_TICKS: usize = 50;
 
 /// One run's outcome.
 #[derive(Debug, Clone, Serialize)]
 pub struct InteractionRun {
     /// Position in the interleaved sequence.
-    pub index: usize,
+    pub(crate) index: usize,
     /// Reactive or Pavlovian.
     pub mode: Mode,
     /// The simulated robot's seed.
-    pub robot_seed: u64,
+    pub(crate) robot_seed: u64,
     /// The simulated operator's seed.
-    pub human_seed: u64,
+    pub(crate) human_seed: u64,
     /// Response timing against the ground-truth commands.
     pub metrics: InteractionMetrics,
     /// The ground-truth commands.
@@ -53,18 +53,18 @@ pub struct InteractionRun {
     /// ([`pavlov::analysis::interaction::physical`]).
     pub physical: Vec<PhysicalLatency>,
     /// Ticks of the observed command onsets used for the aligned averages.
-    pub aligned_onsets: Vec<u64>,
+    pub(crate) aligned_onsets: Vec<u64>,
     /// The recording, if written.
     pub recording: Option<PathBuf>,
     /// Wall time, s.
-    pub wall_s: f64,
+    pub(crate) wall_s: f64,
     /// Every tick (not serialised).
     #[serde(skip)]
     pub records: Vec<Arc<TickRecord>>,
 }
 
 /// The seeds of run `index`: (robot, operator).
-pub fn run_seeds(seed: u64, index: usize) -> (u64, u64) {
+pub(crate) fn run_seeds(seed: u64, index: usize) -> (u64, u64) {
     let run = run_rng(seed, index);
     (run.clone().next_u64(), run.fork(1).next_u64())
 }
@@ -113,7 +113,7 @@ impl Collect for InteractionCollector {
 }
 
 /// Runs one interaction run of `ticks` ticks.
-pub fn run(
+pub(crate) fn run(
     base: &Config,
     index: usize,
     mode: Mode,
@@ -183,7 +183,7 @@ pub fn run(
 
 /// Ticks (indices into `records`) where the stimulus comes on after [`DEBOUNCE_TICKS`] without it, and
 /// the aligned window fits.
-pub fn observed_onsets(records: &[Arc<TickRecord>]) -> Vec<u64> {
+pub(crate) fn observed_onsets(records: &[Arc<TickRecord>]) -> Vec<u64> {
     let mut out = Vec::new();
     let mut quiet = DEBOUNCE_TICKS;
     for (i, r) in records.iter().enumerate() {

@@ -22,7 +22,7 @@ pub const METRICS: [(&str, &str, &str); 6] = [
 ];
 
 /// One metric's value in a run (`None` for an efficiency without energy).
-pub fn metric(r: &RunResult, key: &str) -> Option<f64> {
+pub(crate) fn metric(r: &RunResult, key: &str) -> Option<f64> {
     let m = &r.metrics;
     match key {
         "overcurrent_observations" => Some(m.overcurrent_observations as f64),
@@ -41,30 +41,30 @@ pub struct Comparison {
     /// The metric's key.
     pub metric: String,
     /// Human-readable name.
-    pub label: String,
+    pub(crate) label: String,
     /// Unit.
-    pub unit: String,
+    pub(crate) unit: String,
     /// Over the reactive runs.
     pub reactive: Describe,
     /// Over the Pavlovian runs.
     pub pavlovian: Describe,
     /// (Pavlovian − reactive) / reactive.
-    pub relative_change: Option<f64>,
+    pub(crate) relative_change: Option<f64>,
     /// Welch's t-test of Pavlovian against reactive.
-    pub welch: Option<WelchTest>,
+    pub(crate) welch: Option<WelchTest>,
 }
 
 /// One window of the learning curve.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct CurvePoint {
+pub(crate) struct CurvePoint {
     /// Window index.
-    pub window: usize,
+    pub(crate) window: usize,
     /// Window start, s.
-    pub start_s: f64,
+    pub(crate) start_s: f64,
     /// Over-current observations in the window over the reactive runs.
-    pub reactive: Describe,
+    pub(crate) reactive: Describe,
     /// The same over the Pavlovian runs.
-    pub pavlovian: Describe,
+    pub(crate) pavlovian: Describe,
 }
 
 /// Everything the report shows.
@@ -73,11 +73,11 @@ pub struct Analysis {
     /// One per metric of [`METRICS`].
     pub comparisons: Vec<Comparison>,
     /// Over-current observations per window.
-    pub learning_curve: Vec<CurvePoint>,
+    pub(crate) learning_curve: Vec<CurvePoint>,
     /// The first window from which on the Pavlovian mean stays below the reactive mean (None: never).
-    pub benefit_from_window: Option<usize>,
+    pub(crate) benefit_from_window: Option<usize>,
     /// When the Pavlovian runs first stopped on the prediction alone, s (over the runs that did).
-    pub first_predictive_stop_s: Describe,
+    pub(crate) first_predictive_stop_s: Describe,
 }
 
 fn values(runs: &[RunResult], mode: Mode, key: &str) -> Vec<f64> {
@@ -88,7 +88,7 @@ fn values(runs: &[RunResult], mode: Mode, key: &str) -> Vec<f64> {
 }
 
 /// Analyses the runs; `window_s` is the learning curve's window length.
-pub fn analyse(runs: &[RunResult], window_s: f64) -> Analysis {
+pub(crate) fn analyse(runs: &[RunResult], window_s: f64) -> Analysis {
     let comparisons = METRICS
         .iter()
         .map(|(key, label, unit)| {

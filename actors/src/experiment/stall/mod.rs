@@ -8,9 +8,9 @@
 //! - [`analysis`]: the statistics; [`report`]: files and the terminal table; [`plots`]: the SVG figures.
 
 pub mod analysis;
-pub mod plots;
+pub(crate) mod plots;
 pub mod report;
-pub mod run;
+pub(crate) mod run;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -18,17 +18,17 @@ use std::time::Instant;
 use pavlov::config::Config;
 use serde::{Deserialize, Serialize};
 
-pub use analysis::{Analysis, analyse};
-pub use report::Summary;
-pub use run::{RunResult, RunSpec};
+pub(crate) use analysis::analyse;
+pub(crate) use report::Summary;
+pub(crate) use run::{RunResult, RunSpec};
 
 use super::{interleaved_mode, mode_name, run_all, run_rng};
 
 /// Length of a learning-curve window, seconds.
-pub const WINDOW_S: f64 = 30.0;
+pub(crate) const WINDOW_S: f64 = 30.0;
 
 /// When the Figure 1 excerpt may start: after 2.5 minutes of learning.
-pub const EXCERPT_AFTER_S: f64 = 150.0;
+pub(crate) const EXCERPT_AFTER_S: f64 = 150.0;
 
 /// The experiment's settings.
 #[derive(Debug, Clone, Serialize, Deserialize)]

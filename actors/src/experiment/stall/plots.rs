@@ -36,7 +36,7 @@ fn color(mode: Mode) -> RGBColor {
 /// the same non-zero speed) with an over-current observation ends, i.e. with the robot pushing against a
 /// wall: the first such phase that ends at least `len` ticks into `records`. The first `len` records if
 /// there is none.
-pub fn push_window(records: &[TickRecord], len: usize) -> &[TickRecord] {
+pub(crate) fn push_window(records: &[TickRecord], len: usize) -> &[TickRecord] {
     let driving = |r: &TickRecord| {
         let a = r.default_action;
         a.left_mm_s == a.right_mm_s && a.left_mm_s != 0
@@ -62,7 +62,7 @@ pub fn push_window(records: &[TickRecord], len: usize) -> &[TickRecord] {
 }
 
 /// Figure 1: signals of a push against a wall, one column per policy.
-pub fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
+pub(crate) fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
     let root = SVGBackend::new(path, (1000, 700)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let root = root
@@ -218,7 +218,7 @@ fn bar_panel(
 }
 
 /// Figure 2: over-current observations and efficiency, mean ± SE per policy.
-pub fn fig2_bars(path: &Path, a: &Analysis) -> Io {
+pub(crate) fn fig2_bars(path: &Path, a: &Analysis) -> Io {
     let root = SVGBackend::new(path, (900, 420)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let panels = root.split_evenly((1, 2));
@@ -245,7 +245,7 @@ pub fn fig2_bars(path: &Path, a: &Analysis) -> Io {
 }
 
 /// The learning curve: over-current observations per window, mean ± SE per policy.
-pub fn learning_curve(path: &Path, a: &Analysis) -> Io {
+pub(crate) fn learning_curve(path: &Path, a: &Analysis) -> Io {
     let root = SVGBackend::new(path, (900, 450)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let n = a.learning_curve.len().max(1) as f64;

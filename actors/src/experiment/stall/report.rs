@@ -15,21 +15,21 @@ use crate::experiment::mode_name;
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
     /// Always "stall".
-    pub experiment: String,
+    pub(crate) experiment: String,
     /// The settings.
-    pub options: StallOptions,
+    pub(crate) options: StallOptions,
     /// How each run's simulator seed is derived.
-    pub seed_derivation: String,
+    pub(crate) seed_derivation: String,
     /// Every run, in interleaved order.
     pub runs: Vec<RunResult>,
     /// The statistics.
     pub analysis: Analysis,
     /// Wall-clock time of the whole study, s.
-    pub wall_s: f64,
+    pub(crate) wall_s: f64,
     /// Simulated time over every run, s.
-    pub simulated_s: f64,
+    pub(crate) simulated_s: f64,
     /// Simulated time per second of wall time.
-    pub speedup: f64,
+    pub(crate) speedup: f64,
 }
 
 /// Writes `summary.json`, the CSV tables and the SVG figures into `dir`.
@@ -62,7 +62,7 @@ fn opt(v: Option<f64>) -> String {
 }
 
 /// One row per run.
-pub fn runs_csv(runs: &[RunResult]) -> String {
+pub(crate) fn runs_csv(runs: &[RunResult]) -> String {
     let mut s = String::from("run,policy,seed");
     for (key, _, _) in METRICS {
         s.push(',');
@@ -80,7 +80,7 @@ pub fn runs_csv(runs: &[RunResult]) -> String {
 }
 
 /// One row per run and window.
-pub fn windows_csv(runs: &[RunResult]) -> String {
+pub(crate) fn windows_csv(runs: &[RunResult]) -> String {
     let mut s = String::from(
         "run,policy,window,start_s,overcurrent_observations,stall_events,distance_m,energy_j\n",
     );
@@ -103,7 +103,7 @@ pub fn windows_csv(runs: &[RunResult]) -> String {
 }
 
 /// The learning curve.
-pub fn curve_csv(a: &Analysis) -> String {
+pub(crate) fn curve_csv(a: &Analysis) -> String {
     let mut s =
         String::from("window,start_s,reactive_mean,reactive_se,pavlovian_mean,pavlovian_se\n");
     for p in &a.learning_curve {
@@ -117,7 +117,7 @@ pub fn curve_csv(a: &Analysis) -> String {
 }
 
 /// The Figure 1 signals.
-pub fn signals_csv(excerpts: &[(Mode, &[pavlov::record::TickRecord])]) -> String {
+pub(crate) fn signals_csv(excerpts: &[(Mode, &[pavlov::record::TickRecord])]) -> String {
     let mut s = String::from(
         "policy,seq,t_s,prediction,threshold,overcurrent,stimulus,gate,command_left_mm_s,command_right_mm_s\n",
     );

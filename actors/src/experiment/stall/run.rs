@@ -25,26 +25,26 @@ pub struct RunSpec {
     /// Ticks to run.
     pub ticks: u64,
     /// Length of a learning-curve window, in ticks.
-    pub window_ticks: u64,
+    pub(crate) window_ticks: u64,
     /// Keep the records from this tick on for the Figure 1 excerpt (None: keep none).
-    pub excerpt_from_tick: Option<u64>,
+    pub(crate) excerpt_from_tick: Option<u64>,
     /// How many records the excerpt keeps.
-    pub excerpt_len: usize,
+    pub(crate) excerpt_len: usize,
     /// Where to record the run (None: no recording).
-    pub record_dir: Option<PathBuf>,
+    pub(crate) record_dir: Option<PathBuf>,
 }
 
 /// Counts over one window of a run.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct WindowCounts {
     /// Ticks with an over-current flag.
-    pub overcurrent_observations: u64,
+    pub(crate) overcurrent_observations: u64,
     /// Rising edges of the stimulus.
-    pub stall_events: u64,
+    pub(crate) stall_events: u64,
     /// Distance travelled, m.
-    pub distance_m: f64,
+    pub(crate) distance_m: f64,
     /// Energy drawn, J.
-    pub energy_j: f64,
+    pub(crate) energy_j: f64,
 }
 
 /// The outcome of one run.
@@ -69,12 +69,12 @@ pub struct RunResult {
     /// Records the experiment's own subscription missed (should be 0).
     pub lagged: u64,
     /// Wall-clock time the run took, s.
-    pub wall_s: f64,
+    pub(crate) wall_s: f64,
     /// When the response first engaged on the prediction alone (gate on, stimulus off), s.
-    pub first_predictive_stop_s: Option<f64>,
+    pub(crate) first_predictive_stop_s: Option<f64>,
     /// The Figure 1 excerpt (not serialised into the summary).
     #[serde(skip)]
-    pub excerpt: Vec<TickRecord>,
+    pub(crate) excerpt: Vec<TickRecord>,
 }
 
 /// What a stall run keeps while it runs.
@@ -133,7 +133,7 @@ impl Collect for StallCollector<'_> {
 }
 
 /// Runs `spec` with `base` (mode and seed are overridden) and returns its result.
-pub fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> {
+pub(crate) fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> {
     let mut config = base.clone();
     config.control.mode = spec.mode;
     config.sim.seed = spec.seed;

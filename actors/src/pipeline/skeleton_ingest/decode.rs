@@ -23,7 +23,7 @@ use pavlov::skeleton::{Joint, osceleton_normalized_to_mm};
 use rosc::{OscMessage, OscPacket, OscType};
 
 /// Deepest bundle nesting that is decoded; deeper content is counted as malformed.
-pub const MAX_BUNDLE_DEPTH: usize = 8;
+pub(crate) const MAX_BUNDLE_DEPTH: usize = 8;
 
 /// Whether the raw datagram's bundles nest at most `max_depth` deep (the outermost bundle is at depth 0).
 ///
@@ -31,7 +31,7 @@ pub const MAX_BUNDLE_DEPTH: usize = 8;
 /// datagram of 800 nested empty bundles overflows a 2 MiB thread stack (rosc 0.11.4, debug build), which aborts
 /// the whole process. This walk only follows the element sizes and recurses at most `max_depth` levels;
 /// anything else wrong with the bytes is left for rosc to report.
-pub fn nesting_within(bytes: &[u8], max_depth: usize) -> bool {
+pub(crate) fn nesting_within(bytes: &[u8], max_depth: usize) -> bool {
     nesting_from(bytes, 0, max_depth)
 }
 
@@ -59,11 +59,11 @@ fn nesting_from(bytes: &[u8], depth: usize, max_depth: usize) -> bool {
 }
 
 /// A tracked person, as the streamer identifies them (OSCeleton's small integer, Kinect v2's 64-bit id).
-pub type UserId = u64;
+pub(crate) type UserId = u64;
 
 /// One thing a packet said.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum SkeletonEvent {
+pub(crate) enum SkeletonEvent {
     /// A joint position of `user`, in millimetres.
     Joint {
         /// Whose joint.
@@ -85,7 +85,7 @@ pub enum SkeletonEvent {
 
 /// Kinds of malformed input, each counted separately.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Malformed {
+pub(crate) enum Malformed {
     /// The datagram is not OSC (garbage, truncated, bad padding, bad UTF-8, ...).
     Undecodable,
     /// The datagram filled the whole receive buffer, so it may have been cut off.
@@ -110,13 +110,13 @@ pub struct DecodeCounts {
     /// Datagrams received.
     pub datagrams: u64,
     /// Messages seen (inside bundles or alone).
-    pub messages: u64,
+    pub(crate) messages: u64,
     /// Joint updates produced.
     pub joints: u64,
     /// Joints skipped on purpose (unknown joint name, `NotTracked`).
-    pub skipped_joints: u64,
+    pub(crate) skipped_joints: u64,
     /// Messages known and ignored (`/orient`, `/user/<n>`, hands, argument-less user events).
-    pub ignored: u64,
+    pub(crate) ignored: u64,
     /// [`Malformed::Undecodable`].
     pub undecodable: u64,
     /// [`Malformed::Oversized`].
@@ -137,7 +137,7 @@ pub struct DecodeCounts {
 
 impl DecodeCounts {
     /// Count one malformed item.
-    pub fn count(&mut self, kind: Malformed) {
+    pub(crate) fn count(&mut self, kind: Malformed) {
         let slot = match kind {
             Malformed::Undecodable => &mut self.undecodable,
             Malformed::Oversized => &mut self.oversized,
@@ -166,20 +166,20 @@ impl DecodeCounts {
 
 /// Turns packets into [`SkeletonEvent`]s for one configured format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Decoder {
+pub(crate) struct Decoder {
     format: SkeletonFormat,
     swap_lr: bool,
 }
 
 impl Decoder {
     /// A decoder for `format`, mirroring left and right when `swap_lr`.
-    pub fn new(format: SkeletonFormat, swap_lr: bool) -> Self {
+    pub(crate) fn new(format: SkeletonFormat, swap_lr: bool) -> Self {
         Decoder { format, swap_lr }
     }
 
     /// Decode one packet: events are appended to `events` in packet order, and every message is counted in
     /// `counts`; the returned list holds the malformed items met (for logging).
-    pub fn decode(
+    pub(crate) fn decode(
         &self,
         packet: &OscPacket,
         events: &mut Vec<SkeletonEvent>,

@@ -7,8 +7,8 @@
 //! so joint ages are right) and publishes the pose with `send_modify`. Malformed datagrams are counted by kind
 //! in [`IngestStats`] and logged at most once per [`LOG_EVERY`]; nothing a sender does can stop the actor.
 
-pub mod decode;
-pub mod select;
+pub(crate) mod decode;
+pub(crate) mod select;
 
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -24,24 +24,15 @@ use tokio_util::sync::CancellationToken;
 use decode::{DecodeCounts, Decoder, Malformed, SkeletonEvent, UserId};
 use select::{Applied, DEFAULT_SILENCE_MS, UserSelector};
 
-/// How old a joint may be before it counts as missing, ms (three frames at 30 Hz); `[skeleton]
-/// max_joint_age_ms` overrides it.
-pub const MAX_JOINT_AGE_MS: u64 = 100;
-
 /// The receive buffer: larger than any UDP datagram over IPv4 (65,507 bytes), so a full OSCeleton frame with
 /// orientations (~1.5 kB) is never cut off.
 pub const RECEIVE_BUFFER_BYTES: usize = 64 * 1024;
 
 /// Malformed input is logged at most this often (the counters always count).
-pub const LOG_EVERY: Duration = Duration::from_secs(5);
+pub(crate) const LOG_EVERY: Duration = Duration::from_secs(5);
 
 /// The socket's kernel receive buffer we ask for, so bursts are not lost while the actor is busy.
 const SOCKET_RCVBUF_BYTES: usize = 1 << 20;
-
-/// A pose channel that never receives a skeleton.
-pub fn no_pose() -> (watch::Sender<PoseTracker>, watch::Receiver<PoseTracker>) {
-    watch::channel(PoseTracker::new(MAX_JOINT_AGE_MS))
-}
 
 /// Errors starting the ingest.
 #[derive(Debug, thiserror::Error)]
@@ -76,7 +67,7 @@ pub struct IngestSettings {
 
 impl IngestSettings {
     /// Settings from the `[skeleton]` table.
-    pub fn from_config(cfg: &SkeletonConfig) -> Result<Self, IngestError> {
+    pub(crate) fn from_config(cfg: &SkeletonConfig) -> Result<Self, IngestError> {
         let listen = cfg
             .listen
             .parse()
@@ -97,7 +88,7 @@ pub struct IngestStats {
     /// Decoder counters, malformed input by kind.
     pub counts: DecodeCounts,
     /// Socket receive errors.
-    pub receive_errors: u64,
+    pub(crate) receive_errors: u64,
     /// Joints dropped because they belong to another (or no yet selected) user.
     pub other_user_joints: u64,
     /// The selected user.
@@ -105,7 +96,7 @@ pub struct IngestStats {
     /// How many times a user was selected.
     pub selections: u64,
     /// When the newest datagram arrived, ms since `started`.
-    pub last_datagram_ms: Option<u64>,
+    pub(crate) last_datagram_ms: Option<u64>,
 }
 
 /// A running ingest.
@@ -118,20 +109,15 @@ pub struct SkeletonIngest {
 }
 
 /// A skeleton socket, bound but not yet read.
-pub struct BoundSkeleton {
+pub(crate) struct BoundSkeleton {
     socket: UdpSocket,
     settings: IngestSettings,
     local_addr: SocketAddr,
 }
 
 impl BoundSkeleton {
-    /// The address it listens on (the real port when 0 was asked for).
-    pub fn local_addr(&self) -> SocketAddr {
-        self.local_addr
-    }
-
     /// Starts the actor on the bound socket; it runs until `cancel` fires.
-    pub fn spawn(
+    pub(crate) fn spawn(
         self,
         pose: watch::Sender<PoseTracker>,
         started: Instant,
@@ -156,7 +142,7 @@ impl BoundSkeleton {
 }
 
 /// Binds the socket of `settings`.
-pub fn bind(settings: IngestSettings) -> Result<BoundSkeleton, IngestError> {
+pub(crate) fn bind(settings: IngestSettings) -> Result<BoundSkeleton, IngestError> {
     let bind_err = |source| IngestError::Bind {
         addr: settings.listen,
         source,
@@ -322,7 +308,7 @@ fn apply_events(
 /// Binds the ingest's socket when `config`'s `[skeleton]` is enabled (by default: when the stimulus is
 /// `left_elbow`). A socket that cannot be opened is an error: without skeletons every elbow angle would be
 /// invalid and the command stimulus could never fire.
-pub async fn bind_for(
+pub(crate) async fn bind_for(
     config: &pavlov::config::Config,
 ) -> Result<Option<BoundSkeleton>, IngestError> {
     if !config.skeleton.is_enabled(&config.control.stimulus) {
@@ -397,7 +383,7 @@ mod tests {
     async fn a_taken_port_is_an_error_naming_the_address() {
         let first = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
         let addr = first.local_addr().unwrap();
-        let (tx, _rx) = no_pose();
+        let (tx, _rx) = watch::channel(PoseTracker::new(100));
         let settings = IngestSettings {
             listen: addr,
             format: SkeletonFormat::OsceletonMm,

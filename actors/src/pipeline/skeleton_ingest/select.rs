@@ -19,7 +19,7 @@ use pavlov::skeleton::{Joint, JointSample, PoseTracker};
 use super::decode::{SkeletonEvent, UserId};
 
 /// How long the selected user may be silent before another user can take over, ms.
-pub const DEFAULT_SILENCE_MS: u64 = 1000;
+pub(crate) const DEFAULT_SILENCE_MS: u64 = 1000;
 
 /// What applying an event did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -40,7 +40,7 @@ pub enum Applied {
 
 /// The selection state.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct UserSelector {
+pub(crate) struct UserSelector {
     current: Option<UserId>,
     last_heard_ms: u64,
     silence_ms: u64,
@@ -48,7 +48,7 @@ pub struct UserSelector {
 
 impl UserSelector {
     /// No user selected; a selected user may be silent for `silence_ms` before being replaced.
-    pub fn new(silence_ms: u64) -> Self {
+    pub(crate) fn new(silence_ms: u64) -> Self {
         UserSelector {
             current: None,
             last_heard_ms: 0,
@@ -57,7 +57,7 @@ impl UserSelector {
     }
 
     /// The selected user.
-    pub fn current(&self) -> Option<UserId> {
+    pub(crate) fn current(&self) -> Option<UserId> {
         self.current
     }
 
@@ -67,7 +67,7 @@ impl UserSelector {
 
     /// Apply the events of one datagram received at `now_ms`: first select the user of the first elbow among
     /// them when the selection is vacant, then apply each event. Returns what each step did.
-    pub fn apply_all(
+    pub(crate) fn apply_all(
         &mut self,
         events: &[SkeletonEvent],
         now_ms: u64,
@@ -95,7 +95,12 @@ impl UserSelector {
     }
 
     /// Apply one event received at `now_ms`, updating `pose`.
-    pub fn apply(&mut self, event: SkeletonEvent, now_ms: u64, pose: &mut PoseTracker) -> Applied {
+    pub(crate) fn apply(
+        &mut self,
+        event: SkeletonEvent,
+        now_ms: u64,
+        pose: &mut PoseTracker,
+    ) -> Applied {
         match event {
             SkeletonEvent::Joint {
                 user,
