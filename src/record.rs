@@ -12,7 +12,7 @@ use crate::oi::SensorValues;
 /// The robot-side readings the dashboard, the metrics and the experiments need on every tick, in the
 /// OI's own units. `None` where the snapshot did not carry the packet.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct SensorSummary {
+pub struct SensorReadings {
     /// Packet 14 bit 4: the left wheel's over-current flag.
     pub overcurrent_left: bool,
     /// Packet 14 bit 3: the right wheel's over-current flag.
@@ -48,7 +48,7 @@ pub struct PredictionValue {
 
 /// Elbow angles seen on the tick (interaction experiment), degrees; `None` = invalid.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct ElbowSummary {
+pub struct ElbowAngles {
     /// Left elbow interior angle.
     pub left: Option<f64>,
     /// Exponentially weighted average of the left angle.
@@ -75,7 +75,7 @@ pub enum SafetyStop {
 
 /// The robot link's state on a tick.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct LinkSummary {
+pub struct LinkStatus {
     /// False once the link has failed or closed.
     pub up: bool,
     /// Stream frames that passed every check, so far.
@@ -123,13 +123,13 @@ pub struct TickRecord {
     /// Age of the observation used, in ticks (`None` = none received yet).
     pub obs_age_ticks: Option<u32>,
     /// Raw readings of interest.
-    pub sensors: SensorSummary,
+    pub sensors: SensorReadings,
     /// The scaled observation vector (names are announced once, in the run's header). NaN (a packet the
     /// snapshot lacks) is written as JSON `null` and read back as NaN.
     #[serde(with = "nan_as_null")]
     pub obs: Vec<f32>,
     /// Elbow angles (interaction experiment only).
-    pub elbow: Option<ElbowSummary>,
+    pub elbow: Option<ElbowAngles>,
     /// The stimulus E on this tick.
     pub stimulus: bool,
     /// Every prediction with its threshold.
@@ -147,7 +147,7 @@ pub struct TickRecord {
     /// How late the tick fired, µs.
     pub lateness_us: u32,
     /// The robot link.
-    pub link: LinkSummary,
+    pub link: LinkStatus,
     /// The learning stage's exact inputs, for replay (absent in older recordings).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub inputs: Option<TickInputs>,
@@ -179,7 +179,7 @@ impl TickRecord {
             t_ms,
             mode,
             obs_age_ticks: Some(0),
-            sensors: SensorSummary::default(),
+            sensors: SensorReadings::default(),
             obs: Vec::new(),
             elbow: None,
             stimulus: false,
@@ -190,7 +190,7 @@ impl TickRecord {
             safety_stop: None,
             estop: false,
             lateness_us: 0,
-            link: LinkSummary::default(),
+            link: LinkStatus::default(),
             inputs: None,
         }
     }

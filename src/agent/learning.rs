@@ -11,7 +11,7 @@ use crate::learn::{FeatureInputs, LearnError, PredictionSet, SetSnapshot, Signal
 use crate::obs::ObsLayout;
 use crate::oi::SensorValues;
 use crate::oi::packets::{bits, id};
-use crate::record::{ElbowSummary, PredictionValue};
+use crate::record::{ElbowAngles, PredictionValue};
 use crate::skeleton::ElbowFeatures;
 
 /// Names of the extra (non-observation) inputs, scaled to `[0, 1]` as angle / 180°.
@@ -68,7 +68,7 @@ pub struct LearnOutput {
     /// The gating prediction's threshold θ.
     pub gate_threshold: f64,
     /// Elbow angles, when a skeleton is used.
-    pub elbow: Option<ElbowSummary>,
+    pub elbow: Option<ElbowAngles>,
 }
 
 /// Perception, prediction and learning for one configuration.
@@ -157,7 +157,7 @@ impl LearningStage {
                 scaled_angle(e.right),
                 scaled_angle(e.right_avg),
             ];
-            ElbowSummary {
+            ElbowAngles {
                 left: e.left,
                 left_avg: e.left_avg,
                 right: e.right,

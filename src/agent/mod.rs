@@ -7,12 +7,12 @@
 //! - [`gating`]: prediction + stimulus + mode → the action, with manual teleop and the e-stop.
 //! - [`safety`]: the one predicate for safety stops and for observations fresh enough to learn from.
 //! - [`tick_record`]: assembling a tick's record after actuation.
-//! - [`summary`]: the raw readings a tick record carries.
+//! - [`readings`]: the raw readings a tick record carries.
 
 pub mod gating;
 pub mod learning;
+pub mod readings;
 pub mod safety;
-pub mod summary;
 pub mod tick_record;
 
 pub use gating::{GateOutput, GatingStage};

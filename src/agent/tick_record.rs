@@ -4,11 +4,11 @@
 
 use crate::control::Action;
 use crate::oi::SensorValues;
-use crate::record::{LinkSummary, SafetyStop, TickInputs, TickRecord};
+use crate::record::{LinkStatus, SafetyStop, TickInputs, TickRecord};
 
 use super::gating::GateOutput;
 use super::learning::LearnOutput;
-use super::summary::summarize;
+use super::readings::read_sensors;
 
 /// What sensor ingest saw on the tick.
 #[derive(Debug, Clone)]
@@ -28,7 +28,7 @@ pub struct Sensed {
     /// Angle (degrees) summed over every frame since the previous tick.
     pub angle_deg: i32,
     /// The link's state and counters.
-    pub link: LinkSummary,
+    pub link: LinkStatus,
 }
 
 /// What actuation decided on the tick.
@@ -55,7 +55,7 @@ pub fn assemble(
         t_ms: sensed.t_ms,
         mode: gate.mode,
         obs_age_ticks: sensed.age_ticks,
-        sensors: summarize(sensed.values.as_ref(), sensed.distance_mm, sensed.angle_deg),
+        sensors: read_sensors(sensed.values.as_ref(), sensed.distance_mm, sensed.angle_deg),
         obs: learned.obs_vector,
         elbow: learned.elbow,
         stimulus: learned.stimulus,

@@ -1,11 +1,11 @@
 //! What a run means: the numbers computed from its tick records, shared by the dashboard, the experiments
 //! and the tests.
 //!
-//! - [`run_metrics`]: the stall experiment's counters over a run (over-current observations, stall events,
+//! - [`run_counters`]: the stall experiment's counters over a run (over-current observations, stall events,
 //!   time stalled, distance, energy, efficiency).
 //! - [`interaction`]: response timing against a human's commands, live and after the run.
 //! - [`stats`]: descriptive statistics, Welch's t-test and the small numerical helpers they need.
 
 pub mod interaction;
-pub mod run_metrics;
+pub mod run_counters;
 pub mod stats;

@@ -14,7 +14,7 @@ use std::time::Duration;
 use pavlov::config::Config;
 
 use crate::server::{RobotTarget, Server, ServerError};
-use crate::telemetry::histogram::LatencySummary;
+use crate::telemetry::histogram::LatencyQuantiles;
 
 /// What a benchmark run measured.
 #[derive(Debug, Clone)]
@@ -26,9 +26,9 @@ pub struct BenchReport {
     /// Ticks skipped.
     pub(crate) skipped: u64,
     /// Lateness of each tick.
-    pub lateness: LatencySummary,
+    pub lateness: LatencyQuantiles,
     /// Tick deadline to motor command written.
-    pub(crate) tick_to_command: LatencySummary,
+    pub(crate) tick_to_command: LatencyQuantiles,
     /// Records published.
     pub(crate) records: u64,
 }

@@ -12,7 +12,7 @@ use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use axum::extract::ws::Utf8Bytes;
 use pavlov::analysis::interaction::live::LiveInteraction;
 use pavlov::analysis::interaction::live_aligned::LiveAligned;
-use pavlov::analysis::run_metrics::RunMetrics;
+use pavlov::analysis::run_counters::RunCounters;
 use pavlov::record::TickRecord;
 use tokio::sync::broadcast;
 use tokio_util::sync::CancellationToken;
@@ -67,7 +67,7 @@ impl HubHandle {
 /// The hub's state: the run counters over every record seen, and the live interaction metrics (with the
 /// aligned averages) when the stimulus is the gesture command.
 pub(crate) struct Hub {
-    metrics: RunMetrics,
+    metrics: RunCounters,
     interaction: Option<(LiveInteraction, LiveAligned)>,
     tx: broadcast::Sender<Outgoing>,
 }
@@ -79,7 +79,7 @@ impl Hub {
         let (tx, _) = broadcast::channel(HUB_CAPACITY);
         (
             Hub {
-                metrics: RunMetrics::new(period_ms),
+                metrics: RunCounters::new(period_ms),
                 interaction: track_interaction
                     .then(|| (LiveInteraction::new(), LiveAligned::new(period_ms))),
                 tx: tx.clone(),
@@ -108,13 +108,13 @@ impl Hub {
         });
         if record.seq % STATUS_EVERY_TICKS == 0 {
             let health = health();
-            let counters = self.metrics.summary();
-            let interaction = self.interaction.as_ref().map(|(live, _)| live.summary());
+            let counters = self.metrics.totals();
+            let interaction = self.interaction.as_ref().map(|(live, _)| live.figures());
             let aligned = self
                 .interaction
                 .as_ref()
                 .filter(|_| record.seq % ALIGNED_EVERY_TICKS == 0)
-                .map(|(_, aligned)| aligned.summary());
+                .map(|(_, aligned)| aligned.figures());
             let status = StatusMessage::new(record.seq, &health, &counters, clients)
                 .with_interaction(interaction.as_ref())
                 .with_aligned(aligned.as_ref())
@@ -155,11 +155,11 @@ pub(crate) async fn run(
 mod tests {
     use super::*;
     use pavlov::control::Mode;
-    use pavlov::record::SensorSummary;
+    use pavlov::record::SensorReadings;
 
     fn record(seq: u64) -> TickRecord {
         TickRecord {
-            sensors: SensorSummary {
+            sensors: SensorReadings {
                 overcurrent_left: seq % 2 == 0,
                 ..Default::default()
             },
@@ -197,7 +197,7 @@ mod tests {
         assert_eq!(last["clients"], 3);
         assert_eq!(last["counters"]["ticks"], 21);
         assert_eq!(last["counters"]["overcurrent_observations"], 11);
-        assert_eq!(hub.metrics.summary().ticks, 21);
+        assert_eq!(hub.metrics.totals().ticks, 21);
         assert!(last.get("interaction").is_none(), "{last}");
     }
 

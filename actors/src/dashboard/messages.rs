@@ -1,12 +1,12 @@
 //! The server's telemetry messages of the dashboard protocol (`web/PROTOCOL.md`): `hello`, `tick` and
 //! `status`, serialised straight from the records and counters they describe.
 
-use pavlov::analysis::interaction::live::LiveInteractionSummary;
-use pavlov::analysis::interaction::live_aligned::AlignedSummary;
-use pavlov::analysis::run_metrics::MetricsSummary;
+use pavlov::analysis::interaction::live::LiveInteractionFigures;
+use pavlov::analysis::interaction::live_aligned::AlignedFigures;
+use pavlov::analysis::run_counters::RunTotals;
 use pavlov::control::{Action, Mode};
 use pavlov::record::{
-    ElbowSummary, LinkSummary, PredictionValue, SafetyStop, SensorSummary, TickRecord,
+    ElbowAngles, LinkStatus, PredictionValue, SafetyStop, SensorReadings, TickRecord,
 };
 use serde::Serialize;
 use serde_json::Value;
@@ -50,9 +50,9 @@ pub(crate) struct TickMessage<'a> {
     default: Wheels,
     estop: bool,
     safety_stop: Option<SafetyStop>,
-    sensors: &'a SensorSummary,
-    elbow: Option<&'a ElbowSummary>,
-    link: &'a LinkSummary,
+    sensors: &'a SensorReadings,
+    elbow: Option<&'a ElbowAngles>,
+    link: &'a LinkStatus,
     lateness_us: u32,
 }
 
@@ -130,7 +130,7 @@ pub(crate) struct StatusMessage<'a> {
     kind: &'static str,
     seq: u64,
     health: &'a StatusHealth,
-    counters: &'a MetricsSummary,
+    counters: &'a RunTotals,
     clients: usize,
     #[serde(skip_serializing_if = "Option::is_none")]
     interaction: Option<InteractionStatus<'a>>,
@@ -140,9 +140,9 @@ pub(crate) struct StatusMessage<'a> {
 #[derive(Serialize)]
 struct InteractionStatus<'a> {
     #[serde(flatten)]
-    summary: &'a LiveInteractionSummary,
+    summary: &'a LiveInteractionFigures,
     #[serde(skip_serializing_if = "Option::is_none")]
-    aligned: Option<&'a AlignedSummary>,
+    aligned: Option<&'a AlignedFigures>,
 }
 
 impl<'a> StatusMessage<'a> {
@@ -150,7 +150,7 @@ impl<'a> StatusMessage<'a> {
     pub(crate) fn new(
         seq: u64,
         health: &'a StatusHealth,
-        counters: &'a MetricsSummary,
+        counters: &'a RunTotals,
         clients: usize,
     ) -> Self {
         StatusMessage {
@@ -166,7 +166,7 @@ impl<'a> StatusMessage<'a> {
     /// Adds the live interaction metrics (absent from the JSON when `None`).
     pub(crate) fn with_interaction(
         mut self,
-        interaction: Option<&'a LiveInteractionSummary>,
+        interaction: Option<&'a LiveInteractionFigures>,
     ) -> Self {
         self.interaction = interaction.map(|summary| InteractionStatus {
             summary,
@@ -176,7 +176,7 @@ impl<'a> StatusMessage<'a> {
     }
 
     /// Adds the aligned averages to `interaction` (no effect without it; absent from the JSON when `None`).
-    pub(crate) fn with_aligned(mut self, aligned: Option<&'a AlignedSummary>) -> Self {
+    pub(crate) fn with_aligned(mut self, aligned: Option<&'a AlignedFigures>) -> Self {
         if let Some(i) = &mut self.interaction {
             i.aligned = aligned;
         }
@@ -280,7 +280,7 @@ mod tests {
             t_ms: 240.0,
             mode: Mode::Pavlovian,
             obs_age_ticks: Some(1),
-            sensors: SensorSummary {
+            sensors: SensorReadings {
                 overcurrent_left: true,
                 battery_current_ma: Some(-700),
                 ..Default::default()
@@ -302,7 +302,7 @@ mod tests {
             safety_stop: Some(SafetyStop::EStop),
             estop: true,
             lateness_us: 80,
-            link: LinkSummary {
+            link: LinkStatus {
                 up: true,
                 good_frames: 9,
                 bad_frames: 1,

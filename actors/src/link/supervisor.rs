@@ -8,7 +8,7 @@
 use pavlov::config::{Config, DriveMode};
 use pavlov::oi::parser::ParserStats;
 use pavlov::oi::{Model, SensorValues};
-use pavlov::record::LinkSummary;
+use pavlov::record::LinkStatus;
 use pavlov::supervision::LinkState;
 use pavlov::supervision::monitor::{LinkAction, LinkMonitor};
 use tokio::sync::mpsc;
@@ -269,9 +269,9 @@ impl Supervisor {
     }
 
     /// The link's state for the tick record.
-    pub(crate) fn summary(&self, parser: ParserStats) -> LinkSummary {
+    pub(crate) fn status(&self, parser: ParserStats) -> LinkStatus {
         let c = self.monitor.counters();
-        LinkSummary {
+        LinkStatus {
             up: self.monitor.state() == LinkState::Up,
             good_frames: parser.good_frames,
             bad_frames: parser.bad_frames,

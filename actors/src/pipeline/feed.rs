@@ -8,7 +8,7 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use pavlov::record::{LinkSummary, TickRecord};
+use pavlov::record::{LinkStatus, TickRecord};
 
 use crate::telemetry::counters::RecorderGauge;
 use tokio::sync::{broadcast, mpsc, watch};
@@ -20,7 +20,7 @@ pub(crate) const LIVE_CAPACITY: usize = 1024;
 #[derive(Clone)]
 pub struct TickFeed {
     live: broadcast::Sender<Arc<TickRecord>>,
-    latest_link: Arc<watch::Sender<Option<LinkSummary>>>,
+    latest_link: Arc<watch::Sender<Option<LinkStatus>>>,
     recorder: Option<mpsc::Sender<Arc<TickRecord>>>,
     recorder_dropped: Arc<AtomicU64>,
 }
@@ -61,7 +61,7 @@ impl TickFeed {
     }
 
     /// The link summary of the newest record (`None` before the first).
-    pub(crate) fn latest_link(&self) -> watch::Receiver<Option<LinkSummary>> {
+    pub(crate) fn latest_link(&self) -> watch::Receiver<Option<LinkStatus>> {
         self.latest_link.subscribe()
     }
 

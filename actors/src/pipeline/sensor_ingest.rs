@@ -12,7 +12,7 @@ use std::time::Duration;
 use pavlov::oi::SensorValues;
 use pavlov::oi::packets::id;
 use pavlov::oi::parser::StreamParser;
-use pavlov::record::LinkSummary;
+use pavlov::record::LinkStatus;
 use tokio::io::AsyncReadExt;
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
@@ -37,7 +37,7 @@ pub(crate) struct Observation {
     /// Angle (degrees) summed over every frame since the previous tick.
     pub(crate) angle_deg: i32,
     /// The link's state, mode, counters.
-    pub(crate) link: LinkSummary,
+    pub(crate) link: LinkStatus,
 }
 
 /// The channels and link parts the ingest works with.
@@ -106,7 +106,7 @@ pub(crate) async fn run(
                     age_ticks,
                     distance_mm: std::mem::take(&mut distance),
                     angle_deg: std::mem::take(&mut angle),
-                    link: supervisor.summary(parser.stats()),
+                    link: supervisor.status(parser.stats()),
                 };
                 if out.try_send(obs).is_err() {
                     tracing::debug!("learning is behind; observation for tick {} dropped", tick.seq);

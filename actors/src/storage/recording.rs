@@ -146,7 +146,7 @@ pub fn load(path: &Path) -> Result<Recording, RecordingError> {
 mod tests {
     use super::*;
     use pavlov::control::{Action, Mode};
-    use pavlov::record::{LinkSummary, SensorSummary};
+    use pavlov::record::{LinkStatus, SensorReadings};
 
     fn config() -> Config {
         Config::from_toml(include_str!("../../../config/stall.toml")).unwrap()
@@ -158,7 +158,7 @@ mod tests {
             t_ms: seq as f64 * 20.0,
             mode: Mode::Reactive,
             obs_age_ticks: Some(0),
-            sensors: SensorSummary::default(),
+            sensors: SensorReadings::default(),
             obs: vec![0.25, 1.0],
             elbow: None,
             stimulus: seq % 3 == 0,
@@ -169,7 +169,7 @@ mod tests {
             safety_stop: None,
             estop: false,
             lateness_us: 0,
-            link: LinkSummary::default(),
+            link: LinkStatus::default(),
             inputs: None,
         }
     }

@@ -108,7 +108,7 @@ impl HistogramSample {
                 .map(|&us| us as f64 / 1e6)
                 .zip(counts)
                 .collect(),
-            count: h.summary().count,
+            count: h.quantiles().count,
             sum_seconds: h.sum_us() as f64 / 1e6,
         }
     }

@@ -22,7 +22,7 @@ pub(crate) struct LatencyHistogram {
 
 /// Quantiles of a histogram, µs.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
-pub struct LatencySummary {
+pub struct LatencyQuantiles {
     /// Number of samples.
     pub(crate) count: u64,
     /// Median.
@@ -101,8 +101,8 @@ impl LatencyHistogram {
     }
 
     /// p50, p99, max and mean.
-    pub(crate) fn summary(&self) -> LatencySummary {
-        LatencySummary {
+    pub(crate) fn quantiles(&self) -> LatencyQuantiles {
+        LatencyQuantiles {
             count: self.total,
             p50_us: self.quantile_us(0.5),
             p99_us: self.quantile_us(0.99),
@@ -162,7 +162,7 @@ mod tests {
         for us in 1..=1000u64 {
             h.record(Duration::from_micros(us));
         }
-        let s = h.summary();
+        let s = h.quantiles();
         assert_eq!(s.count, 1000);
         assert!((480..=530).contains(&s.p50_us), "p50 {}", s.p50_us);
         assert!((960..=1000).contains(&s.p99_us), "p99 {}", s.p99_us);
@@ -173,6 +173,9 @@ mod tests {
 
     #[test]
     fn empty_histogram_reports_zero() {
-        assert_eq!(LatencyHistogram::new().summary(), LatencySummary::default());
+        assert_eq!(
+            LatencyHistogram::new().quantiles(),
+            LatencyQuantiles::default()
+        );
     }
 }

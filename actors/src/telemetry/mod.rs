@@ -16,12 +16,12 @@ pub(crate) mod prometheus;
 #[cfg(any(test, feature = "test-support"))]
 pub mod prometheus_check;
 
-use pavlov::record::LinkSummary;
+use pavlov::record::LinkStatus;
 use serde::Serialize;
 use tokio::sync::watch;
 
 use counters::{ActuationStats, RecorderGauge, SharedTickStats, SharedWriterStats};
-use histogram::{LatencyHistogram, LatencySummary};
+use histogram::{LatencyHistogram, LatencyQuantiles};
 
 use crate::simulated::SimStatus;
 
@@ -34,7 +34,7 @@ pub struct Health {
     pub(crate) actuation: watch::Receiver<ActuationStats>,
     pub(crate) sim: Option<watch::Receiver<SimStatus>>,
     pub(crate) recorder: RecorderGauge,
-    pub(crate) link: watch::Receiver<Option<LinkSummary>>,
+    pub(crate) link: watch::Receiver<Option<LinkStatus>>,
 }
 
 /// The recorder queue's figures.
@@ -54,15 +54,15 @@ pub struct HealthFigures {
     /// Ticks skipped because the ticker woke too late.
     pub ticks_skipped: u64,
     /// Tick lateness (fired − deadline).
-    pub(crate) lateness: LatencySummary,
+    pub(crate) lateness: LatencyQuantiles,
     /// Tick deadline → motor command written.
-    pub(crate) tick_to_command: LatencySummary,
+    pub(crate) tick_to_command: LatencyQuantiles,
     /// Serial write errors.
     pub(crate) write_errors: u64,
     /// Actuation's counters.
     pub(crate) actuation: ActuationStats,
     /// The link as the newest tick record saw it (`None` before the first tick).
-    pub(crate) link: Option<LinkSummary>,
+    pub(crate) link: Option<LinkStatus>,
     /// The recorder's queue (`None` without a recorder).
     pub(crate) recorder: Option<RecorderFigures>,
 }
@@ -74,10 +74,10 @@ impl Health {
         if let Ok(t) = self.ticks.lock() {
             f.ticks_fired = t.fired;
             f.ticks_skipped = t.skipped;
-            f.lateness = t.lateness.summary();
+            f.lateness = t.lateness.quantiles();
         }
         if let Ok(w) = self.writer.lock() {
-            f.tick_to_command = w.tick_to_command.summary();
+            f.tick_to_command = w.tick_to_command.quantiles();
             f.write_errors = w.errors;
         }
         f.actuation = *self.actuation.borrow();

@@ -5,7 +5,7 @@
 //! so the format is tested without a server; [`crate::dashboard::http`] takes the snapshot and serves the text with
 //! [`CONTENT_TYPE`]. Every metric is listed in the README's "Metrics" section.
 
-use pavlov::record::LinkSummary;
+use pavlov::record::LinkStatus;
 use pavlov::supervision::{LinkState, TripCause};
 
 use super::counters::{ActuationStats, DashboardStats};
@@ -35,7 +35,7 @@ pub(crate) struct MetricsSnapshot {
     /// Serial write errors.
     pub(crate) write_errors: u64,
     /// The link as the newest tick record saw it (`None` before the first tick).
-    pub(crate) link: Option<LinkSummary>,
+    pub(crate) link: Option<LinkStatus>,
     /// The websocket endpoint's counters.
     pub(crate) ws: DashboardStats,
     /// The recorder's queue (`None` without a recorder).
@@ -94,7 +94,7 @@ fn actuation_help(field: &str) -> String {
     }
 }
 
-fn link_metrics(e: &mut Exposition, link: &LinkSummary) {
+fn link_metrics(e: &mut Exposition, link: &LinkStatus) {
     e.gauge(
         "pavlov_link_up",
         "1 while the robot link is open, 0 once it has failed or closed.",
@@ -328,7 +328,7 @@ mod tests {
                 &TICK_BUCKETS_US,
             ),
             write_errors: 1,
-            link: Some(LinkSummary {
+            link: Some(LinkStatus {
                 up: true,
                 good_frames: 990,
                 bad_frames: 2,

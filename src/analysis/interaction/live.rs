@@ -25,7 +25,7 @@ pub use super::{LIVE_WINDOW_MS, RECENT_COMMANDS};
 
 /// The figures so far.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
-pub struct LiveInteractionSummary {
+pub struct LiveInteractionFigures {
     /// Command onsets seen.
     pub commands: u64,
     /// Commands whose response onset came before the command onset.
@@ -53,7 +53,7 @@ pub struct LiveInteraction {
     awaiting_command_ms: Option<f64>,
     unmatched_responses_ms: VecDeque<f64>,
     recent_leads: VecDeque<Option<f64>>,
-    summary: LiveInteractionSummary,
+    figures: LiveInteractionFigures,
     physical: LivePhysical,
 }
 
@@ -83,11 +83,11 @@ impl LiveInteraction {
     }
 
     /// The figures so far.
-    pub fn summary(&self) -> LiveInteractionSummary {
-        LiveInteractionSummary {
+    pub fn figures(&self) -> LiveInteractionFigures {
+        LiveInteractionFigures {
             mean_current_lead_ms: self.physical.mean_current_lead_ms(),
             mean_motion_lead_ms: self.physical.mean_motion_lead_ms(),
-            ..self.summary
+            ..self.figures
         }
     }
 
@@ -97,7 +97,7 @@ impl LiveInteraction {
                 break;
             }
             self.unmatched_responses_ms.pop_front();
-            self.summary.false_starts += 1;
+            self.figures.false_starts += 1;
         }
         if let Some(c) = self.awaiting_command_ms
             && t_ms > c + LIVE_WINDOW_MS
@@ -110,7 +110,7 @@ impl LiveInteraction {
         if self.awaiting_command_ms.is_some() {
             self.resolve(None);
         }
-        self.summary.commands += 1;
+        self.figures.commands += 1;
         self.last_command_ms = Some(t_ms);
         // Every unmatched response onset is within the window now (older ones expired): the first answers
         // this command, the rest fall in its window and are no false starts.
@@ -141,19 +141,19 @@ impl LiveInteraction {
         self.awaiting_command_ms = None;
         match lead_ms {
             Some(lead) => {
-                self.summary.last_lead_ms = Some(lead);
+                self.figures.last_lead_ms = Some(lead);
                 if lead > 0.0 {
-                    self.summary.early += 1;
+                    self.figures.early += 1;
                 }
             }
-            None => self.summary.missed += 1,
+            None => self.figures.missed += 1,
         }
         if self.recent_leads.len() == RECENT_COMMANDS {
             self.recent_leads.pop_front();
         }
         self.recent_leads.push_back(lead_ms);
         let answered: Vec<f64> = self.recent_leads.iter().flatten().copied().collect();
-        self.summary.mean_lead_ms =
+        self.figures.mean_lead_ms =
             (!answered.is_empty()).then(|| answered.iter().sum::<f64>() / answered.len() as f64);
     }
 }
@@ -165,13 +165,13 @@ mod tests {
     const TICK_MS: f64 = 20.0;
 
     /// Feeds ticks `0..ticks`; the stimulus and the gate are on over the given half-open tick spans.
-    fn run(ticks: u64, stimulus: &[(u64, u64)], gate: &[(u64, u64)]) -> LiveInteractionSummary {
+    fn run(ticks: u64, stimulus: &[(u64, u64)], gate: &[(u64, u64)]) -> LiveInteractionFigures {
         let on = |spans: &[(u64, u64)], k: u64| spans.iter().any(|&(a, b)| (a..b).contains(&k));
         let mut live = LiveInteraction::new();
         for k in 0..ticks {
             live.observe_tick(k as f64 * TICK_MS, on(stimulus, k), on(gate, k));
         }
-        live.summary()
+        live.figures()
     }
 
     #[test]
@@ -224,9 +224,9 @@ mod tests {
         let mut live = LiveInteraction::new();
         live.observe_tick(0.0, false, true);
         live.observe_tick(500.0, false, false);
-        assert_eq!(live.summary().false_starts, 0, "a command may still come");
+        assert_eq!(live.figures().false_starts, 0, "a command may still come");
         live.observe_tick(1001.0, false, false);
-        assert_eq!(live.summary().false_starts, 1);
+        assert_eq!(live.figures().false_starts, 1);
     }
 
     #[test]
@@ -256,9 +256,9 @@ mod tests {
                 live.observe_tick(t + 2500.0, false, false);
                 t += 5000.0;
             }
-            assert_eq!(live.summary().mean_lead_ms, Some(lead));
+            assert_eq!(live.figures().mean_lead_ms, Some(lead));
         }
-        let s = live.summary();
+        let s = live.figures();
         assert_eq!(
             (s.commands, s.early, s.missed, s.false_starts),
             (50, 40, 0, 0)

@@ -45,7 +45,7 @@ pub struct AlignedCurve {
 
 /// The aligned averages of both modes.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
-pub struct AlignedSummary {
+pub struct AlignedFigures {
     /// Offset of each point from the command onset, ms.
     pub offsets_ms: Vec<f64>,
     /// Under reactive control.
@@ -185,10 +185,10 @@ impl LiveAligned {
     }
 
     /// The mean curves of both modes.
-    pub fn summary(&self) -> AlignedSummary {
+    pub fn figures(&self) -> AlignedFigures {
         let bins = self.bins();
         let before = self.bins_before() as f64;
-        AlignedSummary {
+        AlignedFigures {
             offsets_ms: (0..bins)
                 .map(|k| round_tenth((k as f64 - before) * self.period_ms))
                 .collect(),
@@ -236,7 +236,7 @@ mod tests {
         // Reactive: two commands, the current steps 5 ticks (100 ms) after the onset to −550 and −650 mA.
         run(&mut live, 0..200, Mode::Reactive, &[50], -550, 0);
         run(&mut live, 200..400, Mode::Reactive, &[250], -650, 0);
-        let s = live.summary();
+        let s = live.figures();
         assert_eq!(s.offsets_ms.len(), 76);
         assert_eq!(
             (s.offsets_ms[0], s.offsets_ms[25], s.offsets_ms[75]),
@@ -258,7 +258,7 @@ mod tests {
         // Pavlovian: the current drops 10 ticks (200 ms) before the onset.
         run(&mut live, 200..400, Mode::Pavlovian, &[250], -600, 10);
         run(&mut live, 400..600, Mode::Manual, &[450], -600, 0);
-        let s = live.summary();
+        let s = live.figures();
         assert_eq!((s.reactive.commands, s.pavlovian.commands), (1, 1));
         assert_eq!(s.reactive.current_ma[20], Some(-150.0));
         assert_eq!(s.pavlovian.current_ma[20], Some(-600.0));
@@ -282,7 +282,7 @@ mod tests {
                 0,
             );
         }
-        let s = live.summary();
+        let s = live.figures();
         assert_eq!(s.pavlovian.commands, RECENT_COMMANDS);
         assert_eq!(s.pavlovian.current_ma[30], Some(-500.0));
         assert!(live.samples.len() < 200, "old samples are dropped");
@@ -293,9 +293,9 @@ mod tests {
         let mut live = LiveAligned::new(20.0);
         // Onset at tick 50 (1 s): resolved at tick 100 (2 s), not before.
         run(&mut live, 0..100, Mode::Reactive, &[50], -600, 0);
-        assert_eq!(live.summary().reactive.commands, 0);
+        assert_eq!(live.figures().reactive.commands, 0);
         run(&mut live, 100..101, Mode::Reactive, &[50], -600, 0);
-        assert_eq!(live.summary().reactive.commands, 1);
+        assert_eq!(live.figures().reactive.commands, 1);
         // A command with one tick lacking the current is skipped.
         for k in 200..400 {
             let current = (k != 260).then_some(-150);
@@ -307,14 +307,14 @@ mod tests {
                 0,
             ));
         }
-        assert_eq!((live.summary().reactive.commands, live.revision()), (1, 1));
+        assert_eq!((live.figures().reactive.commands, live.revision()), (1, 1));
     }
 
     #[test]
     fn an_onset_near_the_start_leaves_the_early_offsets_empty() {
         let mut live = LiveAligned::new(20.0);
         run(&mut live, 0..100, Mode::Reactive, &[5], -600, 0);
-        let s = live.summary();
+        let s = live.figures();
         assert_eq!(s.reactive.commands, 1);
         assert_eq!(s.reactive.current_ma[19], None);
         assert_eq!(s.reactive.current_ma[20], Some(-150.0));

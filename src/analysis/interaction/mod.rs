@@ -91,7 +91,7 @@ pub enum CommandOutcome {
 
 /// The metrics of one run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct InteractionMetrics {
+pub struct ResponseTiming {
     /// One outcome per command, in the order given.
     pub outcomes: Vec<CommandOutcome>,
     /// Response onsets in no command's window.
@@ -102,7 +102,7 @@ pub struct InteractionMetrics {
     pub duration_ms: f64,
 }
 
-impl InteractionMetrics {
+impl ResponseTiming {
     /// Latencies of the answered commands, in command order.
     pub fn latencies_ms(&self) -> Vec<f64> {
         self.outcomes
@@ -168,7 +168,7 @@ pub fn measure(
     samples: &[ResponseSample],
     commands: &[CommandWindow],
     params: &MatchParams,
-) -> InteractionMetrics {
+) -> ResponseTiming {
     let onsets = response_onsets(samples);
     let windows: Vec<(f64, f64)> = commands.iter().map(|c| window(c, params)).collect();
     let in_any = |t: f64| windows.iter().any(|&(lo, hi)| t >= lo && t <= hi);
@@ -206,7 +206,7 @@ pub fn measure(
         (Some(a), Some(b)) => (b.t_ms - a.t_ms).max(0.0),
         _ => 0.0,
     };
-    InteractionMetrics {
+    ResponseTiming {
         outcomes,
         false_starts,
         responding_outside_ms,

@@ -33,7 +33,7 @@ fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
     let out = std::env::temp_dir().join(format!("pavlov-interaction-{}", std::process::id()));
     let a = run_study(&interaction_config(), &options(&out, true)).expect("study runs");
     let b = run_study(&interaction_config(), &options(&out.join("again"), false)).expect("again");
-    let key = |s: &pavlov_actors::experiment::interaction::InteractionSummary| {
+    let key = |s: &pavlov_actors::experiment::interaction::InteractionStudy| {
         serde_json::to_value((
             &s.timing,
             &s.aligned,

@@ -6,8 +6,8 @@
 use crate::common;
 
 use pavlov::control::Mode;
-use pavlov_actors::experiment::stall::analysis::METRICS;
-use pavlov_actors::experiment::stall::report::{self, Summary};
+use pavlov_actors::experiment::stall::analysis::TOTALS;
+use pavlov_actors::experiment::stall::report::{self, StallStudy};
 use pavlov_actors::experiment::stall::{self, StallOptions, plan, run_seed};
 
 fn options(seed: u64, out: &std::path::Path, record: bool) -> StallOptions {
@@ -25,7 +25,7 @@ fn tmp(name: &str) -> std::path::PathBuf {
     std::env::temp_dir().join(format!("pavlov-{name}-{}", std::process::id()))
 }
 
-fn study(seed: u64, out: &std::path::Path, record: bool) -> Summary {
+fn study(seed: u64, out: &std::path::Path, record: bool) -> StallStudy {
     stall::run_study(&common::stall_config(), &options(seed, out, record), false)
         .expect("study runs")
 }
@@ -76,9 +76,9 @@ fn a_short_study_is_deterministic_recorded_and_shows_the_effect() {
         assert_eq!(rec.header.config.control.mode, r.mode);
         assert_eq!(rec.header.config.sim.seed, r.seed);
         // The metrics recomputed from the recording agree with the live ones.
-        let mut m = pavlov::analysis::run_metrics::RunMetrics::new(20.0);
+        let mut m = pavlov::analysis::run_counters::RunCounters::new(20.0);
         rec.records.iter().for_each(|t| m.observe(t));
-        assert_eq!(m.summary(), r.metrics);
+        assert_eq!(m.totals(), r.metrics);
     }
 
     // The effect: the Pavlovian control stops before the over-current integrator trips.
@@ -89,7 +89,7 @@ fn a_short_study_is_deterministic_recorded_and_shows_the_effect() {
             .find(|c| c.metric == key)
             .expect("metric")
     };
-    assert_eq!(a.analysis.comparisons.len(), METRICS.len());
+    assert_eq!(a.analysis.comparisons.len(), TOTALS.len());
     for key in ["overcurrent_observations", "stall_events", "time_stalled_s"] {
         let c = get(key);
         assert!(

@@ -48,7 +48,7 @@ pub struct InteractionOptions {
 
 /// Everything `summary.json` holds.
 #[derive(Debug, Clone, Serialize)]
-pub struct InteractionSummary {
+pub struct InteractionStudy {
     /// The settings.
     pub(crate) options: InteractionOptions,
     /// How the seeds are derived.
@@ -66,7 +66,7 @@ pub struct InteractionSummary {
 }
 
 /// Runs every run (alternating reactive / Pavlovian) on `threads` threads, with no progress bar.
-pub fn run_study(base: &Config, o: &InteractionOptions) -> Result<InteractionSummary, RunError> {
+pub fn run_study(base: &Config, o: &InteractionOptions) -> Result<InteractionStudy, RunError> {
     run_study_with_progress(base, o, false)
 }
 
@@ -75,7 +75,7 @@ pub fn run_study_with_progress(
     base: &Config,
     o: &InteractionOptions,
     progress: bool,
-) -> Result<InteractionSummary, RunError> {
+) -> Result<InteractionStudy, RunError> {
     let wall = std::time::Instant::now();
     let period_s = base.tick.period_ms.max(1) as f64 / 1000.0;
     let ticks = (o.minutes * 60.0 / period_s).round().max(1.0) as usize;
@@ -105,7 +105,7 @@ pub fn run_study_with_progress(
     };
     let runs = run_all(&specs, o.threads, &one, &on_done)?;
     bar.finish_and_clear();
-    Ok(InteractionSummary {
+    Ok(InteractionStudy {
         options: o.clone(),
         seed_derivation: "run i (even = reactive, odd = Pavlovian): robot seed \
                           Rng::new(seed).fork(i).next_u64(), operator seed Rng::new(seed).fork(i).fork(1).next_u64()"

@@ -9,7 +9,7 @@ use pavlov::control::Mode;
 use pavlov::record::TickRecord;
 use plotters::prelude::*;
 
-use super::InteractionSummary;
+use super::InteractionStudy;
 use super::analysis::AlignedPoint;
 use super::run::{self as interaction, InteractionRun};
 use crate::experiment::mode_name;
@@ -98,7 +98,7 @@ fn excerpt(r: &InteractionRun) -> &[Arc<TickRecord>] {
 }
 
 /// Figure 3: elbow angle, prediction, current and command around a command, one column per policy.
-pub(crate) fn fig3(path: &Path, s: &InteractionSummary) -> std::io::Result<()> {
+pub(crate) fn fig3(path: &Path, s: &InteractionStudy) -> std::io::Result<()> {
     let root = SVGBackend::new(path, (1000, 800)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let root = root
@@ -175,7 +175,7 @@ pub(crate) fn fig3(path: &Path, s: &InteractionSummary) -> std::io::Result<()> {
 }
 
 /// Figure 4: current and rotation aligned on the observed command onset, both policies.
-pub(crate) fn fig4(path: &Path, s: &InteractionSummary) -> std::io::Result<()> {
+pub(crate) fn fig4(path: &Path, s: &InteractionStudy) -> std::io::Result<()> {
     let root = SVGBackend::new(path, (1000, 420)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let cols = root.split_evenly((1, 2));

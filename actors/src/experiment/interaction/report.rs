@@ -6,7 +6,7 @@ use std::path::Path;
 
 use pavlov::analysis::stats::Describe;
 
-use super::{InteractionSummary, plots};
+use super::{InteractionStudy, plots};
 use crate::experiment::mode_name;
 
 fn num(x: f64) -> String {
@@ -18,7 +18,7 @@ fn num(x: f64) -> String {
 }
 
 /// The terminal table.
-pub fn table(s: &InteractionSummary) -> String {
+pub fn table(s: &InteractionStudy) -> String {
     let o = &s.options;
     let mut t = String::new();
     let _ = writeln!(
@@ -118,7 +118,7 @@ fn d(x: &Describe) -> String {
 }
 
 /// Writes `summary.json`, `commands.csv`, `aligned.csv` and the figures.
-pub fn write_all(dir: &Path, s: &InteractionSummary) -> std::io::Result<()> {
+pub fn write_all(dir: &Path, s: &InteractionStudy) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
     let json = serde_json::to_string_pretty(s).map_err(std::io::Error::other)?;
     std::fs::write(dir.join("summary.json"), json)?;

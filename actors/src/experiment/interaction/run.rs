@@ -14,7 +14,7 @@ use std::sync::Arc;
 use pavlov::analysis::interaction::live_physical::physical_sample;
 use pavlov::analysis::interaction::physical::{PhysicalLatency, PhysicalParams, measure_physical};
 use pavlov::analysis::interaction::{
-    CommandWindow, InteractionMetrics, MatchParams, ResponseSample, measure,
+    CommandWindow, MatchParams, ResponseSample, ResponseTiming, measure,
 };
 use pavlov::config::Config;
 use pavlov::control::Mode;
@@ -46,7 +46,7 @@ pub struct InteractionRun {
     /// The simulated operator's seed.
     pub(crate) human_seed: u64,
     /// Response timing against the ground-truth commands.
-    pub metrics: InteractionMetrics,
+    pub metrics: ResponseTiming,
     /// The ground-truth commands.
     pub commands: Vec<CommandWindow>,
     /// Per command: when the battery current dropped and the wheels moved, relative to its onset

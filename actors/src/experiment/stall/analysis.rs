@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use super::run::RunResult;
 
 /// The metrics compared between the policies: (key, label, unit).
-pub const METRICS: [(&str, &str, &str); 6] = [
+pub const TOTALS: [(&str, &str, &str); 6] = [
     (
         "overcurrent_observations",
         "over-current observations",
@@ -22,7 +22,7 @@ pub const METRICS: [(&str, &str, &str); 6] = [
 ];
 
 /// One metric's value in a run (`None` for an efficiency without energy).
-pub(crate) fn metric(r: &RunResult, key: &str) -> Option<f64> {
+pub(crate) fn total(r: &RunResult, key: &str) -> Option<f64> {
     let m = &r.metrics;
     match key {
         "overcurrent_observations" => Some(m.overcurrent_observations as f64),
@@ -70,7 +70,7 @@ pub(crate) struct CurvePoint {
 /// Everything the report shows.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Analysis {
-    /// One per metric of [`METRICS`].
+    /// One per metric of [`TOTALS`].
     pub comparisons: Vec<Comparison>,
     /// Over-current observations per window.
     pub(crate) learning_curve: Vec<CurvePoint>,
@@ -83,13 +83,13 @@ pub struct Analysis {
 fn values(runs: &[RunResult], mode: Mode, key: &str) -> Vec<f64> {
     runs.iter()
         .filter(|r| r.mode == mode)
-        .filter_map(|r| metric(r, key))
+        .filter_map(|r| total(r, key))
         .collect()
 }
 
 /// Analyses the runs; `window_s` is the learning curve's window length.
 pub(crate) fn analyse(runs: &[RunResult], window_s: f64) -> Analysis {
-    let comparisons = METRICS
+    let comparisons = TOTALS
         .iter()
         .map(|(key, label, unit)| {
             let a = values(runs, Mode::Reactive, key);
@@ -146,14 +146,14 @@ pub(crate) fn analyse(runs: &[RunResult], window_s: f64) -> Analysis {
 mod tests {
     use super::*;
     use crate::experiment::stall::run::WindowCounts;
-    use pavlov::analysis::run_metrics::MetricsSummary;
+    use pavlov::analysis::run_counters::RunTotals;
 
     fn run(index: usize, mode: Mode, oc: u64, windows: &[u64]) -> RunResult {
         RunResult {
             index,
             mode,
             seed: index as u64,
-            metrics: MetricsSummary {
+            metrics: RunTotals {
                 ticks: 100,
                 elapsed_s: 2.0,
                 overcurrent_observations: oc,
@@ -201,6 +201,6 @@ mod tests {
         assert_eq!(a.benefit_from_window, Some(1));
         assert_eq!(a.first_predictive_stop_s.n, 2);
         assert_eq!(a.first_predictive_stop_s.mean, 6.0);
-        assert_eq!(metric(&runs[0], "nope"), None);
+        assert_eq!(total(&runs[0], "nope"), None);
     }
 }

@@ -19,7 +19,7 @@ use pavlov::config::Config;
 use serde::{Deserialize, Serialize};
 
 pub(crate) use analysis::analyse;
-pub(crate) use report::Summary;
+pub(crate) use report::StallStudy;
 pub(crate) use run::{RunResult, RunSpec};
 
 use super::{interleaved_mode, mode_name, run_all, run_rng};
@@ -79,7 +79,7 @@ pub fn plan(config: &Config, opts: &StallOptions) -> Vec<RunSpec> {
 }
 
 /// Runs the whole study with `base` as the configuration; `progress` shows a progress bar on stderr.
-pub fn run_study(base: &Config, opts: &StallOptions, progress: bool) -> anyhow::Result<Summary> {
+pub fn run_study(base: &Config, opts: &StallOptions, progress: bool) -> anyhow::Result<StallStudy> {
     let wall = Instant::now();
     let specs = plan(base, opts);
     let bar = super::progress_bar(specs.len(), progress);
@@ -98,7 +98,7 @@ pub fn run_study(base: &Config, opts: &StallOptions, progress: bool) -> anyhow::
     let analysis = analyse(&runs, WINDOW_S);
     let simulated_s: f64 = runs.iter().map(|r| r.metrics.elapsed_s).sum();
     let wall_s = wall.elapsed().as_secs_f64();
-    Ok(Summary {
+    Ok(StallStudy {
         experiment: "stall".into(),
         options: opts.clone(),
         seed_derivation: "run i (0-based, even = reactive, odd = Pavlovian) uses simulator seed \
@@ -118,11 +118,11 @@ pub fn run_and_report(
     opts: &StallOptions,
     progress: bool,
 ) -> anyhow::Result<String> {
-    let summary = run_study(base, opts, progress)?;
-    report::write_all(&opts.out, &summary)?;
-    let mut table = report::table(&summary);
+    let study = run_study(base, opts, progress)?;
+    report::write_all(&opts.out, &study)?;
+    let mut table = report::table(&study);
     table.push_str(&format!("results: {}\n", opts.out.display()));
-    for r in &summary.runs {
+    for r in &study.runs {
         if r.recorder_dropped > 0 || r.lagged > 0 {
             table.push_str(&format!(
                 "warning: run {}: {} records dropped by the recorder queue, {} missed by the analysis\n",

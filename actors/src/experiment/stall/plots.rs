@@ -316,7 +316,7 @@ pub(crate) fn learning_curve(path: &Path, a: &Analysis) -> Io {
 mod tests {
     use super::*;
     use pavlov::control::Action;
-    use pavlov::record::{LinkSummary, SensorSummary};
+    use pavlov::record::{LinkStatus, SensorReadings};
 
     fn rec(seq: u64, default_action: Action, oc: bool) -> TickRecord {
         TickRecord {
@@ -324,9 +324,9 @@ mod tests {
             t_ms: seq as f64 * 20.0,
             mode: Mode::Reactive,
             obs_age_ticks: Some(0),
-            sensors: SensorSummary {
+            sensors: SensorReadings {
                 overcurrent_left: oc,
-                ..SensorSummary::default()
+                ..SensorReadings::default()
             },
             obs: Vec::new(),
             elbow: None,
@@ -338,7 +338,7 @@ mod tests {
             safety_stop: None,
             estop: false,
             lateness_us: 0,
-            link: LinkSummary::default(),
+            link: LinkStatus::default(),
             inputs: None,
         }
     }

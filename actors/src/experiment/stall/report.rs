@@ -6,14 +6,14 @@ use std::path::Path;
 use pavlov::control::Mode;
 use serde::{Deserialize, Serialize};
 
-use super::analysis::{Analysis, METRICS, metric};
+use super::analysis::{Analysis, TOTALS, total};
 use super::run::RunResult;
 use super::{StallOptions, WINDOW_S, plots};
 use crate::experiment::mode_name;
 
 /// Everything `summary.json` holds.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Summary {
+pub struct StallStudy {
     /// Always "stall".
     pub(crate) experiment: String,
     /// The settings.
@@ -33,17 +33,17 @@ pub struct Summary {
 }
 
 /// Writes `summary.json`, the CSV tables and the SVG figures into `dir`.
-pub fn write_all(dir: &Path, summary: &Summary) -> std::io::Result<()> {
+pub fn write_all(dir: &Path, study: &StallStudy) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
-    let json = serde_json::to_string_pretty(summary).map_err(std::io::Error::other)?;
+    let json = serde_json::to_string_pretty(study).map_err(std::io::Error::other)?;
     std::fs::write(dir.join("summary.json"), json)?;
-    std::fs::write(dir.join("runs.csv"), runs_csv(&summary.runs))?;
-    std::fs::write(dir.join("windows.csv"), windows_csv(&summary.runs))?;
-    std::fs::write(dir.join("learning_curve.csv"), curve_csv(&summary.analysis))?;
+    std::fs::write(dir.join("runs.csv"), runs_csv(&study.runs))?;
+    std::fs::write(dir.join("windows.csv"), windows_csv(&study.runs))?;
+    std::fs::write(dir.join("learning_curve.csv"), curve_csv(&study.analysis))?;
     let excerpts: Vec<(Mode, &[pavlov::record::TickRecord])> = [Mode::Reactive, Mode::Pavlovian]
         .into_iter()
         .filter_map(|m| {
-            summary
+            study
                 .runs
                 .iter()
                 .find(|r| r.mode == m && !r.excerpt.is_empty())
@@ -52,8 +52,8 @@ pub fn write_all(dir: &Path, summary: &Summary) -> std::io::Result<()> {
         .collect();
     std::fs::write(dir.join("fig1_signals.csv"), signals_csv(&excerpts))?;
     plots::fig1_push(&dir.join("fig1_push.svg"), &excerpts)?;
-    plots::fig2_bars(&dir.join("fig2_bars.svg"), &summary.analysis)?;
-    plots::learning_curve(&dir.join("fig_learning_curve.svg"), &summary.analysis)?;
+    plots::fig2_bars(&dir.join("fig2_bars.svg"), &study.analysis)?;
+    plots::learning_curve(&dir.join("fig_learning_curve.svg"), &study.analysis)?;
     Ok(())
 }
 
@@ -64,15 +64,15 @@ fn opt(v: Option<f64>) -> String {
 /// One row per run.
 pub(crate) fn runs_csv(runs: &[RunResult]) -> String {
     let mut s = String::from("run,policy,seed");
-    for (key, _, _) in METRICS {
+    for (key, _, _) in TOTALS {
         s.push(',');
         s.push_str(key);
     }
     s.push('\n');
     for r in runs {
         let _ = write!(s, "{},{},{}", r.index, mode_name(r.mode), r.seed);
-        for (key, _, _) in METRICS {
-            let _ = write!(s, ",{}", opt(metric(r, key)));
+        for (key, _, _) in TOTALS {
+            let _ = write!(s, ",{}", opt(total(r, key)));
         }
         s.push('\n');
     }
@@ -165,8 +165,8 @@ fn pm(d: &pavlov::analysis::stats::Describe) -> String {
 }
 
 /// The table printed at the end of a study.
-pub fn table(summary: &Summary) -> String {
-    let o = &summary.options;
+pub fn table(study: &StallStudy) -> String {
+    let o = &study.options;
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -178,7 +178,7 @@ pub fn table(summary: &Summary) -> String {
         "{:<28} {:>24} {:>24} {:>9} {:>8} {:>6} {:>8}",
         "metric", "reactive", "Pavlovian", "change", "t", "df", "p"
     );
-    for c in &summary.analysis.comparisons {
+    for c in &study.analysis.comparisons {
         let (t, df, p) = c.welch.map_or(("–".into(), "–".into(), "–".into()), |w| {
             (
                 format!("{:.2}", w.t),
@@ -210,7 +210,7 @@ pub fn table(summary: &Summary) -> String {
         "learning curve (over-current observations per {WINDOW_S} s window, reactive / Pavlovian mean):"
     );
     let mut line = String::new();
-    for p in &summary.analysis.learning_curve {
+    for p in &study.analysis.learning_curve {
         let _ = write!(
             line,
             " {}s: {:.1}/{:.1}",
@@ -218,7 +218,7 @@ pub fn table(summary: &Summary) -> String {
         );
     }
     let _ = writeln!(s, "{}", line.trim_start());
-    match summary.analysis.benefit_from_window {
+    match study.analysis.benefit_from_window {
         Some(w) => {
             let _ = writeln!(
                 s,
@@ -230,7 +230,7 @@ pub fn table(summary: &Summary) -> String {
             let _ = writeln!(s, "Pavlovian is not below reactive in every later window");
         }
     }
-    let f = &summary.analysis.first_predictive_stop_s;
+    let f = &study.analysis.first_predictive_stop_s;
     let _ = writeln!(
         s,
         "first stop on the prediction alone (gate on, stimulus off): {} ± {} s into the run ({} Pavlovian runs)",
@@ -241,7 +241,7 @@ pub fn table(summary: &Summary) -> String {
     let _ = writeln!(
         s,
         "seeds (run: policy seed): {}",
-        summary
+        study
             .runs
             .iter()
             .map(|r| format!("{}:{} {}", r.index, &mode_name(r.mode)[..1], r.seed))
@@ -251,7 +251,7 @@ pub fn table(summary: &Summary) -> String {
     let _ = writeln!(
         s,
         "{:.0} s simulated in {:.1} s of wall time ({:.0}× real time)",
-        summary.simulated_s, summary.wall_s, summary.speedup
+        study.simulated_s, study.wall_s, study.speedup
     );
     s
 }

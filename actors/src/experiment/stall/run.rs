@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use pavlov::analysis::run_metrics::{MetricsSummary, RunMetrics};
+use pavlov::analysis::run_counters::{RunCounters, RunTotals};
 use pavlov::config::Config;
 use pavlov::control::Mode;
 use pavlov::record::TickRecord;
@@ -57,7 +57,7 @@ pub struct RunResult {
     /// The simulator's seed.
     pub seed: u64,
     /// The run's metrics.
-    pub metrics: MetricsSummary,
+    pub metrics: RunTotals,
     /// Per-window counts, in order.
     pub windows: Vec<WindowCounts>,
     /// The recording, if one was written.
@@ -72,7 +72,7 @@ pub struct RunResult {
     pub(crate) wall_s: f64,
     /// When the response first engaged on the prediction alone (gate on, stimulus off), s.
     pub(crate) first_predictive_stop_s: Option<f64>,
-    /// The Figure 1 excerpt (not serialised into the summary).
+    /// The Figure 1 excerpt (not serialised into the study).
     #[serde(skip)]
     pub(crate) excerpt: Vec<TickRecord>,
 }
@@ -80,14 +80,14 @@ pub struct RunResult {
 /// What a stall run keeps while it runs.
 struct StallCollector<'a> {
     spec: &'a RunSpec,
-    metrics: RunMetrics,
+    metrics: RunCounters,
     windows: Vec<WindowCounts>,
     excerpt: Vec<TickRecord>,
     first_predictive_stop_s: Option<f64>,
 }
 
 struct Kept {
-    metrics: MetricsSummary,
+    metrics: RunTotals,
     windows: Vec<WindowCounts>,
     excerpt: Vec<TickRecord>,
     first_predictive_stop_s: Option<f64>,
@@ -100,14 +100,14 @@ impl Collect for StallCollector<'_> {
         if self.first_predictive_stop_s.is_none() && record.gate && !record.stimulus {
             self.first_predictive_stop_s = Some(record.t_ms / 1000.0);
         }
-        let before = self.metrics.summary();
+        let before = self.metrics.totals();
         self.metrics.observe(&record);
         let w = usize::try_from(record.seq / self.spec.window_ticks.max(1)).unwrap_or(usize::MAX);
         if w >= self.windows.len() && w < 100_000 {
             self.windows.resize(w + 1, WindowCounts::default());
         }
         if let Some(win) = self.windows.get_mut(w) {
-            let after = self.metrics.summary();
+            let after = self.metrics.totals();
             win.overcurrent_observations +=
                 after.overcurrent_observations - before.overcurrent_observations;
             win.stall_events += after.stall_events - before.stall_events;
@@ -124,7 +124,7 @@ impl Collect for StallCollector<'_> {
 
     async fn finish(self) -> Result<Kept, RunError> {
         Ok(Kept {
-            metrics: self.metrics.summary(),
+            metrics: self.metrics.totals(),
             windows: self.windows,
             excerpt: self.excerpt,
             first_predictive_stop_s: self.first_predictive_stop_s,
@@ -146,7 +146,7 @@ pub(crate) fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> 
     };
     let collector = StallCollector {
         spec,
-        metrics: RunMetrics::new(period_ms),
+        metrics: RunCounters::new(period_ms),
         windows: Vec::new(),
         excerpt: Vec::new(),
         first_predictive_stop_s: None,

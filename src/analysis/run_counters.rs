@@ -1,4 +1,4 @@
-//! [`RunMetrics`]: running counters of a run, accumulated from its [`TickRecord`]s.
+//! [`RunCounters`]: running counters of a run, accumulated from its [`TickRecord`]s.
 //!
 //! The dashboard shows them live and the experiment runner reports them at the end of a run; both feed
 //! the same accumulator one record at a time, so the figures agree. Everything is computed from the
@@ -8,7 +8,7 @@
 //! - stall events: rising edges of the stimulus E (off → on), and the time E was on;
 //! - distance: Σ |distance_mm| (odometry since the previous tick), in metres;
 //! - energy: Σ V·|I|·dt from the battery voltage and current, in joules (ticks without both readings add
-//!   nothing and are counted in [`RunMetrics::ticks_without_power`]);
+//!   nothing and are counted in [`RunCounters::ticks_without_power`]);
 //! - efficiency: metres travelled per kilojoule spent.
 //!
 //! `dt` is the gap between consecutive records' scheduled times, so skipped ticks are covered; the first
@@ -20,7 +20,7 @@ use crate::record::TickRecord;
 
 /// Running counters of one run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RunMetrics {
+pub struct RunCounters {
     /// The nominal tick period, ms (used for the first record).
     pub period_ms: f64,
     /// Records seen.
@@ -43,10 +43,10 @@ pub struct RunMetrics {
     last_stimulus: bool,
 }
 
-impl RunMetrics {
+impl RunCounters {
     /// Empty counters for a run ticking every `period_ms`.
     pub fn new(period_ms: f64) -> Self {
-        RunMetrics {
+        RunCounters {
             period_ms,
             ticks: 0,
             overcurrent_observations: 0,
@@ -105,8 +105,8 @@ impl RunMetrics {
     }
 
     /// A serialisable snapshot with the derived figures filled in.
-    pub fn summary(&self) -> MetricsSummary {
-        MetricsSummary {
+    pub fn totals(&self) -> RunTotals {
+        RunTotals {
             ticks: self.ticks,
             elapsed_s: self.elapsed_s,
             overcurrent_observations: self.overcurrent_observations,
@@ -119,9 +119,9 @@ impl RunMetrics {
     }
 }
 
-/// The figures of a [`RunMetrics`], as sent to the dashboard and written in reports.
+/// The figures of a [`RunCounters`], as sent to the dashboard and written in reports.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct MetricsSummary {
+pub struct RunTotals {
     /// Records seen.
     pub ticks: u64,
     /// Run time covered, seconds.
@@ -151,7 +151,7 @@ mod tests {
 
     #[test]
     fn overcurrent_counts_ticks_with_either_flag_once() {
-        let mut m = RunMetrics::new(20.0);
+        let mut m = RunCounters::new(20.0);
         let flags = [
             (false, false),
             (true, false),
@@ -171,7 +171,7 @@ mod tests {
 
     #[test]
     fn stall_events_are_rising_edges_and_time_stalled_follows_the_stimulus() {
-        let mut m = RunMetrics::new(20.0);
+        let mut m = RunCounters::new(20.0);
         let stim = [false, true, true, true, false, true, false, false, true];
         for (i, &e) in stim.iter().enumerate() {
             let mut rec = record(i as u64, i as f64 * 20.0);
@@ -185,7 +185,7 @@ mod tests {
 
     #[test]
     fn a_run_starting_stalled_counts_one_event() {
-        let mut m = RunMetrics::new(20.0);
+        let mut m = RunCounters::new(20.0);
         let mut rec = record(0, 0.0);
         rec.stimulus = true;
         m.observe(&rec);
@@ -194,7 +194,7 @@ mod tests {
 
     #[test]
     fn distance_sums_absolute_odometry() {
-        let mut m = RunMetrics::new(20.0);
+        let mut m = RunCounters::new(20.0);
         for (i, d) in [10, -4, 0, 7, -3].into_iter().enumerate() {
             let mut rec = record(i as u64, i as f64 * 20.0);
             rec.sensors.distance_mm = d;
@@ -205,7 +205,7 @@ mod tests {
 
     #[test]
     fn energy_integrates_voltage_times_current_over_the_record_gaps() {
-        let mut m = RunMetrics::new(20.0);
+        let mut m = RunCounters::new(20.0);
         // 16 V, −500 mA (discharging) on every tick; the third record comes after a skipped tick (40 ms).
         for (i, t) in [0.0, 20.0, 60.0].into_iter().enumerate() {
             let mut rec = record(i as u64, t);
@@ -221,7 +221,7 @@ mod tests {
 
     #[test]
     fn missing_battery_readings_add_no_energy_and_are_counted() {
-        let mut m = RunMetrics::new(20.0);
+        let mut m = RunCounters::new(20.0);
         let mut rec = record(0, 0.0);
         rec.sensors.battery_voltage_mv = Some(16_000);
         m.observe(&rec);
@@ -232,7 +232,7 @@ mod tests {
 
     #[test]
     fn efficiency_is_metres_per_kilojoule() {
-        let mut m = RunMetrics::new(20.0);
+        let mut m = RunCounters::new(20.0);
         for i in 0..50 {
             let mut rec = record(i, i as f64 * 20.0);
             rec.sensors.distance_mm = 4; // 0.2 m in total
@@ -242,7 +242,7 @@ mod tests {
         }
         let eff = m.efficiency_m_per_kj().unwrap();
         assert!((eff - 0.2 / 0.01).abs() < 1e-6, "{eff}");
-        let s = m.summary();
+        let s = m.totals();
         assert_eq!(s.ticks, 50);
         assert_eq!(s.efficiency_m_per_kj, Some(eff));
         assert!((m.overcurrent_per_minute().unwrap()).abs() < 1e-12);
@@ -250,7 +250,7 @@ mod tests {
 
     #[test]
     fn time_going_backwards_counts_as_one_period() {
-        let mut m = RunMetrics::new(20.0);
+        let mut m = RunCounters::new(20.0);
         m.observe(&record(0, 100.0));
         m.observe(&record(1, 100.0));
         m.observe(&record(2, 50.0));

@@ -1,21 +1,25 @@
-//! The raw readings a [`SensorSummary`] carries, taken from one sensor snapshot.
+//! The raw readings a tick record carries ([`SensorReadings`]), taken from one sensor snapshot.
 
 use crate::oi::SensorValues;
 use crate::oi::packets::{bits, id};
-use crate::record::SensorSummary;
+use crate::record::SensorReadings;
 
 /// Summarises `values`, with odometry summed over every frame since the previous tick.
-pub fn summarize(values: Option<&SensorValues>, distance_mm: i32, angle_deg: i32) -> SensorSummary {
+pub fn read_sensors(
+    values: Option<&SensorValues>,
+    distance_mm: i32,
+    angle_deg: i32,
+) -> SensorReadings {
     let Some(v) = values else {
-        return SensorSummary {
+        return SensorReadings {
             distance_mm,
             angle_deg,
-            ..SensorSummary::default()
+            ..SensorReadings::default()
         };
     };
     let oc = v.get_or_zero(id::OVERCURRENTS);
     let bumps = v.get_or_zero(id::BUMPS_WHEEL_DROPS);
-    SensorSummary {
+    SensorReadings {
         overcurrent_left: oc & bits::OC_LEFT_WHEEL != 0,
         overcurrent_right: oc & bits::OC_RIGHT_WHEEL != 0,
         bump_left: bumps & bits::BUMP_LEFT != 0,
@@ -39,12 +43,12 @@ mod tests {
         v.set(id::OVERCURRENTS, bits::OC_LEFT_WHEEL);
         v.set(id::BUMPS_WHEEL_DROPS, bits::BUMP_RIGHT);
         v.set(id::CURRENT, -1200);
-        let s = summarize(Some(&v), 7, -2);
+        let s = read_sensors(Some(&v), 7, -2);
         assert!(s.overcurrent_left && !s.overcurrent_right);
         assert!(s.bump_right && !s.bump_left);
         assert_eq!(s.battery_current_ma, Some(-1200));
         assert_eq!(s.battery_voltage_mv, None);
         assert_eq!((s.distance_mm, s.angle_deg), (7, -2));
-        assert_eq!(summarize(None, 0, 0), SensorSummary::default());
+        assert_eq!(read_sensors(None, 0, 0), SensorReadings::default());
     }
 }
