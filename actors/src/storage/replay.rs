@@ -23,7 +23,7 @@ pub struct Mismatch {
     /// The tick.
     pub seq: u64,
     /// Which field.
-    pub(crate) field: String,
+    pub field: String,
     /// What the recording says.
     pub(crate) recorded: String,
     /// What replay computed.
@@ -38,7 +38,7 @@ pub struct ReplayReport {
     /// Prediction values compared.
     pub(crate) predictions_compared: usize,
     /// Safety stops compared (every tick).
-    pub(crate) stops_compared: usize,
+    pub stops_compared: usize,
     /// Commands compared (every tick but manual-mode ticks without a safety stop).
     pub commands_compared: usize,
     /// Ticks where `seq` jumped (records missing from the recording).

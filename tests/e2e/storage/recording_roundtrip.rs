@@ -97,6 +97,24 @@ fn a_run_with_link_faults_replays_exactly() {
     assert!(not_up > 20, "only {not_up} ticks without an up link");
     let report = replay::replay(&rec).expect("replay");
     assert!(report.exact(), "{}", replay::describe(&report));
+    // Safety stops and commands are checked on every tick, the stopped ones included.
+    assert_eq!(report.stops_compared, rec.records.len());
+    let stopped: Vec<usize> = (0..rec.records.len())
+        .filter(|&i| rec.records[i].safety_stop.is_some())
+        .collect();
+    assert!(stopped.len() >= not_up, "{} stopped ticks", stopped.len());
+    assert_eq!(report.commands_compared, rec.records.len());
+    // A stopped tick recorded as moving, or recorded without its stop, is a mismatch.
+    let at = stopped[stopped.len() / 2];
+    let mut moving = rec.clone();
+    moving.records[at].command = pavlov::control::Action::new(100, 100);
+    let report = replay::replay(&moving).unwrap();
+    assert_eq!(report.mismatch_count, 1, "{}", replay::describe(&report));
+    assert_eq!(report.mismatches[0].field, "command");
+    let mut unstopped = rec.clone();
+    unstopped.records[at].safety_stop = None;
+    let report = replay::replay(&unstopped).unwrap();
+    assert_eq!(report.mismatches[0].field, "safety_stop");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
