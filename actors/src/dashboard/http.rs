@@ -112,6 +112,19 @@ impl AppState {
     }
 }
 
+/// `200 ok` while the tick loop runs and the robot link is up; `503` with the reason otherwise.
+async fn healthz(State(state): State<Arc<AppState>>) -> Response {
+    let verdict = state.health.verdict();
+    let status = match verdict {
+        crate::telemetry::Verdict::Ok => StatusCode::OK,
+        _ => StatusCode::SERVICE_UNAVAILABLE,
+    };
+    let mut r = (status, verdict.describe()).into_response();
+    r.headers_mut()
+        .insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    r
+}
+
 async fn metrics(State(state): State<Arc<AppState>>) -> Response {
     let text = crate::telemetry::prometheus::render(&state.metrics());
     let mut r = text.into_response();
@@ -145,7 +158,7 @@ pub(crate) fn router(state: Arc<AppState>) -> Router {
         )
         .route("/vendor/uplot.iife.min.js", get(uplot_js))
         .route("/vendor/uplot.min.css", get(uplot_css))
-        .route("/healthz", get(|| async { "ok" }))
+        .route("/healthz", get(healthz))
         .route("/metrics", get(metrics))
         .route("/ws", get(ws_handler))
         .fallback(|| async { (StatusCode::NOT_FOUND, "not found\n") })

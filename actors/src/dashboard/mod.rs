@@ -57,13 +57,28 @@ pub enum DashboardError {
     #[error("cannot start the dashboard's runtime: {0}")]
     Runtime(std::io::Error),
     /// The listen address could not be bound.
-    #[error("cannot listen on {addr} for the dashboard: {source}")]
+    #[error("{}", bind_message(addr, source))]
     Bind {
         /// The address from `[dashboard] bind` / `--bind`.
         addr: String,
         /// Why.
         source: std::io::Error,
     },
+}
+
+fn bind_message(addr: &str, source: &std::io::Error) -> String {
+    match source.kind() {
+        std::io::ErrorKind::AddrInUse => format!(
+            "{addr} is in use: stop the other server or pass --bind (e.g. --bind 127.0.0.1:8081)"
+        ),
+        std::io::ErrorKind::AddrNotAvailable => format!(
+            "cannot listen on {addr}: no such address on this machine; pass --bind with one of its addresses"
+        ),
+        std::io::ErrorKind::PermissionDenied => format!(
+            "cannot listen on {addr}: permission denied (ports below 1024 need privileges); pass --bind"
+        ),
+        _ => format!("cannot listen on {addr} for the dashboard: {source}"),
+    }
 }
 
 /// The running endpoint. It runs on its own single-worker tokio runtime (thread `dashboard`), so that
@@ -95,27 +110,73 @@ fn redacted_config(config: &pavlov::config::Config) -> serde_json::Value {
     serde_json::to_value(&config).unwrap_or(serde_json::Value::Null)
 }
 
+/// The dashboard's listening socket, bound before anything else starts (so a busy port stops the start-up
+/// before the robot is touched).
+pub struct BoundDashboard {
+    listener: std::net::TcpListener,
+    addr: SocketAddr,
+}
+
+impl BoundDashboard {
+    /// The address actually bound (useful with port 0).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.addr
+    }
+}
+
 impl Dashboard {
-    /// Binds `[dashboard] bind` and starts serving the dashboard of `server`; uPlot is served from
-    /// `web_dir/node_modules/uplot/dist`.
-    pub async fn start(server: &Server, web_dir: PathBuf) -> Result<Dashboard, DashboardError> {
-        let cfg = &server.config.dashboard;
+    /// Binds `[dashboard] bind`.
+    pub fn bind(
+        config: &pavlov::config::DashboardConfig,
+    ) -> Result<BoundDashboard, DashboardError> {
         let bind_error = |source| DashboardError::Bind {
-            addr: cfg.bind.clone(),
+            addr: config.bind.clone(),
             source,
         };
+        let listener = std::net::TcpListener::bind(&config.bind).map_err(bind_error)?;
+        listener.set_nonblocking(true).map_err(bind_error)?;
+        let addr = listener.local_addr().map_err(bind_error)?;
+        Ok(BoundDashboard { listener, addr })
+    }
+
+    /// Binds `[dashboard] bind` and starts serving the dashboard of `server` (see [`Dashboard::serve`]).
+    pub async fn start(server: &Server, web_dir: PathBuf) -> Result<Dashboard, DashboardError> {
+        let bound = Self::bind(&server.config.dashboard)?;
+        Self::serve(bound, server, web_dir).await
+    }
+
+    /// Starts serving the dashboard of `server` on `bound`; uPlot is served from
+    /// `web_dir/node_modules/uplot/dist`.
+    pub async fn serve(
+        bound: BoundDashboard,
+        server: &Server,
+        web_dir: PathBuf,
+    ) -> Result<Dashboard, DashboardError> {
+        let cfg = &server.config.dashboard;
+        let BoundDashboard {
+            listener: std_listener,
+            addr,
+        } = bound;
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)
             .thread_name("dashboard")
             .enable_all()
             .build()
             .map_err(DashboardError::Runtime)?;
-        let std_listener = std::net::TcpListener::bind(&cfg.bind).map_err(bind_error)?;
-        std_listener.set_nonblocking(true).map_err(bind_error)?;
-        let addr = std_listener.local_addr().map_err(bind_error)?;
         let listener = {
             let _inside = runtime.enter();
-            tokio::net::TcpListener::from_std(std_listener).map_err(bind_error)?
+            tokio::net::TcpListener::from_std(std_listener)
+        };
+        let listener = match listener {
+            Ok(l) => l,
+            Err(source) => {
+                // A runtime may not be dropped inside an async context.
+                runtime.shutdown_background();
+                return Err(DashboardError::Bind {
+                    addr: cfg.bind.clone(),
+                    source,
+                });
+            }
         };
         if !http::uplot_installed(&web_dir) {
             tracing::error!(

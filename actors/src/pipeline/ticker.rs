@@ -59,6 +59,7 @@ pub(crate) async fn run(
         if let Ok(mut s) = stats.lock() {
             s.fired += 1;
             s.skipped += skipped;
+            s.last_fired = Some(fired);
             s.lateness.record(tick.lateness());
         }
         if skipped > 0 {

@@ -19,6 +19,8 @@ pub(crate) struct TickStats {
     pub(crate) fired: u64,
     /// Ticks skipped because the ticker was woken too late.
     pub(crate) skipped: u64,
+    /// When the newest tick fired.
+    pub(crate) last_fired: Option<tokio::time::Instant>,
 }
 
 /// Shared handle on the tick statistics.

@@ -67,7 +67,63 @@ pub struct HealthFigures {
     pub(crate) recorder: Option<RecorderFigures>,
 }
 
+/// Longest silence of the tick loop that still counts as running: 50 ticks at 50 Hz.
+pub const TICK_STALL: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// Whether the server is doing its job, for `/healthz` and `/metrics`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Verdict {
+    /// The tick loop runs and the robot link is up.
+    Ok,
+    /// The tick loop runs but the robot link is not up (stale, reconnecting, tripped, down).
+    LinkNotUp(String),
+    /// The tick loop has not fired for longer than [`TICK_STALL`] (or never has).
+    TickStalled(String),
+}
+
+impl Verdict {
+    /// The one-line text `/healthz` answers.
+    pub fn describe(&self) -> String {
+        match self {
+            Verdict::Ok => "ok".into(),
+            Verdict::LinkNotUp(why) | Verdict::TickStalled(why) => why.clone(),
+        }
+    }
+}
+
 impl Health {
+    /// Time since the newest tick fired (`None` before the first).
+    pub fn tick_age(&self) -> Option<std::time::Duration> {
+        let last = self.ticks.lock().ok()?.last_fired?;
+        Some(tokio::time::Instant::now().saturating_duration_since(last))
+    }
+
+    /// Judges the tick loop and the robot link now.
+    pub fn verdict(&self) -> Verdict {
+        match self.tick_age() {
+            None => return Verdict::TickStalled("the tick loop has not started".into()),
+            Some(age) if age > TICK_STALL => {
+                return Verdict::TickStalled(format!(
+                    "the tick loop is stalled: no tick for {} ms",
+                    age.as_millis()
+                ));
+            }
+            Some(_) => {}
+        }
+        match *self.link.borrow() {
+            Some(l) if l.state == pavlov::supervision::LinkState::Up => Verdict::Ok,
+            Some(l) => Verdict::LinkNotUp(match l.trip {
+                Some(cause) => format!(
+                    "the robot link is {}: the robot tripped ({}); send rearm",
+                    l.state.name(),
+                    cause.describe()
+                ),
+                None => format!("the robot link is {}", l.state.name()),
+            }),
+            None => Verdict::LinkNotUp("no tick record yet".into()),
+        }
+    }
+
     /// The figures now.
     pub fn figures(&self) -> HealthFigures {
         let mut f = HealthFigures::default();
@@ -107,5 +163,60 @@ impl Health {
     /// The simulated robot's state after its newest step (`None` on a real robot).
     pub fn sim_status(&self) -> Option<watch::Receiver<SimStatus>> {
         self.sim.clone()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pavlov::record::LinkStatus;
+    use pavlov::supervision::{LinkState, TripCause};
+
+    fn health(last_fired_ago: Option<std::time::Duration>, link: Option<LinkStatus>) -> Health {
+        let ticks = SharedTickStats::default();
+        if let Some(ago) = last_fired_ago {
+            ticks.lock().unwrap().last_fired = Some(tokio::time::Instant::now() - ago);
+        }
+        Health {
+            ticks,
+            writer: SharedWriterStats::default(),
+            actuation: watch::channel(ActuationStats::default()).1,
+            sim: None,
+            recorder: RecorderGauge::new(None, Default::default()),
+            link: watch::channel(link).1,
+        }
+    }
+
+    fn link(state: LinkState, trip: Option<TripCause>) -> Option<LinkStatus> {
+        Some(LinkStatus {
+            state,
+            trip,
+            ..LinkStatus::default()
+        })
+    }
+
+    #[test]
+    fn the_verdict_judges_the_tick_loop_first_then_the_link() {
+        let ms = std::time::Duration::from_millis;
+        assert!(matches!(
+            health(None, None).verdict(),
+            Verdict::TickStalled(_)
+        ));
+        let stalled = health(Some(ms(1500)), link(LinkState::Up, None)).verdict();
+        assert!(
+            stalled
+                .describe()
+                .starts_with("the tick loop is stalled: no tick for 15"),
+            "{stalled:?}"
+        );
+        let ok = health(Some(ms(5)), link(LinkState::Up, None)).verdict();
+        assert_eq!(ok, Verdict::Ok);
+        let down = health(Some(ms(5)), link(LinkState::Reconnecting, None)).verdict();
+        assert_eq!(down.describe(), "the robot link is reconnecting");
+        let tripped = health(
+            Some(ms(5)),
+            link(LinkState::Tripped, Some(TripCause::Cliff)),
+        );
+        assert!(tripped.verdict().describe().contains("send rearm"));
     }
 }

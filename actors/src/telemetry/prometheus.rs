@@ -42,6 +42,10 @@ pub(crate) struct MetricsSnapshot {
     pub(crate) recorder: Option<RecorderFigures>,
     /// Actuation's safety counters.
     pub(crate) actuation: ActuationStats,
+    /// Seconds since the newest tick fired (`None` before the first).
+    pub(crate) tick_age_seconds: Option<f64>,
+    /// 1 while the tick loop runs and the link is up (what `/healthz` answers 200 for).
+    pub(crate) healthy: bool,
     /// What the simulated robot's fault injector has done (`None` on a real robot).
     pub(crate) sim_faults: Option<pavlov::sim::faults::FaultCounters>,
 }
@@ -62,6 +66,8 @@ impl MetricsSnapshot {
             recorder: f.recorder,
             actuation: f.actuation,
             sim_faults: health.sim.as_ref().map(|s| s.borrow().faults.clone()),
+            tick_age_seconds: health.tick_age().map(|d| d.as_secs_f64()),
+            healthy: health.verdict() == super::Verdict::Ok,
         }
     }
 }
@@ -242,6 +248,18 @@ pub(crate) fn render(s: &MetricsSnapshot) -> String {
         &s.tick_lateness,
     );
     e.counter("pavlov_ticks_fired_total", "Ticks fired.", s.ticks_fired);
+    if let Some(age) = s.tick_age_seconds {
+        e.gauge(
+            "pavlov_tick_age_seconds",
+            "Seconds since the newest tick fired (grows when the tick loop stalls).",
+            age,
+        );
+    }
+    e.gauge(
+        "pavlov_healthy",
+        "1 while the tick loop runs and the robot link is up (what /healthz answers 200 for), else 0.",
+        f64::from(u8::from(s.healthy)),
+    );
     e.counter(
         "pavlov_ticks_skipped_total",
         "Ticks skipped because the ticker woke too late.",
@@ -356,6 +374,8 @@ mod tests {
                 pipeline_stalls: 6,
                 ..ActuationStats::default()
             },
+            tick_age_seconds: Some(0.004),
+            healthy: false,
             sim_faults: Some(pavlov::sim::faults::FaultCounters {
                 hangs: 3,
                 flipped_bytes: 8,

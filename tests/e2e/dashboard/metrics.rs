@@ -20,9 +20,11 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
 
 /// Every family `/metrics` serves once the first tick is out (the README lists the same).
-const FAMILIES: [(&str, &str); 31] = [
+const FAMILIES: [(&str, &str); 33] = [
     ("pavlov_tick_lateness_seconds", "histogram"),
     ("pavlov_ticks_fired_total", "counter"),
+    ("pavlov_tick_age_seconds", "gauge"),
+    ("pavlov_healthy", "gauge"),
     ("pavlov_ticks_skipped_total", "counter"),
     ("pavlov_tick_to_command_seconds", "histogram"),
     ("pavlov_serial_write_errors_total", "counter"),

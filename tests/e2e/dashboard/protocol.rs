@@ -834,6 +834,47 @@ async fn http_get(addr: SocketAddr, path: &str) -> (u16, String, String) {
     (status, head.to_ascii_lowercase(), body.to_string())
 }
 
+/// `/healthz` once the first ticks are out (it answers 503 until the tick loop and the link are up).
+async fn healthy(addr: SocketAddr) -> (u16, String) {
+    let deadline = std::time::Instant::now() + WAIT;
+    loop {
+        let (status, _, body) = http_get(addr, "/healthz").await;
+        if status == 200 || std::time::Instant::now() > deadline {
+            return (status, body);
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+#[tokio::test(flavor = "current_thread")]
+async fn healthz_says_when_the_tick_loop_stalls() {
+    // The server's actors share this test's one runtime thread; the dashboard has its own.
+    let lab = start().await;
+    let addr = lab.addr();
+    assert_eq!(healthy(addr).await, (200, "ok".to_string()));
+    // Block the control runtime for 1.6 s and ask from another thread meanwhile.
+    let probe = std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_millis(1300));
+        let mut s = std::net::TcpStream::connect(addr).unwrap();
+        use std::io::{Read, Write};
+        s.write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+            .unwrap();
+        let mut text = String::new();
+        s.read_to_string(&mut text).unwrap();
+        text
+    });
+    std::thread::sleep(Duration::from_millis(1600));
+    let text = probe.join().unwrap();
+    assert!(text.starts_with("HTTP/1.1 503"), "{text}");
+    assert!(
+        text.contains("the tick loop is stalled: no tick for"),
+        "{text}"
+    );
+    // It recovers once ticks flow again.
+    assert_eq!(healthy(addr).await, (200, "ok".to_string()));
+    lab.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_page_its_assets_and_healthz_are_served() {
     let lab = start().await;
@@ -855,8 +896,7 @@ async fn the_page_its_assets_and_healthz_are_served() {
         (200, "var uPlot = function fake() {};")
     );
     assert_eq!(http_get(addr, "/vendor/uplot.min.css").await.0, 200);
-    let (status, _, body) = http_get(addr, "/healthz").await;
-    assert_eq!((status, body.as_str()), (200, "ok"));
+    assert_eq!(healthy(addr).await, (200, "ok".to_string()));
     assert_eq!(http_get(addr, "/nope").await.0, 404);
     // A plain GET of /ws is not an upgrade.
     assert!(http_get(addr, "/ws").await.0 >= 400);
