@@ -44,8 +44,8 @@ use std::borrow::Cow;
 use std::collections::VecDeque;
 
 use crate::rng::Rng;
-use crate::sim::robot::SimRobot;
 use crate::sim::STEP_SECONDS;
+use crate::sim::robot::SimRobot;
 
 pub use bytes::{ByteRates, ByteTally};
 pub use counters::FaultCounters;

@@ -8,8 +8,8 @@
 
 use std::collections::VecDeque;
 
-use super::{LIVE_WINDOW_MS, RECENT_COMMANDS};
 use super::physical::{PhysicalParams, PhysicalSample, onsets_in_window};
+use super::{LIVE_WINDOW_MS, RECENT_COMMANDS};
 use crate::record::TickRecord;
 
 /// The live tracker of physical onsets.

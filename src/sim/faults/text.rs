@@ -7,8 +7,8 @@
 
 use crate::oi::packets::id;
 use crate::rng::Rng;
-use crate::sim::robot::SimRobot;
 use crate::sim::STEP_SECONDS;
+use crate::sim::robot::SimRobot;
 
 /// A `bat:` line with the robot's present battery readings; `min`/`sec` count the robot's running
 /// time.
