@@ -20,6 +20,7 @@
 //! physical range is used instead and justified next to the entry, so that 10 tiles of width 0.1 still
 //! separate the values that occur.
 
+use crate::oi::spec::PacketFacts;
 use crate::oi::{Model, SensorValues};
 
 /// One dimension of the observation vector.
@@ -285,11 +286,12 @@ pub struct ObsLayout {
 }
 
 impl ObsLayout {
-    /// The layout for `model`: 44 dimensions on a Create 1, 64 on a Create 2.
+    /// The layout for `model`: 44 dimensions on a Create 1, 64 on a Create 2 (the table its spec files
+    /// it under, [`crate::oi::ModelSpec::packet_facts`]).
     pub fn for_model(model: Model) -> Self {
-        let dims: &'static [ObsDim] = match model {
-            Model::Create1 => &CREATE1_DIMS,
-            Model::Create2 => &CREATE2_DIMS,
+        let dims: &'static [ObsDim] = match model.spec().packet_facts {
+            PacketFacts::Create1 => &CREATE1_DIMS,
+            PacketFacts::Create2 => &CREATE2_DIMS,
         };
         ObsLayout { model, dims }
     }

@@ -7,6 +7,7 @@
 //! the real one blocks until all data bytes of a command have arrived [C1 p7; C2 p8].
 
 use super::packets::check_available;
+use super::spec::{DataShape, PwmMotorsDuty};
 use super::{Model, OiError};
 
 /// Opcodes [C1 pp7–16; C2 pp8–22, p35].
@@ -159,18 +160,8 @@ pub enum Command {
     Other { opcode: u8, data: Vec<u8> },
 }
 
-/// How many data bytes follow an opcode.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum DataShape {
-    /// Exactly this many.
-    Fixed(usize),
-    /// A count byte N, then N bytes (148, 149, 152).
-    CountedList,
-    /// Song number, count N, then N (note, duration) pairs (140).
-    Song,
-}
-
-/// The data-byte layout of `op` on `model`, or `None` if the model has no such opcode [C1 p7–16; C2 p8–22].
+/// The data-byte layout of `op` on `model`, or `None` if the model has no such opcode [C1 p7–16; C2 p8–22]:
+/// the opcodes both models share, then the model's own ([`super::ModelSpec::model_opcodes`]).
 fn data_shape(model: Model, op: u8) -> Option<DataShape> {
     use DataShape::{CountedList, Fixed, Song};
     let common = match op {
@@ -182,24 +173,7 @@ fn data_shape(model: Model, op: u8) -> Option<DataShape> {
         148 | 149 => Some(CountedList),
         _ => None,
     };
-    common.or(match model {
-        Model::Create1 => match op {
-            153 | 154 => Some(Fixed(0)),
-            136 | 147 | 151 | 155 | 158 => Some(Fixed(1)),
-            156 | 157 => Some(Fixed(2)),
-            152 => Some(CountedList),
-            _ => None,
-        },
-        Model::Create2 => match op {
-            7 | 133 | 136 | 173 => Some(Fixed(0)),
-            165 => Some(Fixed(1)),
-            162 => Some(Fixed(2)),
-            168 => Some(Fixed(3)),
-            146 | 163 | 164 => Some(Fixed(4)),
-            167 => Some(Fixed(15)),
-            _ => None,
-        },
-    })
+    common.or_else(|| model.spec().model_opcode(op))
 }
 
 /// Opcodes that have their own [`Command`] variant (so `Other` must not carry them).
@@ -209,18 +183,12 @@ fn has_own_variant(op: u8) -> bool {
 
 /// Most ids one Stream or Query List may name: Create 1 43 [C1 p14], Create 2 108 (packet 38's range [C2 p29]).
 pub fn max_packet_list_len(model: Model) -> usize {
-    match model {
-        Model::Create1 => 43,
-        Model::Create2 => 108,
-    }
+    model.spec().max_packet_list_len
 }
 
 /// Highest song slot: Create 1 15 [C1 p11], Create 2 4 [C2 p19].
 pub fn last_song_number(model: Model) -> u8 {
-    match model {
-        Model::Create1 => 15,
-        Model::Create2 => 4,
-    }
+    model.spec().last_song_number
 }
 
 fn invalid(msg: String) -> OiError {
@@ -380,8 +348,12 @@ impl Command {
 
     /// Checks that `model` has this command and that every argument is in its documented range.
     pub fn validate(&self, model: Model) -> Result<(), OiError> {
-        let only_on = |wanted: Model| {
-            if model == wanted {
+        let spec = model.spec();
+        // A command that only some models have exists on `model` when its opcode there takes exactly
+        // the command's data bytes (136 is Demo with one byte on the Create 1, Max with none on the
+        // Create 2).
+        let needs = |shape: DataShape| {
+            if data_shape(model, self.opcode(model)) == Some(shape) {
                 Ok(())
             } else {
                 Err(OiError::CommandNotOnModel {
@@ -390,22 +362,28 @@ impl Command {
                 })
             }
         };
+        let max_speed = i32::from(spec.max_wheel_speed_mm_s);
         match self {
             Command::Reset | Command::Power | Command::Max | Command::Stop => {
-                only_on(Model::Create2)
+                needs(DataShape::Fixed(0))
             }
             Command::DrivePwm { right, left } => {
-                only_on(Model::Create2)?;
+                needs(DataShape::Fixed(4))?;
                 check_range("right wheel PWM", i32::from(*right), -255, 255)?;
                 check_range("left wheel PWM", i32::from(*left), -255, 255)
             }
             Command::Demo(d) => {
-                only_on(Model::Create1)?;
+                needs(DataShape::Fixed(1))?;
                 check_range("demo number", i32::from(*d), -1, 9)
             }
             Command::Baud(code) => check_range("baud code", i32::from(*code), 0, 11),
             Command::Drive { velocity, radius } => {
-                check_range("velocity (mm/s)", i32::from(*velocity), -500, 500)?;
+                check_range(
+                    "velocity (mm/s)",
+                    i32::from(*velocity),
+                    -max_speed,
+                    max_speed,
+                )?;
                 match radius {
                     Radius::Mm(0) => Err(invalid(
                         "radius 0 is undefined; use Radius::Straight or a turn in place".into(),
@@ -415,20 +393,21 @@ impl Command {
                 }
             }
             Command::DriveDirect { right, left } => {
-                check_range("right wheel velocity (mm/s)", i32::from(*right), -500, 500)?;
-                check_range("left wheel velocity (mm/s)", i32::from(*left), -500, 500)
+                check_range(
+                    "right wheel velocity (mm/s)",
+                    i32::from(*right),
+                    -max_speed,
+                    max_speed,
+                )?;
+                check_range(
+                    "left wheel velocity (mm/s)",
+                    i32::from(*left),
+                    -max_speed,
+                    max_speed,
+                )
             }
-            Command::Motors(bits) => {
-                let allowed = if model == Model::Create1 { 0x07 } else { 0x1F };
-                check_mask("motor bits", *bits, allowed, model)
-            }
-            Command::Leds { bits, .. } => {
-                let allowed = match model {
-                    Model::Create1 => led_bits::C1_PLAY | led_bits::C1_ADVANCE,
-                    Model::Create2 => 0x0F,
-                };
-                check_mask("LED bits", *bits, allowed, model)
-            }
+            Command::Motors(bits) => check_mask("motor bits", *bits, spec.motor_bits, model),
+            Command::Leds { bits, .. } => check_mask("LED bits", *bits, spec.led_bits, model),
             Command::Song { number, notes } => {
                 check_range(
                     "song number",
@@ -450,11 +429,11 @@ impl Command {
                 i32::from(last_song_number(model)),
             ),
             Command::Sensors(id) => check_available(*id, model),
-            Command::PwmMotors(duty) => match model {
-                Model::Create1 => duty
+            Command::PwmMotors(duty) => match spec.pwm_motors {
+                PwmMotorsDuty::LowSideDrivers => duty
                     .iter()
                     .try_for_each(|&d| check_range("low-side driver duty", i32::from(d), 0, 128)),
-                Model::Create2 => {
+                PwmMotorsDuty::Brushes => {
                     check_range("main brush PWM", i32::from(duty[0] as i8), -127, 127)?;
                     check_range("side brush PWM", i32::from(duty[1] as i8), -127, 127)?;
                     check_range("vacuum PWM", i32::from(duty[2]), 0, 127)
@@ -527,7 +506,7 @@ pub fn parse_command(model: Model, buf: &[u8]) -> ParsedCommand {
     };
     match total.and_then(|t| buf.get(1..t)) {
         Some(data) => ParsedCommand::Complete {
-            command: decode_command(model, op, data),
+            command: decode_command(op, data),
             consumed: 1 + data.len(),
         },
         None => ParsedCommand::Incomplete,
@@ -545,8 +524,9 @@ fn byte(data: &[u8], at: usize) -> u8 {
     data.get(at).copied().unwrap_or(0)
 }
 
-/// Builds the command for `op` from exactly its data bytes (lengths already checked by [`parse_command`]).
-fn decode_command(model: Model, op: u8, data: &[u8]) -> Command {
+/// Builds the command for `op` from exactly its data bytes (lengths already checked by [`parse_command`],
+/// from the model's opcode table).
+fn decode_command(op: u8, data: &[u8]) -> Command {
     let d0 = byte(data, 0);
     match op {
         128 => Command::Start,
@@ -558,7 +538,8 @@ fn decode_command(model: Model, op: u8, data: &[u8]) -> Command {
         133 => Command::Power,
         134 => Command::Spot,
         135 => Command::Clean,
-        136 if model == Model::Create1 => Command::Demo(d0 as i8),
+        // Demo where the model's 136 takes a data byte (Create 1), Max where it takes none (Create 2).
+        136 if data.len() == 1 => Command::Demo(d0 as i8),
         136 => Command::Max,
         137 => Command::Drive {
             velocity: be16(data, 0),

@@ -1,6 +1,8 @@
 //! The iRobot Create Open Interface (OI), Create 1 and Create 2, as pure data and functions.
 //!
-//! - [`model`]: the two robot models and what differs between them (baud, groups, budgets).
+//! - [`model`]: the robot models, their names, and [`Model::spec`].
+//! - [`spec`]: [`ModelSpec`], the one table of everything that differs between the models (baud, packets
+//!   and groups, stream budget, opcodes, command ranges, capabilities), one `const` entry per model.
 //! - [`sensors`]: [`SensorValues`], a snapshot of raw packet values indexed by packet id.
 //! - [`error`]: [`OiError`], what can be wrong with a packet id, value, command or stream request.
 //! - [`packets`]: the table of sensor packets 7–58 and groups, and their byte encoding.
@@ -24,7 +26,9 @@ pub mod packets;
 pub mod parser;
 pub mod plausible;
 pub mod sensors;
+pub mod spec;
 
 pub use error::OiError;
 pub use model::Model;
 pub use sensors::SensorValues;
+pub use spec::ModelSpec;

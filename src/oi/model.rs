@@ -1,6 +1,8 @@
-//! The two robot models the server drives, and the facts that differ between them.
+//! The robot models the server drives: their names, and the way to each one's [`ModelSpec`].
 
 use serde::{Deserialize, Serialize};
+
+use super::spec::{self, ModelSpec};
 
 /// Baud rates of the Baud command's codes 0–11 [C1 p7; C2 p9].
 pub const BAUD_RATES: [u32; 12] = [
@@ -15,7 +17,7 @@ pub fn baud_code(rate: u32) -> Option<u8> {
         .and_then(|i| u8::try_from(i).ok())
 }
 
-/// An iRobot Create model.
+/// An iRobot Create model. What differs between the models is in its [`ModelSpec`] ([`Model::spec`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Model {
@@ -26,47 +28,47 @@ pub enum Model {
 }
 
 impl Model {
+    /// Every model, in declaration order.
+    pub const ALL: [Model; 2] = [Model::Create1, Model::Create2];
+
+    /// The model's entry in the per-model table.
+    pub const fn spec(self) -> &'static ModelSpec {
+        match self {
+            Model::Create1 => &spec::CREATE1,
+            Model::Create2 => &spec::CREATE2,
+        }
+    }
+
     /// Default serial rate [C1 p5; C2 p4].
     pub fn baud(self) -> u32 {
-        match self {
-            Model::Create1 => 57_600,
-            Model::Create2 => 115_200,
-        }
+        self.spec().baud
     }
 
     /// The group packet that holds every sensor packet from 7 up: 6 on the Create 1 (packets 7–42),
     /// 100 on the Create 2 (packets 7–58).
     pub fn all_sensors_group(self) -> u8 {
-        match self {
-            Model::Create1 => 6,
-            Model::Create2 => 100,
-        }
+        self.spec().all_sensors_group
     }
 
     /// The highest single sensor packet id the model answers.
     pub fn last_packet(self) -> u8 {
-        match self {
-            Model::Create1 => 42,
-            Model::Create2 => 58,
-        }
+        self.spec().last_packet
     }
 
     /// Bytes the robot can send in one 15 ms stream slot at its default baud (10 bits a byte on the wire):
     /// 86 at 57600, 172 at 115200 [C1 p14; C2 p22].
     pub fn stream_budget_bytes(self) -> usize {
-        stream_budget_bytes(self.baud())
+        self.spec().stream_budget_bytes()
     }
 
     /// A short lowercase name, as used in the configuration and on the command line.
     pub fn name(self) -> &'static str {
-        match self {
-            Model::Create1 => "create1",
-            Model::Create2 => "create2",
-        }
+        self.spec().name
     }
 }
 
-/// Bytes that fit in one 15 ms stream slot at `baud` (10 bits per byte on the wire).
+/// Bytes that fit in one 15 ms stream slot (the period of both models) at `baud` (10 bits per byte on
+/// the wire).
 pub fn stream_budget_bytes(baud: u32) -> usize {
     (baud as usize * 15) / 10_000
 }
@@ -80,13 +82,20 @@ impl std::fmt::Display for Model {
 impl std::str::FromStr for Model {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "create1" => Ok(Model::Create1),
-            "create2" => Ok(Model::Create2),
-            other => Err(format!(
-                "unknown model `{other}` (expected create1 or create2)"
-            )),
-        }
+        Model::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("unknown model `{s}` (expected {})", name_list()))
+    }
+}
+
+/// "create1 or create2": every model's name, for messages.
+fn name_list() -> String {
+    let names: Vec<&str> = Model::ALL.iter().map(|m| m.name()).collect();
+    match names.split_last() {
+        Some((last, [])) => (*last).to_string(),
+        Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
+        None => String::new(),
     }
 }
 

@@ -25,9 +25,11 @@ pub struct PacketSpec {
     pub min: i32,
     /// Largest documented value, over both models where they differ.
     pub max: i32,
-    /// Answered by the Create 1 (packets 7–42).
+    /// The Create 1 column of the specifications' tables: answered by the Create 1 (packets 7–42).
+    /// A record of the documents, not consulted: a model answers the members of its all-sensors group
+    /// ([`available_on`]); a test checks that the two agree.
     pub create1: bool,
-    /// Answered by the Create 2 (packets 7–58).
+    /// The Create 2 column (packets 7–58); like `create1`, a record checked against [`available_on`].
     pub create2: bool,
 }
 
@@ -328,18 +330,15 @@ pub fn data_len(id: u8) -> Option<usize> {
     })
 }
 
-/// Whether `model` answers packet or group `id` (Create 1: 0–42; Create 2: 0–58, 100, 101, 106, 107).
+/// Whether `model` answers packet or group `id` (Create 1: 0–42; Create 2: 0–58, 100, 101, 106, 107):
+/// a single packet when it is a member of the model's all-sensors group, a group when the model lists
+/// it ([`super::ModelSpec::all_sensors_group`], [`super::ModelSpec::groups`]).
 pub fn available_on(id: u8, model: Model) -> bool {
-    if let Some(s) = spec(id) {
-        return match model {
-            Model::Create1 => s.create1,
-            Model::Create2 => s.create2,
-        };
-    }
-    match id {
-        0..=6 => true,
-        100 | 101 | 106 | 107 => model == Model::Create2,
-        _ => false,
+    let model_spec = model.spec();
+    if spec(id).is_some() {
+        group_members(model_spec.all_sensors_group).is_some_and(|members| members.contains(&id))
+    } else {
+        model_spec.groups.contains(&id)
     }
 }
 

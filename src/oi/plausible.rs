@@ -64,6 +64,7 @@
 //! speed) for timing jitter and frames the robot could not send.
 
 use super::packets::id;
+use super::spec::PacketFacts;
 use super::{Model, SensorValues};
 
 /// One documented range of one packet's raw value.
@@ -118,7 +119,7 @@ pub const MAX_FRAME_DISTANCE_MM: i32 = 500;
 /// The largest plausible angle in a frame that follows a frame, degrees.
 pub const MAX_FRAME_ANGLE_DEG: i32 = 360;
 
-/// The bounds checked in every Create 1 frame (packets 7–42).
+/// The bounds checked in every frame of a model with the Create 1's packet facts (packets 7–42).
 static CREATE1: &[Bound] = &[
     b(id::BUMPS_WHEEL_DROPS, 0, 31),
     b(id::WALL, 0, 1),
@@ -149,7 +150,7 @@ static CREATE1: &[Bound] = &[
     b(id::REQUESTED_LEFT_VELOCITY, -500, 500),
 ];
 
-/// The bounds checked in every Create 2 frame (packets 7–58).
+/// The bounds checked in every frame of a model with the Create 2's packet facts (packets 7–58).
 static CREATE2: &[Bound] = &[
     b(id::BUMPS_WHEEL_DROPS, 0, 15),
     b(id::WALL, 0, 1),
@@ -211,11 +212,12 @@ static ODOMETRY: &[Bound] = &[
     b(id::ANGLE, -MAX_FRAME_ANGLE_DEG, MAX_FRAME_ANGLE_DEG),
 ];
 
-/// The bounds checked in every frame from `model` (odometry excluded: see [`odometry_bounds`]).
+/// The bounds checked in every frame from `model` (odometry excluded: see [`odometry_bounds`]), the
+/// table its spec files it under ([`super::ModelSpec::packet_facts`]).
 pub fn bounds(model: Model) -> &'static [Bound] {
-    match model {
-        Model::Create1 => CREATE1,
-        Model::Create2 => CREATE2,
+    match model.spec().packet_facts {
+        PacketFacts::Create1 => CREATE1,
+        PacketFacts::Create2 => CREATE2,
     }
 }
 

@@ -29,6 +29,11 @@
 //! `robot::tests::spin_command_latencies_match_the_paper` checks both over several seeds and both models.
 
 use crate::oi::Model;
+use crate::oi::spec::PacketFacts;
+
+/// The wheel over-current limit used for a model whose document gives none, A: the Create 1's 1.0 A
+/// [C1 p10, p17].
+const UNPUBLISHED_OVERCURRENT_LIMIT_A: f64 = 1.0;
 
 /// Open-circuit voltage of the pack as `(state of charge 0..=1, volts)` points, increasing in charge.
 pub type OcvCurve = [(f64, f64); 7];
@@ -62,14 +67,15 @@ pub struct SimParams {
     pub wheel_diameter_m: f64,
     /// Encoder counts per wheel revolution: 508.8 [C2 p31].
     pub encoder_counts_per_rev: f64,
-    /// Fastest commandable wheel speed, mm/s: ±500 [C1 p9; C2 p13].
+    /// Fastest commandable wheel speed, mm/s: ±500 [C1 p9; C2 p13] (the model's
+    /// [`crate::oi::ModelSpec::max_wheel_speed_mm_s`]).
     pub max_wheel_speed_mm_s: f64,
     /// Commanded wheel speeds at or below this magnitude do not move the wheel, mm/s: 10 on the
     /// Create 2 (measured [KT]); 0 on the Create 1 (no data).
     pub speed_dead_band_mm_s: f64,
     /// The Create 2 speed controller runs at discrete speeds ≈28.5 mm/s apart [C2 p13–14; KT]:
     /// anything in `[11 + 28.5k, 11 + 28.5(k+1))` mm/s drives at `11 + 28.5(k+1)`. `None` on the
-    /// Create 1 (no data: continuous).
+    /// Create 1 (no data: continuous). The model's [`crate::oi::ModelSpec::speed_step_mm_s`].
     pub speed_quantum_mm_s: Option<f64>,
 
     // ----- bumper -----
@@ -144,8 +150,9 @@ pub struct SimParams {
     /// Time constant of the firmware's current measurement (battery and wheel currents), s (*estimate*:
     /// a sense resistor and RC filter averaged over a control cycle or two).
     pub current_sense_tau_s: f64,
-    /// Wheel over-current limit, A: 1.0 A [C1 p10, p17]. The Create 2 limit is unpublished; the same value
-    /// is used.
+    /// Wheel over-current limit, A: 1.0 A [C1 p10, p17] (the model's
+    /// [`crate::oi::ModelSpec::wheel_overcurrent_limit_a`]). The Create 2 limit is unpublished; the
+    /// same value is used.
     pub overcurrent_limit_a: f64,
     /// Each 15 ms the over-current bit of a wheel is set with probability
     /// `1 / (1 + exp(-(|I| - limit) / scale))`, `I` the sensed wheel current: rare when cruising
@@ -235,8 +242,10 @@ pub struct SimParams {
 }
 
 impl SimParams {
-    /// The parameters of `model` in the paper's enclosure.
+    /// The parameters of `model` in the paper's enclosure: the limits its spec documents, and the
+    /// physical parameters filed under its [`crate::oi::ModelSpec::packet_facts`].
     pub fn for_model(model: Model) -> Self {
+        let spec = model.spec();
         let common = SimParams {
             enclosure_leg_m: 1.0,
             start_x_m: 1.0 / 3.0,
@@ -246,9 +255,9 @@ impl SimParams {
             wheel_base_m: 0.258,
             wheel_diameter_m: 0.078,
             encoder_counts_per_rev: 508.8,
-            max_wheel_speed_mm_s: 500.0,
+            max_wheel_speed_mm_s: f64::from(spec.max_wheel_speed_mm_s),
             speed_dead_band_mm_s: 0.0,
-            speed_quantum_mm_s: None,
+            speed_quantum_mm_s: spec.speed_step_mm_s,
             bumper_half_arc_rad: std::f64::consts::FRAC_PI_2,
             bumper_overlap_rad: 10f64.to_radians(),
             contact_tolerance_m: 0.001,
@@ -270,7 +279,9 @@ impl SimParams {
             integral_limit: 1.0,
             substeps: 15,
             current_sense_tau_s: 0.03,
-            overcurrent_limit_a: 1.0,
+            overcurrent_limit_a: spec
+                .wheel_overcurrent_limit_a
+                .unwrap_or(UNPUBLISHED_OVERCURRENT_LIMIT_A),
             overcurrent_scale_a: 0.12,
             driver_efficiency: 0.9,
             capacity_mah: 3000.0,
@@ -299,13 +310,12 @@ impl SimParams {
             keep_odometry_remainder: true,
             tx_buffer_bytes: 128,
         };
-        match model {
-            Model::Create1 => common,
-            Model::Create2 => SimParams {
+        match spec.packet_facts {
+            PacketFacts::Create1 => common,
+            PacketFacts::Create2 => SimParams {
                 wheel_base_m: 0.235,
                 wheel_diameter_m: 0.072,
                 speed_dead_band_mm_s: 10.0,
-                speed_quantum_mm_s: Some(28.5),
                 capacity_mah: 2068.0,
                 ocv_curve: LI_ION_4_CELL,
                 internal_resistance_ohm: 0.25,

@@ -61,7 +61,8 @@ pub struct Sensing {
 }
 
 impl Sensing {
-    /// Sensing for a robot described by `params`; `caster_bit` is true on the Create 1 (packet 7 bit 4).
+    /// Sensing for a robot described by `params`; `caster_bit` says whether packet 7 has the caster
+    /// drop bit (bit 4: [`crate::oi::ModelSpec::has_caster_drop`], the Create 1).
     pub fn new(params: &SimParams, caster_bit: bool, rng: &Rng) -> Self {
         let mut calibration = rng.fork(1);
         let spread = params.cliff_signal_spread;

@@ -121,7 +121,7 @@ impl SimRobot {
     /// A robot of `model` at rest in its start pose, OI in Off, all randomness from `seed`.
     pub fn new(model: Model, params: SimParams, seed: u64) -> Self {
         let root = Rng::new(seed);
-        let sensing = Sensing::new(&params, model == Model::Create1, &root.fork(1));
+        let sensing = Sensing::new(&params, model.spec().has_caster_drop, &root.fork(1));
         let odometry = Odometry::new(&params);
         let world = World::new(params, root.fork(2));
         let mut robot = SimRobot {
@@ -297,7 +297,7 @@ impl SimRobot {
                 self.counters.commands += 1;
                 self.execute(crate::oi::command::Command::Start);
             }
-            opcode::RESET if self.model == Model::Create2 => {
+            opcode::RESET if self.model.spec().has_reset_opcode => {
                 self.counters.commands += 1;
                 self.execute(crate::oi::command::Command::Reset);
             }

@@ -12,7 +12,6 @@
 //! - Safe-mode trips (checked every step): any wheel drop, or a cliff while driving forward (or backward
 //!   on a radius tighter than the body) → stop the motors, Passive. Full ignores them.
 
-use crate::oi::Model;
 use crate::oi::command::{Command, max_packet_list_len};
 use crate::oi::packets::available_on;
 use crate::sim::STEP_SECONDS;
@@ -127,7 +126,7 @@ impl SimRobot {
 
     fn play(&mut self, number: u8) {
         // Create 1: "ignored if a song is already playing" [C1 p13].
-        if self.model == Model::Create1 && self.song_steps_left > 0 {
+        if self.model.spec().play_ignored_while_playing && self.song_steps_left > 0 {
             return;
         }
         match self.songs.get(usize::from(number)).copied().flatten() {

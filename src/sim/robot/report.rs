@@ -5,7 +5,6 @@
 //! A report that contains Distance (19) or Angle (20) — alone or in a group — hands over what has
 //! accumulated and starts afresh [C1 p18–19; C2 p27].
 
-use crate::oi::Model;
 use crate::oi::SensorValues;
 use crate::oi::frame::encode_stream_frame;
 use crate::oi::packets::{available_on, encode_data, group_members, id};
@@ -13,18 +12,13 @@ use crate::sim::world::{LEFT, RIGHT};
 
 use super::SimRobot;
 
-/// Packet 17 when no IR byte is seen: 255 on the Create 1, 0 on the Create 2 [C1 p18; C2 p26].
-fn ir_none(model: Model) -> i32 {
-    match model {
-        Model::Create1 => 255,
-        Model::Create2 => 0,
-    }
-}
-
 impl SimRobot {
     /// Sets every packet the model has, with the given odometry values.
     pub(super) fn fill_values(&self, v: &mut SensorValues, distance: i32, angle: i32) {
+        let spec = self.model.spec();
         let r = &self.readings;
+        // No IR byte seen: 255 on the Create 1, 0 on the Create 2 [C1 p18; C2 p26].
+        let ir_none = i32::from(spec.ir_no_byte);
         v.set(id::BUMPS_WHEEL_DROPS, r.bumps_drops);
         v.set(id::WALL, i32::from(r.wall));
         let cliff_ids = [
@@ -40,7 +34,7 @@ impl SimRobot {
         v.set(id::OVERCURRENTS, r.overcurrents);
         v.set(id::DIRT_DETECT, 0);
         v.set(id::UNUSED_16, 0);
-        v.set(id::IR_OMNI, ir_none(self.model));
+        v.set(id::IR_OMNI, ir_none);
         v.set(id::BUTTONS, 0);
         v.set(id::DISTANCE, distance);
         v.set(id::ANGLE, angle);
@@ -60,8 +54,8 @@ impl SimRobot {
         for (&pid, &s) in signal_ids.iter().zip(&r.cliff_signals) {
             v.set(pid, s);
         }
-        // Create 1 cargo bay: digital input 4 (device detect) is high by default [C1 p20].
-        let cargo = if self.model == Model::Create1 { 16 } else { 0 };
+        // Cargo bay: digital input 4 (device detect) is high by default [C1 p20]; without one, 0.
+        let cargo = if spec.has_cargo_bay { 16 } else { 0 };
         v.set(id::CARGO_BAY_DIGITAL_INPUTS, cargo);
         v.set(id::CARGO_BAY_ANALOG_SIGNAL, 0);
         v.set(id::CHARGING_SOURCES, 0);
@@ -73,30 +67,37 @@ impl SimRobot {
         v.set(id::REQUESTED_RADIUS, self.requested.radius);
         v.set(id::REQUESTED_RIGHT_VELOCITY, self.requested.right);
         v.set(id::REQUESTED_LEFT_VELOCITY, self.requested.left);
-        if self.model == Model::Create1 {
-            return;
+        if spec.has_encoders {
+            v.set(id::LEFT_ENCODER, self.odometry.encoder(LEFT));
+            v.set(id::RIGHT_ENCODER, self.odometry.encoder(RIGHT));
         }
-        v.set(id::LEFT_ENCODER, self.odometry.encoder(LEFT));
-        v.set(id::RIGHT_ENCODER, self.odometry.encoder(RIGHT));
-        v.set(id::LIGHT_BUMPER, r.light_bumper);
-        let bump_ids = [
-            id::LIGHT_BUMP_LEFT_SIGNAL,
-            id::LIGHT_BUMP_FRONT_LEFT_SIGNAL,
-            id::LIGHT_BUMP_CENTER_LEFT_SIGNAL,
-            id::LIGHT_BUMP_CENTER_RIGHT_SIGNAL,
-            id::LIGHT_BUMP_FRONT_RIGHT_SIGNAL,
-            id::LIGHT_BUMP_RIGHT_SIGNAL,
-        ];
-        for (&pid, &s) in bump_ids.iter().zip(&r.light_bump_signals) {
-            v.set(pid, s);
+        if spec.has_light_bumpers {
+            v.set(id::LIGHT_BUMPER, r.light_bumper);
+            let bump_ids = [
+                id::LIGHT_BUMP_LEFT_SIGNAL,
+                id::LIGHT_BUMP_FRONT_LEFT_SIGNAL,
+                id::LIGHT_BUMP_CENTER_LEFT_SIGNAL,
+                id::LIGHT_BUMP_CENTER_RIGHT_SIGNAL,
+                id::LIGHT_BUMP_FRONT_RIGHT_SIGNAL,
+                id::LIGHT_BUMP_RIGHT_SIGNAL,
+            ];
+            for (&pid, &s) in bump_ids.iter().zip(&r.light_bump_signals) {
+                v.set(pid, s);
+            }
         }
-        v.set(id::IR_LEFT, 0);
-        v.set(id::IR_RIGHT, 0);
-        v.set(id::LEFT_MOTOR_CURRENT, r.wheel_current_ma[LEFT]);
-        v.set(id::RIGHT_MOTOR_CURRENT, r.wheel_current_ma[RIGHT]);
-        v.set(id::MAIN_BRUSH_CURRENT, 0);
-        v.set(id::SIDE_BRUSH_CURRENT, 0);
-        v.set(id::STASIS, r.stasis);
+        if spec.has_directional_ir {
+            v.set(id::IR_LEFT, ir_none);
+            v.set(id::IR_RIGHT, ir_none);
+        }
+        if spec.has_motor_currents {
+            v.set(id::LEFT_MOTOR_CURRENT, r.wheel_current_ma[LEFT]);
+            v.set(id::RIGHT_MOTOR_CURRENT, r.wheel_current_ma[RIGHT]);
+            v.set(id::MAIN_BRUSH_CURRENT, 0);
+            v.set(id::SIDE_BRUSH_CURRENT, 0);
+        }
+        if spec.has_stasis {
+            v.set(id::STASIS, r.stasis);
+        }
     }
 
     /// The values for a report of `ids`, taking (and so resetting) the odometry it contains.
