@@ -35,10 +35,11 @@ fn text_files(dir: &Path, out: &mut Vec<PathBuf>) {
     for entry in entries.flatten() {
         let path = entry.path();
         let name = entry.file_name().to_string_lossy().into_owned();
+        if SKIPPED.contains(&name.as_str()) {
+            continue;
+        }
         if path.is_dir() {
-            if !SKIPPED.contains(&name.as_str()) {
-                text_files(&path, out);
-            }
+            text_files(&path, out);
         } else if std::fs::read_to_string(&path).is_ok() {
             out.push(path);
         }
