@@ -367,6 +367,7 @@ pub(crate) async fn route(
         let Some(ControlRequest { command, reply }) = next else {
             break;
         };
+        tracing::debug!(?command, "routing a command");
         match command {
             ControlCommand::Latch(c) => {
                 let on = matches!(c, LatchCommand::Estop {});

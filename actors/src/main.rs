@@ -4,6 +4,14 @@
 //! commands in [`cli`], with `anyhow` error reports. Everything else lives in the `pavlov-actors` library
 //! and the `pavlov` core.
 
+/// `println!` that never panics: a closed stdout (`pavlov serve | head -1`) must not take the server down.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
 mod cli;
 
 use anyhow::{Context, Result};
@@ -12,13 +20,10 @@ use clap::Parser;
 use cli::{Cli, Command};
 
 fn main() -> Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    let _log = pavlov_actors::telemetry::logging::init(
+        tracing_subscriber::EnvFilter::try_from_default_env()
+            .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+    );
     let cli = Cli::parse();
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()

@@ -40,11 +40,11 @@ pub async fn run(args: BenchArgs) -> Result<()> {
         let report =
             load::run_abuse_comparison(cfg, duration, repository_web_dir(), load, Abuse::default())
                 .await?;
-        println!("{report}");
+        say!("{report}");
         return Ok(());
     }
     let report = bench::run_realtime(cfg.clone(), duration).await?;
-    println!("{report}");
+    say!("{report}");
     if args.ws_clients > 0 || args.stalled_client {
         let load = load::Load {
             clients: args.ws_clients,
@@ -52,7 +52,7 @@ pub async fn run(args: BenchArgs) -> Result<()> {
         };
         let loaded =
             load::run_realtime_with_clients(cfg, duration, repository_web_dir(), load).await?;
-        println!(
+        say!(
             "with {} websocket clients{}:",
             args.ws_clients,
             if args.stalled_client {
@@ -61,10 +61,11 @@ pub async fn run(args: BenchArgs) -> Result<()> {
                 ""
             }
         );
-        println!("{loaded}");
-        println!(
+        say!("{loaded}");
+        say!(
             "tick lateness p99: {} µs without clients, {} µs with them",
-            report.lateness.p99_us, loaded.bench.lateness.p99_us
+            report.lateness.p99_us,
+            loaded.bench.lateness.p99_us
         );
     }
     Ok(())

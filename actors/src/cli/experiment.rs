@@ -111,7 +111,7 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
                     .unwrap_or_else(|| PathBuf::from(format!("results/stall-{}", a.seed))),
             };
             let table = stall::run_and_report(&config, &opts, true)?;
-            print!("{table}");
+            say!("{}", table.trim_end());
             Ok(())
         }
         Experiment::Interaction(a) => {
@@ -129,8 +129,8 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
             };
             let summary = interaction::run_study_with_progress(&config, &opts, true)?;
             interaction::report::write_all(&opts.out, &summary)?;
-            print!("{}", interaction::report::table(&summary));
-            println!("results: {}", opts.out.display());
+            say!("{}", interaction::report::table(&summary).trim_end());
+            say!("results: {}", opts.out.display());
             Ok(())
         }
     }

@@ -48,7 +48,7 @@ pub async fn run(args: HumanArgs) -> Result<()> {
         realtime: !fast,
         frames,
     };
-    println!(
+    say!(
         "simulated human (seed {seed}) sending {} to udp://{to}",
         skeleton_format_name(format)
     );
@@ -62,9 +62,12 @@ pub async fn run(args: HumanArgs) -> Result<()> {
     let report = send_human(opts, cancel).await;
     watcher.abort();
     let report = report.context("the simulated human could not send")?;
-    println!(
+    say!(
         "sent {} frames in {} datagrams ({} send errors); {} commands (ground truth)",
-        report.frames, report.datagrams, report.send_errors, report.commands
+        report.frames,
+        report.datagrams,
+        report.send_errors,
+        report.commands
     );
     Ok(())
 }

@@ -17,10 +17,10 @@ pub struct ReplayArgs {
 pub fn run(args: ReplayArgs) -> Result<()> {
     let rec = recording::load(&args.path)?;
     if rec.torn_tail {
-        eprintln!("note: the recording's last line was incomplete and was skipped");
+        tracing::warn!("note: the recording's last line was incomplete and was skipped");
     }
     let report = replay::replay(&rec)?;
-    println!("{}", replay::describe(&report));
+    say!("{}", replay::describe(&report));
     anyhow::ensure!(report.exact(), "the replay differs from the recording");
     Ok(())
 }

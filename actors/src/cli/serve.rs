@@ -47,7 +47,7 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     if cfg.checkpoint.resume {
         let (path, cp) =
             checkpoint_files::load_for_resume(&cfg).context("cannot resume (--resume)")?;
-        println!(
+        say!(
             "resuming from {} (tick {})",
             path.display(),
             cp.created_tick
@@ -68,6 +68,8 @@ pub async fn run(args: ServeArgs) -> Result<()> {
         None => RobotTarget::Simulated,
     };
     tracing::info!(?target, mode = ?cfg.control.mode, "starting pavlov");
+    // Every listening socket is bound before the robot is touched: a busy port stops here.
+    let bound = Dashboard::bind(&cfg.dashboard)?;
     let recorder = recorder::Recorder::spawn(
         recording::RecordingHeader::new(&cfg, "pavlov serve"),
         record.clone(),
@@ -78,7 +80,7 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     )
     .context("cannot start the recorder")?;
     if let Some(dir) = &record {
-        println!(
+        say!(
             "recording every tick into {}",
             dir.join(recording::TICKS_FILE).display()
         );
@@ -88,23 +90,23 @@ pub async fn run(args: ServeArgs) -> Result<()> {
         .start()
         .await
         .context("cannot start the server")?;
-    let dash = match Dashboard::start(&server, dashboard.web_dir()).await {
+    let dash = match Dashboard::serve(bound, &server, dashboard.web_dir()).await {
         Ok(d) => d,
         Err(e) => {
             server.shutdown().await;
             return Err(e).context("cannot start the dashboard");
         }
     };
-    println!("pavlov is driving {robot_name}; press Ctrl-C to stop");
-    println!("dashboard: {}", dash.url());
+    say!("pavlov is driving {robot_name}; press Ctrl-C to stop");
+    say!("dashboard: {}", dash.url());
     if server.config.dashboard.token.is_some() {
-        println!(
+        say!(
             "dashboard commands need the token: open {}#token=<your token>",
             dash.url()
         );
     }
     if let Some(sk) = &server.skeleton {
-        println!(
+        say!(
             "skeleton: listening for {} on udp://{}",
             skeleton_format_name(server.config.skeleton.format),
             sk.local_addr

@@ -48,7 +48,7 @@ pub async fn run(args: SimArgs) -> Result<()> {
     let pty = robot::spawn_sim_pty(robot, injector, cancel.clone())
         .context("cannot start the simulated robot")?;
     let status = pty.status.clone();
-    println!("{}", pty.path);
+    say!("{}", pty.path);
     tracing::info!(path = %pty.path, %model, seed, "simulated Create listening on a pseudo-terminal");
     shutdown_signal().await;
     cancel.cancel();
@@ -57,7 +57,7 @@ pub async fn run(args: SimArgs) -> Result<()> {
     let world = robot.world();
     let c = robot.counters();
     let injected = status.borrow().faults.clone();
-    println!(
+    say!(
         "{}",
         serde_json::json!({
             "oi_mode": robot.oi_mode().code(),

@@ -101,6 +101,7 @@ enum Out {
 impl Session {
     /// Serves one connection until either side ends it.
     pub(crate) async fn run(self, socket: WebSocket) {
+        tracing::debug!(access = ?self.access, "websocket client connected");
         let (sink, stream) = socket.split();
         let queue = Arc::new(OutQueue::new(self.queue));
         let stride = Arc::new(AtomicU64::new(1));

@@ -32,6 +32,7 @@ pub(crate) struct Actuation {
     safety: SafetyConfig,
     last_decision_seq: Option<u64>,
     last_written: Option<Action>,
+    last_stop: Option<pavlov::record::SafetyStop>,
     stats: ActuationStats,
 }
 
@@ -43,6 +44,7 @@ impl Actuation {
             safety,
             last_decision_seq: None,
             last_written: None,
+            last_stop: None,
             stats: ActuationStats::default(),
         }
     }
@@ -85,6 +87,10 @@ impl Actuation {
         );
         if stop == Some(pavlov::record::SafetyStop::StaleObservation) {
             self.stats.stale_observations += 1;
+        }
+        if stop != self.last_stop {
+            tracing::debug!(tick = obs.tick.seq, from = ?self.last_stop, to = ?stop, "safety stop changed");
+            self.last_stop = stop;
         }
         let command = if stop.is_some() {
             Action::STOP

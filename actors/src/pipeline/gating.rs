@@ -78,6 +78,7 @@ pub(crate) async fn run(
         out,
     } = channels;
     let mut last_seq = 0;
+    let mut engaged = false;
     loop {
         tokio::select! {
             biased;
@@ -96,6 +97,14 @@ pub(crate) async fn run(
                 last_seq = p.observation.tick.seq;
                 let o = &p.output;
                 let gate = stage.decide(last_seq, o.stimulus, o.gate_value, o.gate_threshold);
+                if gate.gate != engaged {
+                    engaged = gate.gate;
+                    tracing::debug!(
+                        tick = last_seq, engaged, stimulus = o.stimulus, prediction = ?o.gate_value,
+                        threshold = o.gate_threshold, "the fixed response {}",
+                        if engaged { "took over" } else { "let go" }
+                    );
+                }
                 if out.try_send(Decision { learned: p, gate }).is_err() {
                     tracing::debug!("actuation is behind; a decision was dropped");
                 }

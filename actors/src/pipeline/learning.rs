@@ -273,6 +273,7 @@ pub(crate) async fn run(
                     }
                 } else {
                     learning.skipped_stale += 1;
+                    tracing::debug!(tick = seq, "not learning from a stale observation or a link that is not up");
                 }
                 learning.autosave_if_due(seq);
             }

@@ -136,12 +136,20 @@ pub(crate) async fn run(
                 }
                 Ok(n) => {
                     let now = Instant::now();
+                    let bad_before = parser.stats().bad_frames;
                     parser.feed(&buf[..n], |frame| {
                         distance = distance.saturating_add(frame.get_or_zero(id::DISTANCE));
                         angle = angle.saturating_add(frame.get_or_zero(id::ANGLE));
                         supervisor.on_frame(&frame);
                         newest = Some((frame, now));
                     });
+                    let stats = parser.stats();
+                    if stats.bad_frames > bad_before {
+                        tracing::debug!(
+                            bad_frames = stats.bad_frames, skipped_bytes = stats.skipped_bytes,
+                            "rejected a damaged sensor frame"
+                        );
+                    }
                 }
             }
         }

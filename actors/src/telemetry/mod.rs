@@ -6,12 +6,14 @@
 //! - [`histogram`]: the allocation-free latency histogram that sits on the tick path;
 //! - [`exposition`]: a writer of the Prometheus text format; [`prometheus`]: the `/metrics` text;
 //!   [`prometheus_check`]: a strict reader of that format, for tests;
-//! - [`health_log`]: the tick-health line logged once a minute.
+//! - [`health_log`]: the tick-health line logged once a minute;
+//! - [`logging`]: logging that never blocks or fails the caller (a queue and a writer thread).
 
 pub(crate) mod counters;
 pub(crate) mod exposition;
 pub(crate) mod health_log;
 pub(crate) mod histogram;
+pub mod logging;
 pub(crate) mod prometheus;
 #[cfg(any(test, feature = "test-support"))]
 pub mod prometheus_check;

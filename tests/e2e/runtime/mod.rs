@@ -3,4 +3,5 @@
 mod link_supervision;
 mod serial_pty;
 mod stale_stream;
+mod startup;
 mod virtual_time;

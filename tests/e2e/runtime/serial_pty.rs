@@ -13,11 +13,11 @@ use pavlov::supervision::LinkState;
 
 const PAVLOV: &str = env!("CARGO_BIN_EXE_pavlov");
 
-fn terminate(child: &Child) {
+pub(super) fn terminate(child: &Child) {
     kill(Pid::from_raw(child.id() as i32), Signal::SIGTERM).expect("send SIGTERM");
 }
 
-fn wait_with_timeout(child: &mut Child, limit: Duration) -> std::process::ExitStatus {
+pub(super) fn wait_with_timeout(child: &mut Child, limit: Duration) -> std::process::ExitStatus {
     let start = Instant::now();
     loop {
         if let Some(status) = child.try_wait().expect("wait") {
@@ -98,7 +98,7 @@ fn serve_drives_the_simulated_create_over_a_pty_and_stops_it_on_sigterm() {
 }
 
 /// Starts `pavlov sim --pty` with `faults` and returns the process, its stdout and the device path.
-fn start_sim(faults: &str) -> (Child, BufReader<std::process::ChildStdout>, String) {
+pub(super) fn start_sim(faults: &str) -> (Child, BufReader<std::process::ChildStdout>, String) {
     let mut sim = Command::new(PAVLOV)
         .args(["sim", "--pty", "--model", "create1", "--seed", "4"])
         .args(["--faults", faults])
