@@ -65,13 +65,35 @@ pub fn stop_bytes(model: Model) -> Result<Vec<u8>, OiError> {
     Command::DriveDirect { right: 0, left: 0 }.encode(model)
 }
 
-/// The rates a baud rescue tries, in order: every Baud rate but `model`'s default, the documented
-/// fallback (19200) first [C1 p5; C2 p4].
-pub fn baud_rescue_rates(model: Model) -> impl Iterator<Item = u32> {
-    let fallback = 19_200;
-    std::iter::once(fallback)
-        .chain(BAUD_RATES.into_iter().rev().filter(move |&r| r != fallback))
-        .filter(move |&r| r != model.baud())
+/// Rates one baud rescue tries: each costs ~110 ms with the port unread, so a rescue never keeps the port
+/// from being read for much longer than 200 ms, and frames that return meanwhile are seen soon after.
+pub const BAUD_RESCUE_BATCH: usize = 2;
+
+/// Every rate a baud rescue may try, most likely first: 300 and 600 baud (a flipped bit turns Drive
+/// Direct, Drive, Safe or Start into Baud (129), and the next byte, a small speed's high byte, is code 0
+/// or 1 [C1 p7; C2 p9]), then the documented fallback 19200 [C1 p5; C2 p4], then the others from the
+/// fastest down; never `model`'s default.
+pub fn baud_rescue_rates(model: Model) -> Vec<u32> {
+    let likely = [300, 600, 19_200];
+    likely
+        .into_iter()
+        .chain(BAUD_RATES.into_iter().rev().filter(|r| !likely.contains(r)))
+        .filter(|&r| r != model.baud())
+        .collect()
+}
+
+/// The rates of rescue number `index` since the last frame: the next [`BAUD_RESCUE_BATCH`] of
+/// [`baud_rescue_rates`], starting over after the last.
+pub fn baud_rescue_batch(model: Model, index: u32) -> Vec<u32> {
+    let rates = baud_rescue_rates(model);
+    let batches = rates.len().div_ceil(BAUD_RESCUE_BATCH).max(1);
+    let k = index as usize % batches;
+    rates
+        .iter()
+        .skip(k * BAUD_RESCUE_BATCH)
+        .take(BAUD_RESCUE_BATCH)
+        .copied()
+        .collect()
 }
 
 /// The Baud command that returns `model` to its default rate (sent at each rescue rate).
@@ -117,5 +139,24 @@ mod tests {
         // 3 + 1 + 80 = 84 bytes fits 86 at 57600, but group 100 is not a Create 1 packet at all; and two
         // copies of group 6 (2 × 53 + 2 = 108 bytes) exceed the 86-byte budget.
         assert!(startup_bytes(Model::Create1, DriveMode::Safe, &[6, 6]).is_err());
+    }
+
+    #[test]
+    fn baud_rescues_try_the_likely_rates_first_two_at_a_time_and_cycle() {
+        let all = baud_rescue_rates(Model::Create1);
+        assert_eq!(all.len(), 11);
+        assert!(!all.contains(&57_600));
+        assert_eq!(&all[..3], &[300, 600, 19_200]);
+        assert_eq!(baud_rescue_batch(Model::Create1, 0), vec![300, 600]);
+        assert_eq!(baud_rescue_batch(Model::Create1, 1), vec![19_200, 115_200]);
+        let mut seen: Vec<u32> = (0..6)
+            .flat_map(|i| baud_rescue_batch(Model::Create1, i))
+            .collect();
+        seen.sort_unstable();
+        let mut sorted = all.clone();
+        sorted.sort_unstable();
+        assert_eq!(seen, sorted, "six rescues cover every rate once");
+        assert_eq!(baud_rescue_batch(Model::Create1, 6), vec![300, 600]);
+        assert!(!baud_rescue_rates(Model::Create2).contains(&115_200));
     }
 }

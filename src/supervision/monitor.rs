@@ -90,6 +90,10 @@ pub struct LinkMonitor {
 /// the checksum with a wrong mode byte must not stop the robot until the operator comes.
 pub const TRIP_CONFIRM_FRAMES: u32 = 2;
 
+/// The first reopen attempt (counted since the last frame) that starts with a baud rescue; then every
+/// other one.
+pub const RESCUE_FROM_ATTEMPT: u32 = 2;
+
 /// What the monitor has counted.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct MonitorCounters {
@@ -152,6 +156,15 @@ impl LinkMonitor {
     /// Reopens (successful or not) since the last valid frame.
     pub fn reopen_attempt(&self) -> u32 {
         self.reopen_attempt
+    }
+
+    /// When the reopen about to run should first try to bring a robot back from another baud rate, the
+    /// number of this rescue since the last frame (which rates to try: `oi::handshake::baud_rescue_batch`):
+    /// after two reopens that brought no frame, and after every other one from then on.
+    pub fn rescue_due(&self) -> Option<u32> {
+        let attempt = self.reopen_attempt;
+        (attempt >= RESCUE_FROM_ATTEMPT && attempt % 2 == 0)
+            .then(|| (attempt - RESCUE_FROM_ATTEMPT) / 2)
     }
 
     /// True when the firmware's mode-plus-one quirk is being corrected.

@@ -3,10 +3,11 @@
 //! ([`super::serial::SerialOpener`]) and the simulated Create ([`crate::simulated::device::SimDevice`]).
 //!
 //! Both can also run a **baud rescue**: a damaged byte on the way to the robot can form a Baud command and
-//! move the robot to another rate, where the host can no longer reach it. The rescue opens the port at
-//! every other rate in turn and sends Baud with the model's default code, waiting 100 ms after each
+//! move the robot to another rate, where the host can no longer reach it. A rescue opens the port at a
+//! few other rates in turn and sends Baud with the model's default code, waiting 100 ms after each
 //! [C1 p7; C2 p9]; at the robot's rate this brings it back, at the others it is line noise the robot drops.
-//! The rates and bytes are the core's ([`pavlov::oi::handshake::baud_rescue_rates`]).
+//! Which rates, and how many at once (two, so the port is never left unread for much more than 200 ms),
+//! is the core's decision ([`pavlov::oi::handshake::baud_rescue_batch`]).
 
 use std::time::Duration;
 
@@ -20,8 +21,8 @@ pub trait LinkOpener: Send {
     fn open(&mut self) -> BoxFuture<'static, Result<(LinkReader, LinkWriter), LinkError>>;
     /// A short description for logs.
     fn describe(&self) -> String;
-    /// Sends Baud (the model's default) at every other rate; see the module doc.
-    fn rescue_baud(&mut self) -> BoxFuture<'static, ()>;
+    /// Sends Baud (the model's default) at each of `rates`; see the module doc.
+    fn rescue_baud(&mut self, rates: Vec<u32>) -> BoxFuture<'static, ()>;
 }
 
 /// The robot needs 100 ms after a Baud command before it talks at the new rate [C1 p7; C2 p9].

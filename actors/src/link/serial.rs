@@ -3,7 +3,7 @@
 
 use futures_util::future::BoxFuture;
 use pavlov::oi::Model;
-use pavlov::oi::handshake::{baud_back_bytes, baud_rescue_rates};
+use pavlov::oi::handshake::baud_back_bytes;
 use tokio::io::AsyncWriteExt;
 use tokio_serial::{DataBits, FlowControl, Parity, SerialPortBuilderExt, StopBits};
 
@@ -52,10 +52,10 @@ impl LinkOpener for SerialOpener {
         format!("serial port {}", self.path)
     }
 
-    fn rescue_baud(&mut self) -> BoxFuture<'static, ()> {
+    fn rescue_baud(&mut self, rates: Vec<u32>) -> BoxFuture<'static, ()> {
         let (path, model) = (self.path.clone(), self.model);
         Box::pin(async move {
-            for rate in baud_rescue_rates(model) {
+            for rate in rates {
                 let port = tokio_serial::new(&path, rate)
                     .flow_control(tokio_serial::FlowControl::None)
                     .open_native_async();

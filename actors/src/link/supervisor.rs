@@ -21,9 +21,6 @@ use super::{LinkError, LinkReader, LinkWriter};
 use crate::command::{Applied, CommandError, Envelope, LinkCommand};
 use pavlov::oi::handshake;
 
-/// The first reopen attempt (counted since the last frame) that starts with a baud rescue; then every other.
-const RESCUE_FROM_ATTEMPT: u32 = 2;
-
 /// How long a reopen waits for the writer to close the old port.
 const CLOSE_WAIT: std::time::Duration = std::time::Duration::from_millis(500);
 
@@ -110,13 +107,15 @@ impl Supervisor {
                     // Every other reopen that brought no frame, first try to bring a robot back from
                     // another baud rate (a damaged byte can form a Baud command).
                     let attempt = self.monitor.reopen_attempt();
-                    let rescue = (attempt >= RESCUE_FROM_ATTEMPT && attempt % 2 == 0).then(|| {
+                    let rescue = self.monitor.rescue_due().map(|index| {
                         self.baud_rescues += 1;
+                        let rates = handshake::baud_rescue_batch(self.model, index);
                         tracing::warn!(
                             rescues = self.baud_rescues,
-                            "no frame after {attempt} reopens: sending Baud at every other rate"
+                            ?rates,
+                            "no frame after {attempt} reopens: sending Baud at other rates"
                         );
-                        opener.rescue_baud()
+                        opener.rescue_baud(rates)
                     });
                     // Close the old port first: a serial device is held exclusively.
                     let (closed_tx, closed) = tokio::sync::oneshot::channel();

@@ -4,7 +4,7 @@
 
 use futures_util::future::BoxFuture;
 use pavlov::oi::Model;
-use pavlov::oi::handshake::{baud_back_bytes, baud_rescue_rates};
+use pavlov::oi::handshake::baud_back_bytes;
 use tokio::io::{AsyncWriteExt, DuplexStream};
 use tokio::sync::mpsc;
 
@@ -62,10 +62,10 @@ impl LinkOpener for SimDevice {
         "the simulated Create".into()
     }
 
-    fn rescue_baud(&mut self) -> BoxFuture<'static, ()> {
+    fn rescue_baud(&mut self, rates: Vec<u32>) -> BoxFuture<'static, ()> {
         let device = self.clone();
         Box::pin(async move {
-            for rate in baud_rescue_rates(device.model) {
+            for rate in rates {
                 let Ok((reader, mut writer)) = device.connect_at(rate) else {
                     return;
                 };

@@ -204,3 +204,24 @@ fn the_quirk_does_not_hide_a_trip() {
     m.on_frame(315, &frame(2));
     assert_eq!(m.state(), LinkState::Tripped);
 }
+
+#[test]
+fn a_baud_rescue_comes_on_the_second_reopen_without_a_frame_and_every_other_one() {
+    let mut m = LinkMonitor::new(cfg(), code::SAFE, ModeQuirk::Auto, 0);
+    run(&mut m, 0, 100, true, 2);
+    m.on_link_lost(100);
+    let mut due = Vec::new();
+    let mut t = 100;
+    for _ in 0..6 {
+        while m.on_tick(t) != Some(LinkAction::Reopen) {
+            t += 10;
+        }
+        due.push(m.rescue_due());
+        m.reopened(t);
+    }
+    assert_eq!(due, vec![None, None, Some(0), None, Some(1), None]);
+    // A frame starts the count again.
+    m.on_frame(t + 10, &frame(2));
+    assert_eq!(m.rescue_due(), None);
+    assert_eq!(m.reopen_attempt(), 0);
+}

@@ -139,6 +139,58 @@ async fn a_silent_hang_goes_stale_stops_the_wheels_and_recovers() {
     assert_eq!(last.link.state, LinkState::Up, "not up at the end");
 }
 
+/// Runs 5 minutes with hangs of `hang_ms` (about one every 30 s) and returns the outages the records show
+/// that are longer than half a hang: from the first tick not up to the first tick up again, ms.
+async fn outages_of_hangs(hang_ms: u64, seed: u64) -> Vec<f64> {
+    let server = start(&format!("hang=5e-4,hang_ms={hang_ms}..{hang_ms}"), seed).await;
+    let mut rx = server.feed.subscribe();
+    let records = common::collect(&mut rx, 15_000).await;
+    let hangs = server
+        .health()
+        .sim_status()
+        .expect("simulated")
+        .borrow()
+        .faults
+        .hangs;
+    server.shutdown().await;
+    assert_stopped_unless_up(&records);
+    let mut outages = Vec::new();
+    let mut start = None;
+    for r in &records {
+        match (r.link.state == LinkState::Up, start) {
+            (false, None) => start = Some(r.t_ms),
+            (true, Some(s)) => {
+                outages.push(r.t_ms - s);
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    eprintln!("{hangs} hangs of {hang_ms} ms; outages (ms): {outages:?}");
+    outages.retain(|&ms| ms > hang_ms as f64 / 2.0);
+    outages
+}
+
+#[tokio::test(start_paused = true)]
+async fn control_resumes_within_250_ms_of_frames_returning_after_a_long_outage() {
+    // Hangs long enough for several reopens and baud rescues, during which the port is not read, ending at
+    // different points of that schedule (a 3 s hang ends during the first rescue's old 1.2 s sweep, a 6.5 s
+    // hang during the second). Whenever the line comes back, frames must be read within 250 ms. The stream
+    // is declared stale 150 ms after its last frame, so an outage in the records lasts the hang − 150 ms +
+    // that delay (+ up to two ticks of quantisation).
+    for (hang_ms, seed) in [(3000u64, 21u64), (6500, 22)] {
+        let outages = outages_of_hangs(hang_ms, seed).await;
+        assert!(outages.len() >= 3, "only {} long outages", outages.len());
+        let bound = hang_ms as f64 - 150.0 + 250.0 + 40.0;
+        for ms in outages {
+            assert!(
+                ms <= bound,
+                "a {hang_ms} ms hang left control stopped for {ms} ms (bound {bound})"
+            );
+        }
+    }
+}
+
 async fn rearm(server: &Server) -> Outcome {
     let (req, reply) = ControlRequest::new(LinkCommand::Rearm {});
     server.commands.send(req).await.expect("router up");
