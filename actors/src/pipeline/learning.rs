@@ -281,6 +281,7 @@ impl Learning {
                 self.stage.reset();
                 Ok(Applied::Reset { reset: true })
             }
+            // `command` hands saves to the writer, which answers them; this arm is never reached.
             LearningCommand::SaveWeights { .. } => Err(CommandError::Unavailable(
                 "save_weights is answered by the checkpoint writer".into(),
             )),

@@ -168,8 +168,9 @@ fn save(
     unique: bool,
     c: &Checkpoint,
 ) -> Result<Applied, CommandError> {
+    // Refusals go back to the client (and are counted as error replies); a flood must not flood the log.
     let rejected = |e: String| {
-        tracing::warn!("save_weights refused: {e}");
+        tracing::debug!("save_weights refused: {e}");
         CommandError::Rejected(e)
     };
     let bytes = encode(c, true).map_err(|e| rejected(format!("save_weights: {e}")))?;
