@@ -10,9 +10,11 @@
 //! writer's queue; the writer then sends stop, pause-stream and Start (→ Passive) and closes the link;
 //! only then does the server return.
 
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use pavlov::config::Config;
+use pavlov::learn::checkpoint::Checkpoint;
 use pavlov::oi::handshake;
 use pavlov::oi::parser::StreamParser;
 use pavlov::sim::faults::FaultInjector;
@@ -36,7 +38,7 @@ use crate::pipeline::sensor_ingest::IngestLink;
 use crate::pipeline::skeleton_ingest::{self, SkeletonIngest};
 use crate::pipeline::{self, PipelineParts};
 use crate::simulated::{SimStatus, robot};
-use crate::storage::checkpoint_files;
+use crate::storage::checkpoint_files::{self, Resumed};
 use crate::storage::recorder::RecorderLink;
 use crate::telemetry::Health;
 use crate::telemetry::counters::SharedWriterStats;
@@ -107,7 +109,7 @@ impl ServerBuilder {
         } = self;
         config.validate()?;
         // Learning (and any checkpoint to resume) is checked before the robot is touched.
-        let learning = build_learning(&config)?;
+        let (learning, checkpoints) = build_learning(&config)?;
         let stream = config.robot.stream_ids();
         let model = config.robot.model;
         let startup = handshake::startup_bytes(model, config.robot.oi_mode, &stream)
@@ -209,6 +211,7 @@ impl ServerBuilder {
             pose,
             started,
             config,
+            checkpoints,
             obs_names,
             skeleton,
             health,
@@ -298,6 +301,8 @@ pub struct Server {
     pub started: Instant,
     /// The configuration in force at start-up.
     pub config: Config,
+    /// What start-up did with checkpoints: what was resumed, where this run's checkpoints go.
+    pub checkpoints: CheckpointStart,
     /// The skeleton ingest, when `[skeleton]` is enabled and its socket opened.
     pub skeleton: Option<SkeletonIngest>,
     /// Names of the observation vector's dimensions, in record order.
@@ -349,22 +354,57 @@ impl Server {
     }
 }
 
-/// Learning for `config`: resumed from the newest checkpoint if `[checkpoint] resume`, checkpointing
-/// if `[checkpoint] autosave`.
-fn build_learning(config: &Config) -> Result<Learning, ServerError> {
+/// What start-up did with checkpoints.
+#[derive(Debug, Default)]
+pub struct CheckpointStart {
+    /// The checkpoint resumed from, the newer ones skipped and why, and the learning parameters it
+    /// carries that differ from the configuration's (the checkpoint's are in force).
+    pub resumed: Option<Resumed>,
+    /// This run's folder of automatic checkpoints, `[checkpoint] dir/runs/<run id>/` (with autosave).
+    pub run_dir: Option<PathBuf>,
+}
+
+/// Learning for `config`: resumed from `[checkpoint] resume_from`, or from the newest valid checkpoint
+/// if `[checkpoint] resume`, and checkpointing into a new run folder if `[checkpoint] autosave`. What
+/// was resumed, skipped and overridden is logged.
+fn build_learning(config: &Config) -> Result<(Learning, CheckpointStart), ServerError> {
     let mut learning = Learning::new(config).map_err(|e| ServerError::Learning(e.to_string()))?;
-    if config.checkpoint.resume {
-        let (path, checkpoint) = checkpoint_files::load_for_resume(config)
+    let c = &config.checkpoint;
+    let mut restore = |cp: &Checkpoint| learning.resume(cp).map_err(|e| e.to_string());
+    let resumed = if let Some(file) = &c.resume_from {
+        let r = checkpoint_files::resume_file(config, Path::new(file), &mut restore)
+            .map_err(|e| ServerError::Learning(format!("--resume-from: {e}")))?;
+        Some(r)
+    } else if c.resume {
+        let r = checkpoint_files::resume_newest(config, &mut restore)
             .map_err(|e| ServerError::Learning(format!("--resume: {e}")))?;
-        learning
-            .resume(&checkpoint)
-            .map_err(|e| ServerError::Learning(format!("--resume: {}: {e}", path.display())))?;
-        tracing::info!(path = %path.display(), tick = checkpoint.created_tick, "resumed learning from a checkpoint");
+        Some(r)
+    } else {
+        None
+    };
+    if let Some(r) = &resumed {
+        tracing::info!(path = %r.path.display(), tick = r.tick, "resumed learning from a checkpoint");
+        for s in &r.skipped {
+            tracing::warn!(path = %s.path.display(), "skipped a newer checkpoint: {}", s.reason);
+        }
+        for o in &r.overrides {
+            tracing::info!(
+                prediction = %o.prediction,
+                parameter = o.parameter,
+                checkpoint = o.checkpoint,
+                configuration = o.configuration,
+                "resumed {o}"
+            );
+        }
     }
-    if config.checkpoint.autosave {
-        learning = learning.with_autosave(config).map_err(|e| {
+    if c.autosave {
+        learning = learning.with_autosave().map_err(|e| {
             ServerError::Learning(format!("cannot start the checkpoint writer: {e}"))
         })?;
     }
-    Ok(learning)
+    let run_dir = learning.run_dir().map(Path::to_path_buf);
+    if let Some(dir) = &run_dir {
+        tracing::info!(dir = %dir.display(), "this run's checkpoints go into its own folder");
+    }
+    Ok((learning, CheckpointStart { resumed, run_dir }))
 }

@@ -268,19 +268,31 @@ impl SkeletonConfig {
 }
 
 /// `[checkpoint]`: where learned weights are saved.
+///
+/// Layout of `dir`: every server run writes its automatic checkpoints into `runs/<run id>/` (pruned to
+/// `keep`), `save_weights` writes into `saved/` (never pruned, never overwritten, limited by `max_saves`
+/// and `max_saves_mb`), and `--resume` searches every run (and the flat `checkpoint-<tick>.json` files
+/// of earlier versions).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CheckpointConfig {
-    /// Directory that `save_weights` and the periodic checkpoints write into; a client names only the file.
+    /// Directory that holds `runs/` (automatic checkpoints) and `saved/` (`save_weights`).
     pub dir: String,
     /// Seconds of ticks between periodic checkpoints (0: only at shutdown).
     pub every_s: u64,
-    /// How many periodic checkpoints to keep (the oldest are deleted).
+    /// How many of this run's automatic checkpoints to keep (the oldest are deleted).
     pub keep: usize,
-    /// Restore the newest checkpoint in `dir` before the first tick (`pavlov serve --resume`).
+    /// Restore the newest valid checkpoint in `dir` before the first tick (`pavlov serve --resume`).
     pub resume: bool,
+    /// Restore this checkpoint file instead of searching (`pavlov serve --resume-from FILE`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub resume_from: Option<String>,
     /// Write periodic and shut-down checkpoints (`pavlov serve` turns this on; experiments leave it off).
     pub autosave: bool,
+    /// The most files `saved/` may hold before `save_weights` is refused.
+    pub max_saves: usize,
+    /// The most MiB `saved/` may hold, the new save included, before `save_weights` is refused.
+    pub max_saves_mb: u64,
 }
 
 impl Default for CheckpointConfig {
@@ -290,7 +302,10 @@ impl Default for CheckpointConfig {
             every_s: 60,
             keep: 5,
             resume: false,
+            resume_from: None,
             autosave: false,
+            max_saves: 100,
+            max_saves_mb: 256,
         }
     }
 }
@@ -388,6 +403,23 @@ impl Config {
                 "checkpoint.keep",
                 "must keep at least 1 checkpoint",
             ));
+        }
+        if self.checkpoint.max_saves == 0 {
+            return Err(invalid("checkpoint.max_saves", "must be at least 1"));
+        }
+        if !(1..=1_048_576).contains(&self.checkpoint.max_saves_mb) {
+            return Err(invalid(
+                "checkpoint.max_saves_mb",
+                "must be between 1 and 1048576 (1 TiB)",
+            ));
+        }
+        if self
+            .checkpoint
+            .resume_from
+            .as_deref()
+            .is_some_and(|f| f.trim().is_empty())
+        {
+            return Err(invalid("checkpoint.resume_from", "must name a file"));
         }
         let d = &self.dashboard;
         let bind: std::net::SocketAddr = d.bind.parse().map_err(|_| {

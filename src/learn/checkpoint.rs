@@ -2,8 +2,12 @@
 //! belongs to, and the check that refuses to resume a checkpoint into a configuration that differs.
 //!
 //! The fingerprint is FNV-1a (64 bit) over the canonical TOML encoding of the robot model, the stimulus
-//! and the prediction specs: everything that decides what a weight means. Pure code: writing files
-//! atomically is the server's job.
+//! and the prediction specs: everything that decides what a weight means. A checkpoint never holds a
+//! non-finite number ([`Checkpoint::new`] refuses one, naming the prediction): JSON cannot carry NaN or
+//! infinity, and a learner restored from one would only predict NaN. [`Checkpoint::param_overrides`]
+//! names the learning parameters (α, λ, θ) a checkpoint carries that differ from the configuration's
+//! (changed at run time with `set_params`); restoring the checkpoint puts its values in force. Pure code:
+//! writing files atomically is the server's job.
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -53,6 +57,73 @@ pub enum CheckpointError {
     /// The configuration could not be encoded for the fingerprint.
     #[error("cannot encode the configuration for its fingerprint: {0}")]
     Encode(String),
+    /// A weight, trace or parameter is NaN or infinite: such a state is never checkpointed.
+    #[error(
+        "prediction `{prediction}`: {field} is {value}; a checkpoint never holds a non-finite number"
+    )]
+    NonFinite {
+        /// The prediction whose state is not finite.
+        prediction: String,
+        /// Which value (`weights[12]`, `traces[3]`, `alpha`, …).
+        field: String,
+        /// The value (`NaN`, `inf`, `-inf`).
+        value: f64,
+    },
+}
+
+/// A learning parameter a checkpoint carries that differs from the configuration's.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamOverride {
+    /// The prediction.
+    pub prediction: String,
+    /// `alpha`, `lambda` or `threshold`.
+    pub parameter: &'static str,
+    /// The checkpoint's value (the one in force after restoring it).
+    pub checkpoint: f64,
+    /// The configuration's value.
+    pub configuration: f64,
+}
+
+impl std::fmt::Display for ParamOverride {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "prediction `{}`: {} is {} in the checkpoint, {} in the configuration; the checkpoint's {} is in force",
+            self.prediction, self.parameter, self.checkpoint, self.configuration, self.checkpoint
+        )
+    }
+}
+
+/// Checks that every number in `state` is finite; the error names the first one that is not.
+pub fn check_finite(state: &SetSnapshot) -> Result<(), CheckpointError> {
+    for p in &state.predictions {
+        let non_finite = |field: String, value: f64| CheckpointError::NonFinite {
+            prediction: p.name.clone(),
+            field,
+            value,
+        };
+        for (what, values) in [("weights", &p.weights), ("traces", &p.traces)] {
+            if let Some((i, &v)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                return Err(non_finite(format!("{what}[{i}]"), v));
+            }
+        }
+        let threshold = match p.threshold {
+            super::spec::Threshold::Fixed(t) => t,
+            super::spec::Threshold::Steps(_) => 0.0,
+        };
+        let gamma = p.previous.as_ref().map_or(0.0, |prev| prev.gamma);
+        for (field, v) in [
+            ("alpha", p.alpha),
+            ("lambda", p.lambda),
+            ("threshold", threshold),
+            ("previous.gamma", gamma),
+        ] {
+            if !v.is_finite() {
+                return Err(non_finite(field.to_string(), v));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// What the fingerprint covers, in a fixed order.
@@ -95,8 +166,10 @@ pub fn config_fingerprint(config: &Config) -> Result<String, CheckpointError> {
 }
 
 impl Checkpoint {
-    /// A checkpoint of `state`, taken at `tick`, for `config`.
+    /// A checkpoint of `state`, taken at `tick`, for `config`. Refused when any number in `state` is
+    /// not finite ([`CheckpointError::NonFinite`] names the prediction).
     pub fn new(config: &Config, tick: u64, state: SetSnapshot) -> Result<Self, CheckpointError> {
+        check_finite(&state)?;
         Ok(Checkpoint {
             format: CHECKPOINT_FORMAT.to_string(),
             created_tick: tick,
@@ -150,6 +223,37 @@ impl Checkpoint {
             ));
         }
         Err(CheckpointError::Mismatch { differences })
+    }
+
+    /// The learning parameters (α, λ, θ) of this checkpoint's state that differ from `config`'s, matched
+    /// by prediction name. Restoring the checkpoint puts the checkpoint's values in force.
+    pub fn param_overrides(&self, config: &Config) -> Vec<ParamOverride> {
+        let mut out = Vec::new();
+        for saved in &self.state.predictions {
+            let Some(spec) = config.predictions.iter().find(|p| p.name == saved.name) else {
+                continue;
+            };
+            let saved_threshold = PredictionSpec {
+                threshold: saved.threshold,
+                ..spec.clone()
+            }
+            .threshold_value();
+            for (parameter, checkpoint, configuration) in [
+                ("alpha", saved.alpha, spec.alpha),
+                ("lambda", saved.lambda, spec.lambda),
+                ("threshold", saved_threshold, spec.threshold_value()),
+            ] {
+                if checkpoint.to_bits() != configuration.to_bits() {
+                    out.push(ParamOverride {
+                        prediction: saved.name.clone(),
+                        parameter,
+                        checkpoint,
+                        configuration,
+                    });
+                }
+            }
+        }
+        out
     }
 }
 
@@ -225,6 +329,10 @@ mod tests {
 
     fn stall() -> Config {
         Config::from_toml(include_str!("../../config/stall.toml")).unwrap()
+    }
+
+    fn learned_state(cfg: &Config) -> SetSnapshot {
+        crate::agent::LearningStage::new(cfg).unwrap().snapshot()
     }
 
     fn empty_state() -> SetSnapshot {
@@ -310,5 +418,53 @@ mod tests {
             cp.check_against(&cfg),
             Err(CheckpointError::Format { .. })
         ));
+    }
+
+    #[test]
+    fn a_non_finite_weight_trace_or_parameter_is_never_checkpointed() {
+        let cfg = stall();
+        let name = cfg.predictions[0].name.clone();
+        assert!(Checkpoint::new(&cfg, 1, learned_state(&cfg)).is_ok());
+        let mut nan_weight = learned_state(&cfg);
+        nan_weight.predictions[0].weights[7] = f64::NAN;
+        let err = Checkpoint::new(&cfg, 1, nan_weight).unwrap_err();
+        assert!(
+            matches!(&err, CheckpointError::NonFinite { prediction, field, value }
+                if *prediction == name && field == "weights[7]" && value.is_nan()),
+            "{err:?}"
+        );
+        let msg = err.to_string();
+        assert!(msg.contains(&format!("`{name}`")), "{msg}");
+        assert!(msg.contains("weights[7] is NaN"), "{msg}");
+        let mut inf_trace = learned_state(&cfg);
+        inf_trace.predictions[0].traces[0] = f64::INFINITY;
+        let msg = Checkpoint::new(&cfg, 1, inf_trace).unwrap_err().to_string();
+        assert!(msg.contains("traces[0] is inf"), "{msg}");
+        let mut nan_alpha = learned_state(&cfg);
+        nan_alpha.predictions[0].alpha = f64::NAN;
+        let msg = Checkpoint::new(&cfg, 1, nan_alpha).unwrap_err().to_string();
+        assert!(msg.contains("alpha is NaN"), "{msg}");
+    }
+
+    #[test]
+    fn parameters_changed_at_run_time_are_named_as_overrides() {
+        let cfg = stall();
+        let cp = Checkpoint::new(&cfg, 1, learned_state(&cfg)).unwrap();
+        assert!(cp.param_overrides(&cfg).is_empty());
+        let mut state = learned_state(&cfg);
+        state.predictions[0].alpha = 0.01;
+        state.predictions[0].threshold = crate::learn::spec::Threshold::Fixed(0.3);
+        let cp = Checkpoint::new(&cfg, 1, state).unwrap();
+        let overrides = cp.param_overrides(&cfg);
+        let what: Vec<_> = overrides.iter().map(|o| o.parameter).collect();
+        assert_eq!(what, ["alpha", "threshold"]);
+        assert_eq!(overrides[0].checkpoint, 0.01);
+        assert_eq!(overrides[0].configuration, cfg.predictions[0].alpha);
+        let line = overrides[1].to_string();
+        assert!(
+            line.contains("threshold is 0.3 in the checkpoint, 0.5 in the configuration"),
+            "{line}"
+        );
+        assert!(line.contains("the checkpoint's 0.3 is in force"), "{line}");
     }
 }

@@ -20,15 +20,23 @@ pub struct ServeArgs {
     robot: Option<String>,
     #[command(flatten)]
     dashboard: DashboardArgs,
-    /// Record every tick into DIR/ticks.jsonl (JSON Lines, replayable with `pavlov replay DIR`). Without
-    /// it, recording starts and stops on the dashboard's commands, under ./recordings.
+    /// Record every tick into DIR/ticks.jsonl (JSON Lines, replayable with `pavlov replay DIR`); refused
+    /// if DIR already holds a recording. Recordings started from the dashboard go into ./recordings.
     #[arg(long, value_name = "DIR")]
     record: Option<PathBuf>,
-    /// Continue learning from the newest checkpoint in [checkpoint] dir. Refused (before the robot is
-    /// touched) if there is none or it was made for a different configuration.
-    #[arg(long)]
+    /// Continue learning from the newest valid checkpoint in [checkpoint] dir, over every run; newer
+    /// ones that cannot be used are skipped and named. Refused (before the robot is touched) if none is
+    /// valid.
+    #[arg(long, conflicts_with = "resume_from")]
     resume: bool,
+    /// Continue learning from this checkpoint file: an automatic checkpoint or a `save_weights` save
+    /// (e.g. weights/saved/w.json). Refused if it cannot be used.
+    #[arg(long, value_name = "FILE")]
+    resume_from: Option<PathBuf>,
 }
+
+/// The folder dashboard-started recordings go into.
+const RECORDINGS_ROOT: &str = "recordings";
 
 /// Runs the server until Ctrl-C or SIGTERM.
 pub async fn run(args: ServeArgs) -> Result<()> {
@@ -38,20 +46,26 @@ pub async fn run(args: ServeArgs) -> Result<()> {
         dashboard,
         record,
         resume,
+        resume_from,
     } = args;
     let mut cfg = load_config(&config_args)?;
     dashboard.apply(&mut cfg)?;
     // The server checkpoints its weights periodically and at shutdown.
     cfg.checkpoint.autosave = true;
     cfg.checkpoint.resume |= resume;
-    if cfg.checkpoint.resume {
-        let (path, cp) =
-            checkpoint_files::load_for_resume(&cfg).context("cannot resume (--resume)")?;
-        say!(
-            "resuming from {} (tick {})",
-            path.display(),
-            cp.created_tick
-        );
+    if let Some(file) = resume_from {
+        cfg.checkpoint.resume_from = Some(file.display().to_string());
+    }
+    if cfg.checkpoint.resume || cfg.checkpoint.resume_from.is_some() {
+        // Refuse before anything is started (the recorder would create its file); the server then
+        // resumes for real and reports what it took and skipped.
+        checkpoint_files::load_for_resume(&cfg).context(
+            if cfg.checkpoint.resume_from.is_some() {
+                "cannot resume (--resume-from)"
+            } else {
+                "cannot resume (--resume)"
+            },
+        )?;
     }
     if robot.is_some() && config_args.faults.is_some() {
         anyhow::bail!(
@@ -70,15 +84,13 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     tracing::info!(?target, mode = ?cfg.control.mode, "starting pavlov");
     // Every listening socket is bound before the robot is touched: a busy port stops here.
     let bound = Dashboard::bind(&cfg.dashboard)?;
-    let recorder = recorder::Recorder::spawn(
+    let recorder = recorder::Recorder::spawn_new(
         recording::RecordingHeader::new(&cfg, "pavlov serve"),
         record.clone(),
-        record
-            .clone()
-            .unwrap_or_else(|| PathBuf::from("recordings")),
+        PathBuf::from(RECORDINGS_ROOT),
         recorder::DEFAULT_CAPACITY,
     )
-    .context("cannot start the recorder")?;
+    .context("cannot start the recorder (--record)")?;
     if let Some(dir) = &record {
         say!(
             "recording every tick into {}",
@@ -97,6 +109,14 @@ pub async fn run(args: ServeArgs) -> Result<()> {
             return Err(e).context("cannot start the dashboard");
         }
     };
+    if let Some(resumed) = &server.checkpoints.resumed {
+        for line in resumed.report_lines() {
+            say!("{line}");
+        }
+    }
+    if let Some(dir) = &server.checkpoints.run_dir {
+        say!("this run's checkpoints: {}", dir.display());
+    }
     say!("pavlov is driving {robot_name}; press Ctrl-C to stop");
     say!("dashboard: {}", dash.url());
     if server.config.dashboard.token.is_some() {

@@ -4,20 +4,28 @@
 //! once) and then learns (the TD(λ) update runs after the prediction has left), but only from a fresh
 //! observation ([`pavlov::agent::safety::observation_is_fresh`]). It applies learning's commands
 //! (parameters, reset, save, injected human requests) and checkpoints the weights periodically.
+//!
+//! Checkpoints and saves are built here (a copy of the state, between two ticks) and written by the
+//! checkpoint writer's thread: automatic ones into this run's folder, saves into `saved/`
+//! ([`crate::storage::checkpoint_files`]). A state holding a NaN or an infinity is never checkpointed:
+//! the refusal is logged with the prediction's name and counted.
 
 use pavlov::agent::safety::observation_is_fresh;
 use pavlov::agent::{LearnInput, LearnOutput, LearningStage};
 use pavlov::config::Config;
 use pavlov::learn::LearnError;
-use pavlov::learn::checkpoint::Checkpoint;
+use pavlov::learn::checkpoint::{Checkpoint, CheckpointError};
 use pavlov::skeleton::{ElbowFeatureTracker, PoseTracker};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
 use super::sensor_ingest::Observation;
-use crate::command::{Applied, CommandError, Envelope, Inbox, LearningCommand, Outcome};
-use crate::storage::checkpoint_files::CheckpointWriter;
+use crate::command::{Applied, CommandError, Envelope, Inbox, LearningCommand, Outcome, Reply};
+use crate::storage::checkpoint_files::layout::create_run_dir;
+use crate::storage::checkpoint_files::saves::{SaveQuota, check_save_name, saved_dir};
+use crate::storage::checkpoint_files::writer::{CheckpointWriter, SaveJob, WriterSettings};
+use crate::storage::utc;
 
 /// Learning's output for one tick.
 #[derive(Debug, Clone)]
@@ -38,32 +46,37 @@ pub(crate) struct Learning {
     elbows: Option<ElbowFeatureTracker>,
     request_until: u64,
     period_ms: u64,
-    checkpoint_dir: std::path::PathBuf,
+    /// The configuration checkpoints are made for.
+    config: Config,
+    /// Writes checkpoints and saves: started with autosave, or at the first save.
+    writer: Option<CheckpointWriter>,
     autosave: Option<Autosave>,
     /// Ticks learned before this run (from a resumed checkpoint): checkpoints count lifelong ticks.
     tick_offset: u64,
+    /// Checkpoints and saves refused because a weight, trace or parameter was not finite.
+    refused_non_finite: u64,
     /// Observations older than this many ticks are not learned from.
     max_obs_age_ticks: u32,
     /// Ticks not learned from because the observation was stale or the link not up.
     skipped_stale: u64,
 }
 
-/// Periodic and final checkpoints of the learned state.
+/// Periodic and final checkpoints of the learned state, into this run's folder.
 struct Autosave {
-    config: Config,
     every_ticks: u64,
     last_seq: u64,
-    writer: CheckpointWriter,
+    run_dir: std::path::PathBuf,
 }
 
-/// True for a bare file name: no directories, no `..`, nothing hidden.
-fn is_plain_file_name(name: &str) -> bool {
-    !name.is_empty()
-        && name.len() <= 128
-        && !name.starts_with('.')
-        && name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-'))
+/// Where the writer puts `config`'s checkpoints and saves.
+fn writer_settings(config: &Config, run_dir: Option<std::path::PathBuf>) -> WriterSettings {
+    let c = &config.checkpoint;
+    WriterSettings {
+        run_dir,
+        keep: c.keep,
+        saved_dir: saved_dir(std::path::Path::new(&c.dir)),
+        quota: SaveQuota::of(c),
+    }
 }
 
 impl Learning {
@@ -78,25 +91,40 @@ impl Learning {
             elbows: uses_skeleton.then(ElbowFeatureTracker::new),
             request_until: 0,
             period_ms: config.tick.period_ms.max(1),
-            checkpoint_dir: config.checkpoint.dir.clone().into(),
+            config: config.clone(),
+            writer: None,
             autosave: None,
             tick_offset: 0,
+            refused_non_finite: 0,
             max_obs_age_ticks: config.safety.max_obs_age_ticks,
             skipped_stale: 0,
         })
     }
 
-    /// Checkpoints into `[checkpoint] dir` every `every_s` seconds of ticks and when the loop ends.
-    pub(crate) fn with_autosave(mut self, config: &Config) -> std::io::Result<Self> {
-        let c = &config.checkpoint;
-        let writer = CheckpointWriter::spawn(c.dir.clone().into(), c.keep)?;
+    /// Checkpoints into a new run folder, `[checkpoint] dir/runs/<run id>/`, every `every_s` seconds of
+    /// ticks and when the loop ends.
+    pub(crate) fn with_autosave(mut self) -> std::io::Result<Self> {
+        let c = &self.config.checkpoint;
+        let run_dir = create_run_dir(std::path::Path::new(&c.dir))?;
+        let every_ticks = (c.every_s * 1000).div_ceil(self.period_ms);
+        if let Some(old) = self.writer.take() {
+            old.finish(None);
+        }
+        self.writer = Some(CheckpointWriter::spawn(writer_settings(
+            &self.config,
+            Some(run_dir.clone()),
+        ))?);
         self.autosave = Some(Autosave {
-            config: config.clone(),
-            every_ticks: (c.every_s * 1000).div_ceil(self.period_ms),
+            every_ticks,
             last_seq: 0,
-            writer,
+            run_dir,
         });
         Ok(self)
+    }
+
+    /// This run's folder of automatic checkpoints (with autosave).
+    pub(crate) fn run_dir(&self) -> Option<&std::path::Path> {
+        self.autosave.as_ref().map(|a| a.run_dir.as_path())
     }
 
     /// Continues from `checkpoint` (already checked against the configuration).
@@ -106,24 +134,88 @@ impl Learning {
         Ok(())
     }
 
-    /// A checkpoint of the current state at this run's tick `seq`.
-    fn checkpoint(&self, config: &Config, seq: u64) -> Option<Checkpoint> {
-        Checkpoint::new(config, self.tick_offset + seq, self.stage.snapshot())
-            .map_err(|e| tracing::error!("cannot build a checkpoint: {e}"))
-            .ok()
+    /// A checkpoint of the current state at this run's tick `seq`. A state with a non-finite number is
+    /// refused: logged with the prediction's name, and counted.
+    fn checkpoint(&mut self, seq: u64) -> Result<Checkpoint, CheckpointError> {
+        let tick = self.tick_offset + seq;
+        Checkpoint::new(&self.config, tick, self.stage.snapshot()).inspect_err(|e| {
+            if matches!(e, CheckpointError::NonFinite { .. }) {
+                self.refused_non_finite += 1;
+            }
+            tracing::error!(
+                tick,
+                refused_non_finite = self.refused_non_finite,
+                "no checkpoint written: {e}"
+            );
+        })
     }
 
     /// Hands a periodic checkpoint to the writer when one is due.
     fn autosave_if_due(&mut self, seq: u64) {
-        let Some(a) = &self.autosave else { return };
+        let Some(a) = &mut self.autosave else { return };
         if a.every_ticks == 0 || seq < a.last_seq + a.every_ticks {
             return;
         }
-        if let Some(c) = self.checkpoint(&a.config, seq) {
-            a.writer.submit(c);
+        a.last_seq = seq;
+        if let Ok(c) = self.checkpoint(seq)
+            && let Some(w) = &self.writer
+        {
+            w.submit(c);
         }
-        if let Some(a) = &mut self.autosave {
-            a.last_seq = seq;
+    }
+
+    /// `save_weights`: checks the name at once, then hands the save to the writer, which answers
+    /// `reply` when the file is on disk or refused.
+    fn save_weights(&mut self, name: Option<String>, seq: u64, reply: Reply) {
+        let rejected = |e: String| Err(CommandError::Rejected(e));
+        // A client names a file, never a place: it is written into `[checkpoint] dir/saved/`.
+        let (name, unique) = match name {
+            Some(name) => (name, false),
+            None => {
+                let stamp = utc::stamp(std::time::SystemTime::now());
+                let tick = self.tick_offset + seq;
+                (format!("weights-{stamp}-tick{tick}.json"), true)
+            }
+        };
+        if let Err(e) = check_save_name(&name) {
+            let _ = reply.send(rejected(e.to_string()));
+            return;
+        }
+        let checkpoint = match self.checkpoint(seq) {
+            Ok(c) => c,
+            Err(e) => {
+                let _ = reply.send(rejected(format!("save_weights: {e}")));
+                return;
+            }
+        };
+        if self.writer.is_none() {
+            match CheckpointWriter::spawn(writer_settings(&self.config, None)) {
+                Ok(w) => self.writer = Some(w),
+                Err(e) => {
+                    let _ = reply.send(Err(CommandError::Unavailable(format!(
+                        "cannot start the checkpoint writer: {e}"
+                    ))));
+                    return;
+                }
+            }
+        }
+        if let Some(w) = &self.writer {
+            w.submit_save(SaveJob {
+                name,
+                unique,
+                checkpoint,
+                reply,
+            });
+        }
+    }
+
+    /// Applies `command`; a save is answered later, by the writer.
+    fn command(&mut self, command: LearningCommand, seq: u64, reply: Reply) {
+        match command {
+            LearningCommand::SaveWeights { path } => self.save_weights(path, seq, reply),
+            other => {
+                let _ = reply.send(self.apply(other, seq));
+            }
         }
     }
 
@@ -135,11 +227,19 @@ impl Learning {
                 "ticks not learned from: stale observation or link not up"
             );
         }
-        let Some(a) = self.autosave.take() else {
+        let last = match self.autosave.take() {
+            Some(_) => self.checkpoint(seq).ok(),
+            None => None,
+        };
+        if self.refused_non_finite > 0 {
+            tracing::error!(
+                checkpoints = self.refused_non_finite,
+                "checkpoints not written in this run because a weight, trace or parameter was not finite"
+            );
+        }
+        let Some(writer) = self.writer.take() else {
             return;
         };
-        let last = self.checkpoint(&a.config, seq);
-        let writer = a.writer;
         if tokio::task::spawn_blocking(move || writer.finish(last))
             .await
             .is_err()
@@ -181,33 +281,10 @@ impl Learning {
                 self.stage.reset();
                 Ok(Applied::Reset { reset: true })
             }
-            LearningCommand::SaveWeights { path } => {
-                // A client names a file, never a place: it is written inside `[checkpoint] dir`.
-                let name = path.unwrap_or_else(|| format!("weights-tick{seq}.json"));
-                if !is_plain_file_name(&name) {
-                    return Err(rejected(format!(
-                        "save_weights takes a file name (letters, digits, '.', '_', '-'; not starting with '.'), \
-                         written into the checkpoint directory `{}`; got `{name}`",
-                        self.checkpoint_dir.display()
-                    )));
-                }
-                let path = self.checkpoint_dir.join(&name);
-                let snapshot = self.stage.snapshot();
-                let json =
-                    serde_json::to_vec_pretty(&snapshot).map_err(|e| rejected(e.to_string()))?;
-                // The disk is not touched on the tick path: the write happens on the blocking pool.
-                let (dir, p) = (self.checkpoint_dir.clone(), path.clone());
-                tokio::task::spawn_blocking(move || {
-                    if let Err(e) =
-                        std::fs::create_dir_all(&dir).and_then(|()| std::fs::write(&p, json))
-                    {
-                        tracing::error!("could not save weights to {}: {e}", p.display());
-                    }
-                });
-                Ok(Applied::Saved {
-                    path: path.display().to_string(),
-                })
-            }
+            // `command` hands saves to the writer, which answers them; this arm is never reached.
+            LearningCommand::SaveWeights { .. } => Err(CommandError::Unavailable(
+                "save_weights is answered by the checkpoint writer".into(),
+            )),
         }
     }
 }
@@ -243,7 +320,7 @@ pub(crate) async fn run(
             biased;
             _ = cancel.cancelled() => break,
             Some(Envelope { command, reply }) = commands.recv() => {
-                let _ = reply.send(learning.apply(command, seq));
+                learning.command(command, seq, reply);
             }
             o = observations.recv() => {
                 let Some(obs) = o else { break };
@@ -280,28 +357,4 @@ pub(crate) async fn run(
         }
     }
     learning.finish(seq).await;
-}
-
-#[cfg(test)]
-mod tests {
-    use super::is_plain_file_name;
-
-    #[test]
-    fn only_plain_file_names_are_accepted() {
-        for ok in ["w.json", "run-3_weights.json", "a"] {
-            assert!(is_plain_file_name(ok), "{ok}");
-        }
-        for bad in [
-            "",
-            "../x.json",
-            "/etc/passwd",
-            "a/b.json",
-            ".hidden",
-            "..",
-            "x y",
-            "ü.json",
-        ] {
-            assert!(!is_plain_file_name(bad), "{bad}");
-        }
-    }
 }

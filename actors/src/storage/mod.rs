@@ -3,9 +3,12 @@
 //!
 //! - [`recorder`]: writes the tick feed on its own thread; [`recording`]: the format and its reader;
 //!   [`replay`]: runs a recording back through the core and checks it is reproduced exactly.
-//! - [`checkpoint_files`]: atomic checkpoint files, pruning, and finding one to resume from.
+//! - [`checkpoint_files`]: per-run automatic checkpoints, saves, pruning, and finding one to resume.
+//! - `names`: the plain names clients give saves and recordings; `utc`: time stamps for names on disk.
 
 pub mod checkpoint_files;
+pub(crate) mod names;
 pub mod recorder;
 pub mod recording;
 pub mod replay;
+pub(crate) mod utc;

@@ -5,18 +5,27 @@
 //! appends one JSON line each to a buffered file, and flushes whenever the queue runs dry and at least every
 //! [`FLUSH_EVERY`], so a killed process loses at most about a second (a torn last line is skipped by the
 //! reader). It also takes `start_recording` / `stop_recording` commands from the command router.
+//!
+//! A client names a recording, never a place: `start_recording`'s `dir` is a plain name
+//! ([`crate::storage::names`]) of a folder inside the recordings root, and the default name
+//! (`recording-<UTC time>`, with `-2`, `-3`, … if taken) is always new. A recording file is never
+//! overwritten, neither by a client nor by `pavlov serve --record` ([`Recorder::spawn_new`]); only the
+//! experiments, which regenerate their own results, replace one ([`Recorder::spawn`]). A refused start
+//! leaves the running recording open.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime};
 
 use pavlov::record::TickRecord;
 use tokio::sync::mpsc;
 
 use crate::command::{Applied, CommandError, Envelope, Inbox, Outcome, RecorderCommand};
+use crate::storage::names::{NAME_RULES, check_plain_name};
 use crate::storage::recording::{RecordingHeader, TICKS_FILE};
+use crate::storage::utc;
 
 /// The longest time written records may stay in the buffer.
 pub(crate) const FLUSH_EVERY: Duration = Duration::from_secs(1);
@@ -54,11 +63,33 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    /// Starts the recorder thread. With `dir`, recording into `dir/ticks.jsonl` starts at once;
-    /// `root` is where `start_recording` without a directory creates a timestamped one.
+    /// Starts the recorder thread. With `dir`, recording into `dir/ticks.jsonl` starts at once,
+    /// replacing a recording already there (for experiments, which regenerate their own results);
+    /// `root` is the folder `start_recording` creates its recordings in.
     pub fn spawn(
         header: RecordingHeader,
         dir: Option<PathBuf>,
+        root: PathBuf,
+        capacity: usize,
+    ) -> std::io::Result<Recorder> {
+        Self::spawn_with(header, dir, Existing::Replace, root, capacity)
+    }
+
+    /// Like [`Recorder::spawn`], but refuses (an `AlreadyExists` error naming the file) to start when
+    /// `dir` already holds a recording: for `pavlov serve --record DIR`.
+    pub fn spawn_new(
+        header: RecordingHeader,
+        dir: Option<PathBuf>,
+        root: PathBuf,
+        capacity: usize,
+    ) -> std::io::Result<Recorder> {
+        Self::spawn_with(header, dir, Existing::Refuse, root, capacity)
+    }
+
+    fn spawn_with(
+        header: RecordingHeader,
+        dir: Option<PathBuf>,
+        existing: Existing,
         root: PathBuf,
         capacity: usize,
     ) -> std::io::Result<Recorder> {
@@ -71,7 +102,7 @@ impl Recorder {
             report: RecorderReport::default(),
         };
         if let Some(d) = dir {
-            writer.open(&d)?;
+            writer.open(&d, existing)?;
         }
         let thread = std::thread::Builder::new()
             .name("pavlov-recorder".into())
@@ -96,6 +127,13 @@ impl Recorder {
     }
 }
 
+/// What opening a recording does to one already there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Existing {
+    Replace,
+    Refuse,
+}
+
 struct OpenFile {
     out: BufWriter<File>,
     path: PathBuf,
@@ -111,15 +149,33 @@ struct Writer {
 }
 
 impl Writer {
-    fn open(&mut self, dir: &Path) -> std::io::Result<PathBuf> {
-        self.close();
+    /// Opens a recording in `dir` and only then closes the one open (a refused open leaves it running).
+    fn open(&mut self, dir: &Path, existing: Existing) -> std::io::Result<PathBuf> {
         std::fs::create_dir_all(dir)?;
         let path = dir.join(TICKS_FILE);
-        let mut out = BufWriter::with_capacity(256 * 1024, File::create(&path)?);
+        let file = match existing {
+            Existing::Replace => File::create(&path),
+            Existing::Refuse => File::options()
+                .write(true)
+                .create_new(true)
+                .open(&path)
+                .map_err(|e| match e.kind() {
+                    std::io::ErrorKind::AlreadyExists => std::io::Error::new(
+                        e.kind(),
+                        format!(
+                            "{} already holds a recording, and a recording is never overwritten",
+                            path.display()
+                        ),
+                    ),
+                    _ => e,
+                }),
+        }?;
+        let mut out = BufWriter::with_capacity(256 * 1024, file);
         let header = serde_json::to_string(&self.header).map_err(std::io::Error::other)?;
         out.write_all(header.as_bytes())?;
         out.write_all(b"\n")?;
         out.flush()?;
+        self.close();
         self.report.files.push(path.clone());
         self.open = Some(OpenFile {
             out,
@@ -178,19 +234,23 @@ impl Writer {
     fn command(&mut self, cmd: RecorderCommand) -> Outcome {
         match cmd {
             RecorderCommand::StartRecording { dir } => {
-                let dir = dir.map(PathBuf::from).unwrap_or_else(|| {
-                    let secs = SystemTime::now()
-                        .duration_since(UNIX_EPOCH)
-                        .map_or(0, |d| d.as_secs());
-                    self.root.join(format!("recording-{secs}"))
-                });
-                self.open(&dir)
+                let dir = match dir {
+                    Some(name) => {
+                        check_plain_name(&name).map_err(|e| {
+                            CommandError::Rejected(format!(
+                                "start_recording takes {NAME_RULES}, of a folder inside the recordings folder {}; {e}",
+                                self.root.display()
+                            ))
+                        })?;
+                        self.root.join(name)
+                    }
+                    None => self.new_default_dir(),
+                };
+                self.open(&dir, Existing::Refuse)
                     .map(|p| Applied::Recording {
                         recording: p.display().to_string(),
                     })
-                    .map_err(|e| {
-                        CommandError::Rejected(format!("cannot record into {}: {e}", dir.display()))
-                    })
+                    .map_err(|e| CommandError::Rejected(format!("start_recording: {e}")))
             }
             RecorderCommand::StopRecording {} => match self.open.as_ref().map(|f| f.path.clone()) {
                 Some(p) => {
@@ -202,6 +262,18 @@ impl Writer {
                 None => Err(CommandError::Rejected("no recording is running".into())),
             },
         }
+    }
+
+    /// `root/recording-<UTC time>`, with `-2`, `-3`, … when that folder exists (twice in a second).
+    fn new_default_dir(&self) -> PathBuf {
+        let base = format!("recording-{}", utc::stamp(SystemTime::now()));
+        let mut dir = self.root.join(&base);
+        let mut n = 2;
+        while dir.exists() {
+            dir = self.root.join(format!("{base}-{n}"));
+            n += 1;
+        }
+        dir
     }
 
     fn run(
@@ -286,7 +358,7 @@ mod tests {
         commands
             .blocking_send(Envelope {
                 command: RecorderCommand::StartRecording {
-                    dir: Some(dir.display().to_string()),
+                    dir: Some("a".into()),
                 },
                 reply: tx,
             })
@@ -313,6 +385,61 @@ mod tests {
         assert_eq!(seqs.first(), Some(&1), "{report:?}");
         assert!(!seqs.contains(&3));
         assert_eq!(report.written + report.discarded, 3);
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    fn writer(root: &Path) -> Writer {
+        Writer {
+            header: header(),
+            root: root.to_path_buf(),
+            open: None,
+            report: RecorderReport::default(),
+        }
+    }
+
+    fn start(w: &mut Writer, dir: Option<&str>) -> Outcome {
+        w.command(RecorderCommand::StartRecording {
+            dir: dir.map(str::to_string),
+        })
+    }
+
+    #[test]
+    fn default_names_are_new_even_twice_in_a_second() {
+        let root = std::env::temp_dir().join(format!("pavlov-rec-default-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let mut w = writer(&root);
+        let mut paths = Vec::new();
+        for _ in 0..3 {
+            match start(&mut w, None) {
+                Ok(Applied::Recording { recording }) => paths.push(recording),
+                other => panic!("{other:?}"),
+            }
+        }
+        w.close();
+        paths.sort();
+        paths.dedup();
+        assert_eq!(paths.len(), 3, "{paths:?}");
+        for p in &paths {
+            assert!(Path::new(p).starts_with(&root), "{p}");
+        }
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn a_refused_start_leaves_the_running_recording_open() {
+        let root = std::env::temp_dir().join(format!("pavlov-rec-keep-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let mut w = writer(&root);
+        assert!(start(&mut w, Some("first")).is_ok());
+        let err = start(&mut w, Some("first")).unwrap_err().to_string();
+        assert!(err.contains("never overwritten"), "{err}");
+        let err = start(&mut w, Some("../x")).unwrap_err().to_string();
+        assert!(err.contains("separator"), "{err}");
+        w.write(&record(1));
+        w.close();
+        assert_eq!(w.report.written, 1, "the first recording kept going");
+        let back = crate::storage::recording::load(&root.join("first")).unwrap();
+        assert_eq!(back.records.len(), 1);
         let _ = std::fs::remove_dir_all(&root);
     }
 }

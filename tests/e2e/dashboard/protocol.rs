@@ -635,9 +635,11 @@ async fn learning_commands_are_applied() {
     assert_eq!(ack["type"], "ack", "{ack}");
     let ack = command(&mut ws, json!({"cmd":"reset_weights"}), 3).await;
     assert_eq!(ack["type"], "ack", "{ack}");
-    let path = dir.path().join("w.json");
+    // Saves go into `[checkpoint] dir/saved/`, apart from the automatic checkpoints.
+    let path = dir.path().join("saved").join("w.json");
     let ack = command(&mut ws, json!({"cmd":"save_weights","path":"w.json"}), 4).await;
     assert_eq!(ack["type"], "ack", "{ack}");
+    assert_eq!(ack["result"]["path"], path.display().to_string(), "{ack}");
     // A client names a file, never a place on the server's disk.
     let outside = command(
         &mut ws,
@@ -646,8 +648,41 @@ async fn learning_commands_are_applied() {
     )
     .await;
     assert_eq!(outside["type"], "error", "{outside}");
+    assert_eq!(outside["code"], "rejected", "{outside}");
+    assert!(
+        outside["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("absolute path")),
+        "{outside}"
+    );
     let up = command(&mut ws, json!({"cmd":"save_weights","path":"../w.json"}), 6).await;
     assert_eq!(up["type"], "error", "{up}");
+    assert!(
+        up["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("path separator")),
+        "{up}"
+    );
+    // Nor the automatic checkpoints' names, nor a save that exists.
+    let reserved = command(
+        &mut ws,
+        json!({"cmd":"save_weights","path":"checkpoint-99999999990.json"}),
+        7,
+    )
+    .await;
+    assert!(
+        reserved["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("reserved")),
+        "{reserved}"
+    );
+    let again = command(&mut ws, json!({"cmd":"save_weights","path":"w.json"}), 8).await;
+    assert!(
+        again["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("never overwrites")),
+        "{again}"
+    );
     let deadline = std::time::Instant::now() + WAIT;
     while !path.exists() && std::time::Instant::now() < deadline {
         tokio::time::sleep(Duration::from_millis(20)).await;

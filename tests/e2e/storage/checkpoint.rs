@@ -1,41 +1,18 @@
-//! Lifelong weights: periodic and shut-down checkpoints written atomically with their configuration,
-//! `--resume` continuing from the newest one, and refusal of a checkpoint from another configuration.
+//! Lifelong weights: periodic and shut-down checkpoints written atomically with their configuration into
+//! the run's own folder, `--resume` continuing from the newest one, and refusal of a checkpoint from
+//! another configuration (naming the difference), as a library call and from `pavlov serve`.
 
 use crate::common;
-
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
 
 use pavlov::agent::{LearnInput, LearningStage};
 use pavlov::config::Config;
 use pavlov::learn::checkpoint::{Checkpoint, config_fingerprint};
 use pavlov::record::TickRecord;
 use pavlov_actors::server::{RobotTarget, Server};
-use pavlov_actors::storage::checkpoint_files::{list, write_atomic};
+use pavlov_actors::storage::checkpoint_files::{RUNS_DIR, list};
 
+use super::fixtures::{config_in, fresh_dir, read, serve, write_stall_checkpoint, write_torn};
 use common::{run_sim, stall_config};
-
-/// A fresh, empty directory for one test.
-fn fresh_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("pavlov-checkpoint-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn config_in(dir: &Path) -> Config {
-    let mut cfg = stall_config();
-    cfg.checkpoint.dir = dir.display().to_string();
-    cfg.checkpoint.every_s = 2;
-    cfg.checkpoint.keep = 2;
-    cfg.checkpoint.autosave = true;
-    cfg
-}
-
-fn read(path: &Path) -> Checkpoint {
-    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
-}
 
 /// The predictions a stage restored from `cp` makes on `record`'s inputs.
 fn predictions_from(cfg: &Config, cp: Option<&Checkpoint>, record: &TickRecord) -> Vec<f64> {
@@ -61,8 +38,14 @@ async fn checkpoints_are_periodic_pruned_final_and_resumable() {
     let cfg = config_in(&dir);
     // 5 s of ticks at 20 ms: periodic checkpoints at ticks 100 and 200, a final one at shutdown.
     let (records, server) = run_sim(cfg.clone(), 250).await;
+    let run_dir = server
+        .checkpoints
+        .run_dir
+        .clone()
+        .expect("autosave has a run folder");
+    assert_eq!(run_dir.parent().unwrap(), dir.join(RUNS_DIR));
     server.shutdown().await;
-    let files = list(&dir).unwrap();
+    let files = list(&run_dir).unwrap();
     assert_eq!(files.len(), 2, "keep = 2 leaves two of three: {files:?}");
     let fingerprint = config_fingerprint(&cfg).unwrap();
     for (tick, path) in &files {
@@ -86,7 +69,7 @@ async fn checkpoints_are_periodic_pruned_final_and_resumable() {
         "learning went on after the periodic checkpoint"
     );
     // No temporary file is left behind by a complete write.
-    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+    let leftovers: Vec<_> = std::fs::read_dir(&run_dir)
         .unwrap()
         .filter_map(|e| e.ok())
         .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
@@ -95,7 +78,7 @@ async fn checkpoints_are_periodic_pruned_final_and_resumable() {
 
     // A crash mid-write leaves a hidden .tmp with a higher tick: --resume must ignore it.
     std::fs::write(
-        dir.join(".checkpoint-999999.json.tmp"),
+        run_dir.join(".checkpoint-999999.json.tmp"),
         b"{\"format\": \"pavl",
     )
     .unwrap();
@@ -104,6 +87,11 @@ async fn checkpoints_are_periodic_pruned_final_and_resumable() {
     resumed.checkpoint.resume = true;
     resumed.checkpoint.every_s = 0;
     let (records, server) = run_sim(resumed.clone(), 5).await;
+    let report = server.checkpoints.resumed.as_ref().expect("resumed");
+    assert_eq!(&report.path, final_path);
+    assert!(report.skipped.is_empty(), "{:?}", report.skipped);
+    let second_run = server.checkpoints.run_dir.clone().unwrap();
+    assert_ne!(second_run, run_dir, "every run has its own folder");
     server.shutdown().await;
     let first = &records[0];
     assert_eq!(first.seq, 0);
@@ -116,17 +104,14 @@ async fn checkpoints_are_periodic_pruned_final_and_resumable() {
     let fresh = predictions_from(&cfg, None, first);
     assert_ne!(got, fresh, "a fresh learner would predict otherwise");
     // Ticks count on across runs: the resumed run's checkpoint is the newest.
-    let newest = list(&dir).unwrap().last().cloned().unwrap();
+    let newest = list(&second_run).unwrap().last().cloned().unwrap();
     assert!(newest.0 > *final_tick, "{newest:?}");
+    assert_eq!(
+        list(&run_dir).unwrap(),
+        files,
+        "the first run's files are untouched"
+    );
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// Writes a checkpoint of a fresh stall learner into `dir`.
-fn write_stall_checkpoint(dir: &Path, tick: u64) {
-    let cfg = stall_config();
-    let stage = LearningStage::new(&cfg).unwrap();
-    let cp = Checkpoint::new(&cfg, tick, stage.snapshot()).unwrap();
-    write_atomic(dir, &cp).unwrap();
 }
 
 #[tokio::test(start_paused = true)]
@@ -162,6 +147,28 @@ async fn a_checkpoint_of_another_configuration_is_refused() {
     assert!(err.contains(&format!("({name}).lambda")), "{err}");
     assert!(err.contains("0.125"), "{err}");
     assert!(err.contains("checkpoint-10.json"), "{err}");
+    // With a torn newer one as well, the refusal gives every reason.
+    let torn = write_torn(
+        &dir,
+        &super::fixtures::fresh_checkpoint(&stall_config(), 20),
+    );
+    let err = Server::builder(cfg.clone(), RobotTarget::Simulated)
+        .start()
+        .await
+        .err()
+        .expect("nothing valid")
+        .to_string();
+    assert!(err.contains("no valid checkpoint"), "{err}");
+    assert!(
+        err.contains(&format!("{}: not JSON", torn.display())),
+        "{err}"
+    );
+    assert!(
+        err.contains("checkpoint-10.json: another configuration"),
+        "{err}"
+    );
+    // Nothing was started, so no run folder was made.
+    assert!(!dir.join(RUNS_DIR).exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -180,22 +187,8 @@ fn serve_resume_with_a_mismatching_checkpoint_exits_naming_it() {
     );
     let config = dir.join("other.toml");
     std::fs::write(&config, text).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_pavlov"))
-        .args(["serve", "--resume", "--bind", "127.0.0.1:0", "-c"])
-        .arg(&config)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while child.try_wait().unwrap().is_none() {
-        if Instant::now() > deadline {
-            let _ = child.kill();
-            panic!("pavlov serve --resume did not refuse the checkpoint");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let out = child.wait_with_output().unwrap();
+    let config = config.display().to_string();
+    let out = serve(&dir, &["--resume", "-c", &config], "pavlov is driving");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(stderr.contains("lambda"), "{stderr}");

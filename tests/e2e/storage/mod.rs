@@ -1,5 +1,10 @@
-//! What the server keeps on disk: recordings (round trip, replay, a kill mid-write) and checkpoints.
+//! What the server keeps on disk: recordings (round trip, replay, a kill mid-write, names a client may
+//! give), checkpoints (periodic, per run, resumed with fallback) and saves.
 
 mod checkpoint;
+mod checkpoint_runs;
+mod fixtures;
 mod recording_crash;
+mod recording_names;
 mod recording_roundtrip;
+mod saves;
