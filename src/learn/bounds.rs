@@ -151,6 +151,25 @@ pub fn check_initial_weight(name: &str, value: f64) -> Result<(), LearnError> {
     }
 }
 
+/// The initial prediction before σ, `w₀·‖x‖²` (every active weight at `w₀`), finite: a finite `w₀` such
+/// as 1e307 would otherwise overflow the first prediction and stop the learner at once.
+pub fn check_initial_value(
+    name: &str,
+    initial_weight: f64,
+    active_features: usize,
+) -> Result<(), LearnError> {
+    if (initial_weight * active_features as f64).is_finite() {
+        Ok(())
+    } else {
+        Err(out_of_bounds(
+            name,
+            "initial_weight",
+            initial_weight,
+            format!("overflows the prediction over {active_features} active features"),
+        ))
+    }
+}
+
 /// A fixed threshold θ finite (a number of steps K always gives a finite θ).
 pub fn check_threshold(name: &str, threshold: Threshold) -> Result<(), LearnError> {
     match threshold {

@@ -28,7 +28,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::bounds::{ParamBounds, check_tau, check_threshold, feature_bounds};
+use super::bounds::{ParamBounds, check_initial_value, check_tau, check_threshold, feature_bounds};
 use super::td::TdParams;
 use super::{LearnError, Sigma};
 
@@ -149,12 +149,14 @@ impl PredictionSpec {
     }
 
     /// Checks every field against its bound (`super::bounds`) for a robot with `obs_dims` observation
-    /// dimensions, without allocating anything: the scalars, the tile count and the feature count, and
-    /// the step size α·‖x‖² ≤ 1 with ‖x‖² the number of tilings. Returns the bounds for runtime changes.
+    /// dimensions, without allocating anything: the scalars, the tile count and the feature count, the
+    /// step size α·‖x‖² ≤ 1 with ‖x‖² the number of tilings, and a finite initial prediction w₀·‖x‖².
+    /// Returns the bounds for runtime changes.
     pub fn bounds(&self, obs_dims: usize) -> Result<ParamBounds, LearnError> {
         self.validate()?;
         let bounds = feature_bounds(&self.name, &self.features, obs_dims)?;
         bounds.check_alpha(&self.name, self.alpha)?;
+        check_initial_value(&self.name, self.initial_weight, bounds.active_features)?;
         Ok(bounds)
     }
 }
@@ -287,5 +289,17 @@ mod tests {
         assert!(fast.bounds(10).is_ok());
         let command: PredictionSpec = toml::from_str(COMMAND).unwrap();
         assert_eq!(command.bounds(44).unwrap().max_alpha, 0.2);
+        // A finite initial weight whose prediction over 44 features overflows.
+        let mut huge = stall;
+        huge.initial_weight = 1e307;
+        match huge.bounds(44) {
+            Err(LearnError::OutOfBounds { field, bound, .. }) => {
+                assert_eq!(field, "initial_weight");
+                assert!(bound.contains("44 active features"), "{bound}");
+            }
+            other => panic!("{other:?}"),
+        }
+        huge.initial_weight = -1e300;
+        huge.bounds(44).unwrap();
     }
 }
