@@ -17,8 +17,8 @@
 //! **Sizes**, checked before anything is allocated: at most [`MAX_TILES_PER_DIMENSION`] tiles per input,
 //! at most [`MAX_PREDICTIONS`] predictions, and at most [`MAX_FEATURES`] features in all predictions
 //! together. The weights and the traces are dense `f64` vectors, and every tick's update walks the whole
-//! trace: 10⁶ features are 16 MB and about 1.2 ms per tick on a laptop core (including the divergence
-//! check), 10⁷ would be 160 MB and 20 ms, the whole tick. The paper's predictions have 440 and 500.
+//! trace: 10⁶ features are 16 MB and took about 1.2 ms per update on the machine this was written on
+//! (including the divergence check), 10⁷ would be 160 MB and took 20 ms, the whole tick. The paper's predictions have 440 and 500.
 
 use serde::Serialize;
 
