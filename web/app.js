@@ -2,7 +2,7 @@
 // run counters and tick health, and sends commands (mode, e-stop, teleop, request, learning, recording).
 
 import {
-  Backoff, GapCounter, Window, alignedData, connectionTarget, fmt, fmtDuration, fmtLead, parseParam, teleopWheels, tokenFromHash,
+  Backoff, GapCounter, Window, alignedData, connectionTarget, fmt, fmtDuration, fmtLead, paramLimits, parseParam, teleopWheels, tokenFromHash,
 } from './lib.js';
 
 const WINDOW_SECONDS = 30;
@@ -18,6 +18,7 @@ const $ = (id) => document.getElementById(id);
 const state = {
   ws: null,
   hello: null,
+  limits: paramLimits(null, null),
   canCommand: false,
   connected: false,
   nextId: 1,
@@ -147,6 +148,7 @@ function onHello(h) {
   const model = cfg.robot ? cfg.robot.model : '';
   $('robot-name').textContent = `${h.server} · ${model ? `${model} · ` : ''}${h.tick_period_ms} ms ticks`;
   $('learn-target').textContent = h.signals.gate_prediction ? `prediction “${h.signals.gate_prediction}”` : '';
+  applyLimits(paramLimits(h.signals.bounds, h.signals.gate_prediction));
   // The counters count stimulus onsets and time with the stimulus on: stalls, or gesture commands.
   const stall = !(cfg.control && cfg.control.stimulus && cfg.control.stimulus.kind !== 'stall');
   $('c-stalls-label').textContent = stall ? 'Stall events' : 'Stimulus onsets';
@@ -156,6 +158,26 @@ function onHello(h) {
   setConn('live', h.can_command ? `live · ${h.rate_hz} Hz` : `live · ${h.rate_hz} Hz · watch-only`);
   buildCharts(h.signals.predictions);
   log(`connected to ${h.server} (protocol ${h.protocol})`);
+}
+
+/** The learning form uses the server's bounds (hello.signals.bounds): input min/max and a hint. */
+function applyLimits(limits) {
+  state.limits = limits;
+  for (const [key, id] of [['alpha', 'p-alpha'], ['lambda', 'p-lambda'], ['threshold', 'p-threshold']]) {
+    const input = $(id);
+    input.min = String(limits[key].lo);
+    input.max = String(limits[key].hi);
+    input.title = limits[key].hint;
+  }
+  $('params-bounds').textContent = `${limits.alpha.hint} · ${limits.lambda.hint}`;
+  showParamsError(null);
+}
+
+function showParamsError(message) {
+  const el = $('params-error');
+  el.hidden = !message;
+  el.textContent = message || '';
+  el.style.color = message ? 'var(--alarm)' : '';
 }
 
 function onTick(t) {
@@ -251,6 +273,7 @@ function onStatus(s) {
 
 function onAck(a) {
   state.pending.delete(a.id);
+  if (a.cmd === 'set_params') showParamsError(null);
   if (a.cmd === 'start_recording') $('rec-state').textContent = 'on';
   if (a.cmd === 'stop_recording') $('rec-state').textContent = 'off';
   if (a.cmd === 'teleop') return;
@@ -261,6 +284,8 @@ function onAck(a) {
 function onError(e) {
   const cmd = state.pending.get(e.id);
   state.pending.delete(e.id);
+  // The server's refusal (e.g. α beyond α·‖x‖² ≤ 1) is shown next to the form; nothing was changed.
+  if (cmd === 'set_params') showParamsError(`refused: ${e.message}`);
   log(`✗ ${cmd ? `${cmd}: ` : ''}${e.message}`, 'error');
 }
 
@@ -487,13 +512,11 @@ function wireControls() {
   $('speed').addEventListener('input', () => { $('speed-value').textContent = `${$('speed').value} mm/s`; });
   $('params').addEventListener('submit', (e) => {
     e.preventDefault();
-    const fields = [
-      ['alpha', parseParam($('p-alpha').value, 'α', 0, 1)],
-      ['lambda', parseParam($('p-lambda').value, 'λ', 0, 1)],
-      ['threshold', parseParam($('p-threshold').value, 'θ', -1e6, 1e6)],
-    ];
+    const l = state.limits;
+    const field = (key, id, name) => [key, parseParam($(id).value, name, l[key].lo, l[key].hi, l[key].loOpen)];
+    const fields = [field('alpha', 'p-alpha', 'α'), field('lambda', 'p-lambda', 'λ'), field('threshold', 'p-threshold', 'θ')];
     const bad = fields.find(([, r]) => r.error);
-    if (bad) { log(bad[1].error, 'error'); return; }
+    if (bad) { showParamsError(bad[1].error); log(bad[1].error, 'error'); return; }
     const args = Object.fromEntries(fields.filter(([, r]) => r.value !== undefined).map(([k, r]) => [k, r.value]));
     if (Object.keys(args).length === 0) { log('enter α, λ or θ first', 'warn'); return; }
     send('set_params', args);

@@ -140,14 +140,41 @@ export function fmtDuration(seconds) {
   return h > 0 ? `${h}:${String(m).padStart(2, '0')}:${ss}` : `${m}:${ss}`;
 }
 
-/** Parses a learning-parameter field: a finite number, or `undefined` when empty, or an error message. */
-export function parseParam(text, name, lo, hi) {
+/**
+ * Parses a learning-parameter field: a finite number, or `undefined` when empty, or an error message.
+ * The value must lie in [lo, hi]; with `loOpen` it must also be above `lo` (α > 0).
+ */
+export function parseParam(text, name, lo, hi, loOpen = false) {
   const t = String(text ?? '').trim();
   if (t === '') return { value: undefined };
   const v = Number(t);
   if (!Number.isFinite(v)) return { error: `${name} must be a number` };
-  if (v < lo || v > hi) return { error: `${name} must be between ${lo} and ${hi}` };
+  if (v < lo || v > hi || (loOpen && v <= lo)) {
+    return { error: loOpen ? `${name} must be above ${lo} and at most ${hi}` : `${name} must be between ${lo} and ${hi}` };
+  }
   return { value: v };
+}
+
+/**
+ * The limits of the learning form for prediction `name`, from `hello.signals.bounds` (PROTOCOL.md): the
+ * bounds the server checks. α in (0, max_alpha] (α·‖x‖² ≤ 1 with ‖x‖² = active_features), λ in
+ * [min_lambda, max_lambda], θ finite (the form keeps it within ±1e6). Without bounds for `name` (an
+ * older server), α in (0, 1] and λ in [0, 1]; the server still has the last word.
+ */
+export function paramLimits(bounds, name) {
+  const list = bounds && Array.isArray(bounds.predictions) ? bounds.predictions : [];
+  const p = list.find((b) => b && b.name === name);
+  const num = (v, d) => (typeof v === 'number' && Number.isFinite(v) ? v : d);
+  const maxAlpha = num(p && p.max_alpha, 1);
+  const active = p && Number.isInteger(p.active_features) ? p.active_features : null;
+  return {
+    alpha: {
+      lo: 0, hi: maxAlpha, loOpen: true,
+      hint: active ? `0 < α ≤ 1/${active} = ${Number(maxAlpha.toPrecision(3))} (α·‖x‖² ≤ 1, ${active} active features)` : '0 < α ≤ 1',
+    },
+    lambda: { lo: num(p && p.min_lambda, 0), hi: num(p && p.max_lambda, 1), loOpen: false, hint: '0 ≤ λ ≤ 1' },
+    threshold: { lo: -1e6, hi: 1e6, loOpen: false, hint: 'any number' },
+  };
 }
 
 /**

@@ -4,10 +4,17 @@
 //! wheels' over-current flags, or the left-elbow command), and outputs every prediction with the current
 //! weights; the caller acts on that at once. [`LearningStage::learn`] then runs the TD(λ) update for the
 //! transition into this tick (the paper's "act first, then learn"; see [`crate::learn::set`]).
+//!
+//! Runtime changes are bounded like the configuration: [`LearningStage::set_params`] goes through
+//! [`crate::learn::bounds`] (α·‖x‖² ≤ 1 and the rest), and an injected human request lasts at most
+//! [`MAX_REQUEST_MS`]. A prediction whose weights were about to become non-finite stops learning, is
+//! reported by [`LearningStage::learn`], and no longer drives the gate (see [`crate::learn::set`]).
 
 use crate::config::{Config, StimulusSpec};
 use crate::control::StallDetector;
-use crate::learn::{FeatureInputs, LearnError, PredictionSet, SetSnapshot, SignalNames, Threshold};
+use crate::learn::{
+    FeatureInputs, LearnError, ParamBounds, PredictionSet, SetSnapshot, SignalNames, Threshold,
+};
 use crate::obs::ObsLayout;
 use crate::oi::SensorValues;
 use crate::oi::packets::{bits, id};
@@ -41,6 +48,39 @@ pub struct LearnInput<'a> {
     pub forced_stimulus: bool,
 }
 
+/// The longest injected human request, ms (10 s). A request forces the stimulus E on for its whole
+/// length: the gate engages the response (the interaction experiment spins the robot in place) and the
+/// learner is told the stimulus is there. The page's Request button asks for 500 ms and a real gesture
+/// command lasts about a second; 10 s leaves room for slow demonstrations, while 10⁹ ms would leave the
+/// robot spinning, and the predictions learning a fake stimulus, for eleven days.
+pub const MAX_REQUEST_MS: u64 = 10_000;
+
+/// A human request longer than [`MAX_REQUEST_MS`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("human_request.duration_ms = {duration_ms} exceeds {max} ms (10 s)", max = MAX_REQUEST_MS)]
+pub struct RequestTooLong {
+    /// The duration asked for, ms.
+    pub duration_ms: u64,
+}
+
+/// The first tick after a human request of `duration_ms` made on tick `seq`, with ticks of `period_ms`.
+pub fn request_end(seq: u64, duration_ms: u64, period_ms: u64) -> Result<u64, RequestTooLong> {
+    if duration_ms > MAX_REQUEST_MS {
+        return Err(RequestTooLong { duration_ms });
+    }
+    Ok(seq.saturating_add(duration_ms.div_ceil(period_ms.max(1))))
+}
+
+/// What one learning step reports.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct LearnReport {
+    /// Predictions that stopped learning on this step because their weights were about to become
+    /// non-finite (they keep their last finite weights and no longer drive the gate).
+    pub newly_diverged: Vec<String>,
+    /// How many times a prediction has stopped so, since the stage was built.
+    pub divergences: u64,
+}
+
 /// A prediction's learning parameters in force.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ParamsInForce {
@@ -52,6 +92,10 @@ pub struct ParamsInForce {
     pub lambda: f64,
     /// Gate threshold θ.
     pub threshold: f64,
+    /// The bounds of changes to α (α·‖x‖² ≤ 1).
+    pub bounds: ParamBounds,
+    /// The prediction stopped learning because its weights were about to become non-finite.
+    pub diverged: bool,
 }
 
 /// What the stage produced for acting.
@@ -81,6 +125,8 @@ pub struct LearningStage {
     obs: Vec<f64>,
     extra: [f64; 4],
     pending_stimulus: Option<bool>,
+    /// Diverged predictions already reported by `learn`.
+    reported: Vec<String>,
 }
 
 fn scaled_angle(a: Option<f64>) -> f64 {
@@ -111,6 +157,7 @@ impl LearningStage {
             gate_index,
             extra: [f64::NAN; 4],
             pending_stimulus: None,
+            reported: Vec::new(),
         })
     }
 
@@ -194,11 +241,27 @@ impl LearningStage {
     }
 
     /// Step 2 of a tick: the TD(λ) update into this tick. Call once after each [`LearningStage::act`].
-    pub fn learn(&mut self) -> Result<(), LearnError> {
+    /// Reports any prediction that stopped learning on this step (the caller logs it).
+    pub fn learn(&mut self) -> Result<LearnReport, LearnError> {
         let Some(stimulus) = self.pending_stimulus.take() else {
             return Err(LearnError::LearnWithoutPredict);
         };
-        self.set.learn(&[stimulus]).map(|_| ())
+        let before = self.set.divergences();
+        self.set.learn(&[stimulus])?;
+        let divergences = self.set.divergences();
+        let newly_diverged = if divergences > before {
+            // Rare (never with the bounds in force); the names are only gathered then.
+            let mut names: Vec<String> = self.set.diverged().map(str::to_string).collect();
+            names.retain(|n| !self.reported.contains(n));
+            self.reported.extend(names.iter().cloned());
+            names
+        } else {
+            Vec::new()
+        };
+        Ok(LearnReport {
+            newly_diverged,
+            divergences,
+        })
     }
 
     /// Forgets the previous tick (after a gap in the sensor stream): credit is not carried across it.
@@ -212,16 +275,20 @@ impl LearningStage {
             Some(n) => self.set.specs().find(|s| s.name == n),
             None => self.set.specs().nth(self.gate_index),
         }?;
+        let bounds = self.set.bounds(&spec.name)?;
         Some(ParamsInForce {
             prediction: spec.name.clone(),
             alpha: spec.alpha,
             lambda: spec.lambda,
             threshold: spec.threshold_value(),
+            bounds,
+            diverged: self.set.diverged().any(|n| n == spec.name),
         })
     }
 
     /// Changes α, λ or θ of prediction `name` (default: the gating prediction) and returns the
-    /// parameters now in force. On error nothing changes.
+    /// parameters now in force. Every value is checked against its bound first (α finite, > 0 and
+    /// α·‖x‖² ≤ 1, λ in `[0, 1]`, θ finite; [`crate::learn::bounds`]); on error nothing changes.
     pub fn set_params(
         &mut self,
         name: Option<&str>,
@@ -237,31 +304,21 @@ impl LearningStage {
                 ));
             }
         };
-        if let Some(a) = alpha {
-            crate::learn::td::check_alpha(&name, a)?;
-        }
-        if let Some(l) = lambda {
-            crate::learn::td::check_lambda(&name, l)?;
-        }
-        if let Some(t) = threshold {
-            crate::learn::spec::check_threshold(&name, Threshold::Fixed(t))?;
-        }
-        if let Some(a) = alpha {
-            self.set.set_alpha(&name, a)?;
-        }
-        if let Some(l) = lambda {
-            self.set.set_lambda(&name, l)?;
-        }
-        if let Some(t) = threshold {
-            self.set.set_threshold(&name, Threshold::Fixed(t))?;
-        }
+        self.set
+            .set_params(&name, alpha, lambda, threshold.map(Threshold::Fixed))?;
         self.params(Some(&name))
             .ok_or(LearnError::UnknownPrediction(name))
     }
 
-    /// Resets every weight and trace to its initial value.
+    /// How many times a prediction stopped learning because it diverged, since the stage was built.
+    pub fn divergences(&self) -> u64 {
+        self.set.divergences()
+    }
+
+    /// Resets every weight and trace to its initial value; a diverged prediction learns again.
     pub fn reset(&mut self) {
         self.set.reset();
+        self.reported.clear();
     }
 
     /// The learned state of every prediction.
@@ -269,9 +326,12 @@ impl LearningStage {
         self.set.snapshot()
     }
 
-    /// Restores a snapshot taken from a stage of the same predictions (on error nothing changes).
+    /// Restores a snapshot taken from a stage of the same predictions (on error nothing changes); its
+    /// α, λ and θ must be within their bounds, and a diverged prediction learns again.
     pub fn restore(&mut self, snapshot: &SetSnapshot) -> Result<(), LearnError> {
-        self.set.restore(snapshot)
+        self.set.restore(snapshot)?;
+        self.reported.clear();
+        Ok(())
     }
 }
 
@@ -360,5 +420,118 @@ mod tests {
             ("stall", 0.01, 0.7)
         );
         assert!(s.set_params(Some("nope"), Some(0.01), None, None).is_err());
+    }
+
+    #[test]
+    fn set_params_is_bounded_like_the_configuration() {
+        let mut s = stall_stage();
+        let before = s.params(None).unwrap();
+        assert_eq!(before.bounds.active_features, 44);
+        for alpha in [1.0, 1e308, 0.0228, -1.0, f64::NAN] {
+            let e = s.set_params(None, Some(alpha), None, None).unwrap_err();
+            assert!(e.to_string().contains("alpha"), "{e}");
+        }
+        let e = s.set_params(None, Some(1.0), None, None).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "prediction `stall`: alpha = 1.0 exceeds 1/44 = 0.0227 (α·‖x‖² ≤ 1 with 44 active features)"
+        );
+        // Refused as a whole: a good λ next to a bad α changes nothing.
+        assert!(
+            s.set_params(None, Some(1e308), Some(0.9), Some(0.3))
+                .is_err()
+        );
+        assert!(s.set_params(None, None, Some(-0.1), None).is_err());
+        assert!(s.set_params(None, None, None, Some(f64::INFINITY)).is_err());
+        assert_eq!(s.params(None).unwrap(), before);
+        // At the bound: accepted.
+        let p = s
+            .set_params(None, Some(1.0 / 44.0), Some(1.0), None)
+            .unwrap();
+        assert_eq!((p.alpha, p.lambda), (1.0 / 44.0, 1.0));
+    }
+
+    #[test]
+    fn human_requests_are_bounded() {
+        assert_eq!(request_end(100, 500, 20), Ok(125));
+        assert_eq!(request_end(100, MAX_REQUEST_MS, 20), Ok(600));
+        assert_eq!(request_end(u64::MAX, 500, 20), Ok(u64::MAX));
+        let e = request_end(100, 1_000_000_000, 20).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "human_request.duration_ms = 1000000000 exceeds 10000 ms (10 s)"
+        );
+    }
+
+    /// One input, `bump_right` (0 or 1), in two tiles: α = 1 is the bound. The restored weights are
+    /// −0.9e308 on "no bump" and +0.9e308 on "bump", with a trace of 1 on "bump" and the previous tick on
+    /// "no bump": moving to "bump" gives a finite δ ≈ 1.76e308 whose step would overflow w.
+    fn diverging_stage() -> LearningStage {
+        let text = include_str!("../../config/stall.toml")
+            .replace(
+                "features = { kind = \"one_dim\", all_obs = true, tiles = 10 }",
+                "features = { kind = \"one_dim\", inputs = [\"bump_right\"], tiles = 2 }",
+            )
+            .replace("alpha = 0.022727272727272728", "alpha = 1.0")
+            .replace("lambda = 0.5", "lambda = 1.0");
+        let mut s = LearningStage::new(&Config::from_toml(&text).unwrap()).unwrap();
+        let mut snap = s.snapshot();
+        let p = &mut snap.predictions[0];
+        p.weights = vec![-0.9e308, 0.9e308];
+        p.traces = vec![0.0, 1.0];
+        p.previous = Some(crate::learn::PreviousStep {
+            active: vec![0],
+            gamma: 0.96,
+        });
+        s.restore(&snap).unwrap();
+        s
+    }
+
+    #[test]
+    fn a_diverged_prediction_does_not_drive_the_gate() {
+        use crate::agent::gating::GatingStage;
+        use crate::control::{Action, Mode, Policy};
+        let mut s = diverging_stage();
+        let response = Policy::Stop {};
+        let default = Policy::Constant {
+            left_mm_s: 100,
+            right_mm_s: 100,
+        };
+        let mut gate = GatingStage::new(Mode::Pavlovian, default, response);
+        let mut bumped = snapshot(false);
+        bumped.set(id::BUMPS_WHEEL_DROPS, 1);
+        let input = |v| LearnInput {
+            values: Some(v),
+            elbow: None,
+            forced_stimulus: false,
+        };
+        let out = s.act(input(&bumped));
+        assert_eq!(out.gate_value, Some(0.9e308), "valid until it diverges");
+        let report = s.learn().unwrap();
+        assert_eq!(report.newly_diverged, vec!["stall".to_string()]);
+        assert_eq!(report.divergences, 1);
+        assert!(s.params(None).unwrap().diverged);
+        for seq in 0..50 {
+            let out = s.act(input(&bumped));
+            assert!(out.predictions[0].value.is_finite());
+            assert!(out.predictions[0].value > out.gate_threshold);
+            assert_eq!(out.gate_value, None);
+            let d = gate.decide(seq, out.stimulus, out.gate_value, out.gate_threshold);
+            assert!(!d.gate, "a diverged prediction engaged the response");
+            assert_eq!(d.action, Action::new(100, 100));
+            // The stimulus still engages it: the gate is the reactive rule.
+            assert!(
+                gate.decide(seq, true, out.gate_value, out.gate_threshold)
+                    .gate
+            );
+            let report = s.learn().unwrap();
+            assert!(report.newly_diverged.is_empty(), "reported once");
+            assert_eq!(report.divergences, 1);
+        }
+        let w = s.snapshot().predictions[0].weights.clone();
+        assert_eq!(w, vec![-0.9e308, 0.9e308]);
+        s.reset();
+        assert!(!s.params(None).unwrap().diverged);
+        assert_eq!(s.act(input(&bumped)).gate_value, Some(0.0));
     }
 }

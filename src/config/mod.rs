@@ -10,7 +10,9 @@ use crate::control::{Mode, Policy};
 use crate::learn::PredictionSpec;
 use crate::oi::Model;
 
+mod bounds;
 mod link;
+pub use bounds::{MAX_CLIENT_QUEUE, MAX_SAFETY_TIMEOUT_MS};
 pub use link::LinkConfig;
 
 /// A configuration error, naming the offending key.
@@ -89,9 +91,9 @@ impl Default for TickConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SafetyConfig {
-    /// Stop when no fresh action has arrived for this many ticks.
+    /// Stop when no fresh action has arrived for this many ticks (1 tick to 1 s; see `bounds`).
     pub max_action_age_ticks: u32,
-    /// Stop when the newest observation is older than this many ticks.
+    /// Stop when the newest observation is older than this many ticks (1 tick to 1 s; see `bounds`).
     pub max_obs_age_ticks: u32,
 }
 
@@ -357,12 +359,8 @@ impl Config {
         if !(1..=1000).contains(&self.tick.period_ms) {
             return Err(invalid("tick.period_ms", "must be between 1 and 1000"));
         }
-        if self.safety.max_action_age_ticks == 0 {
-            return Err(invalid("safety.max_action_age_ticks", "must be at least 1"));
-        }
-        if self.safety.max_obs_age_ticks == 0 {
-            return Err(invalid("safety.max_obs_age_ticks", "must be at least 1"));
-        }
+        // Safety timeouts, policy speeds, every prediction's bounds, the client queue.
+        bounds::check(self)?;
         let model = self.robot.model;
         for (i, &id) in self.robot.stream.iter().enumerate() {
             if !crate::oi::packets::available_on(id, model) {
@@ -450,8 +448,6 @@ impl Config {
             return Err(invalid("predictions", "at least one prediction is needed"));
         }
         for (i, p) in self.predictions.iter().enumerate() {
-            p.validate()
-                .map_err(|e| invalid(format!("predictions[{i}]"), e.to_string()))?;
             if self.predictions[..i].iter().any(|q| q.name == p.name) {
                 return Err(invalid(
                     format!("predictions[{i}].name"),

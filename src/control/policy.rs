@@ -30,9 +30,14 @@ pub const SPIN_MM_S: i16 = 150;
 /// An invalid policy configuration.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 pub enum ControlError {
-    /// A speed outside what the Open Interface accepts.
-    #[error("policy speed {0} mm/s is outside -500..=500")]
-    SpeedOutOfRange(i16),
+    /// A speed outside what the Open Interface's Drive Direct accepts; `field` is the policy's key.
+    #[error("{field} = {speed} mm/s is outside the Drive Direct range -500..=500 mm/s")]
+    SpeedOutOfRange {
+        /// The policy's key, e.g. `drive_mm_s`.
+        field: &'static str,
+        /// The configured speed.
+        speed: i16,
+    },
 }
 
 /// The stall experiment's default policy: a deterministic 1000-tick (20 s) cycle of
@@ -50,7 +55,8 @@ impl StallDefaultPolicy {
     pub const CYCLE_TICKS: u64 = 1000;
 
     /// The cycle driving straight at `speed_mm_s` and turning with each wheel at half that speed
-    /// (200 → 100 mm/s; see the module documentation). Speeds are clamped to the OI's ±500 mm/s.
+    /// (200 → 100 mm/s; see the module documentation). Speeds are clamped to the OI's ±500 mm/s, a last
+    /// line of defence: a configuration with a speed beyond it is refused ([`Policy::validate`]).
     pub fn new(speed_mm_s: i16) -> Self {
         StallDefaultPolicy {
             drive_mm_s: speed_mm_s.clamp(-MAX_WHEEL_MM_S, MAX_WHEEL_MM_S),
@@ -145,25 +151,29 @@ impl Policy {
         }
     }
 
-    /// Rejects speeds outside ±500 mm/s (which [`Policy::action`] would otherwise clamp).
+    /// Rejects speeds outside ±500 mm/s, the Drive Direct range: refused, not clamped, so that the robot
+    /// never drives at a speed other than the one configured ([`Policy::action`] clamps only as a last
+    /// line of defence).
     pub fn validate(&self) -> Result<(), ControlError> {
-        let speeds: &[i16] = match self {
+        let speeds: &[(&'static str, i16)] = match self {
             Policy::Stop {} => &[],
             Policy::StallCycle {
                 drive_mm_s,
                 turn_mm_s,
-            } => &[*drive_mm_s, *turn_mm_s],
-            Policy::SpinLeft { speed_mm_s } | Policy::SpinRight { speed_mm_s } => &[*speed_mm_s],
+            } => &[("drive_mm_s", *drive_mm_s), ("turn_mm_s", *turn_mm_s)],
+            Policy::SpinLeft { speed_mm_s } | Policy::SpinRight { speed_mm_s } => {
+                &[("speed_mm_s", *speed_mm_s)]
+            }
             Policy::Constant {
                 left_mm_s,
                 right_mm_s,
-            } => &[*left_mm_s, *right_mm_s],
+            } => &[("left_mm_s", *left_mm_s), ("right_mm_s", *right_mm_s)],
         };
         match speeds
             .iter()
-            .find(|s| s.unsigned_abs() > MAX_WHEEL_MM_S.unsigned_abs())
+            .find(|(_, s)| s.unsigned_abs() > MAX_WHEEL_MM_S.unsigned_abs())
         {
-            Some(&s) => Err(ControlError::SpeedOutOfRange(s)),
+            Some(&(field, speed)) => Err(ControlError::SpeedOutOfRange { field, speed }),
             None => Ok(()),
         }
     }
@@ -270,12 +280,40 @@ mod tests {
         assert_eq!(Policy::Stop {}.validate(), Ok(()));
         assert_eq!(
             Policy::Constant {
-                left_mm_s: 600,
-                right_mm_s: 0
+                left_mm_s: 0,
+                right_mm_s: -600
             }
             .validate(),
-            Err(ControlError::SpeedOutOfRange(600))
+            Err(ControlError::SpeedOutOfRange {
+                field: "right_mm_s",
+                speed: -600
+            })
         );
+        let e = Policy::StallCycle {
+            drive_mm_s: 2000,
+            turn_mm_s: 100,
+        }
+        .validate()
+        .unwrap_err()
+        .to_string();
+        assert_eq!(
+            e,
+            "drive_mm_s = 2000 mm/s is outside the Drive Direct range -500..=500 mm/s"
+        );
+        assert!(
+            Policy::SpinRight {
+                speed_mm_s: i16::MIN
+            }
+            .validate()
+            .is_err()
+        );
+        for edge in [500, -500] {
+            let p = Policy::Constant {
+                left_mm_s: edge,
+                right_mm_s: edge,
+            };
+            assert_eq!(p.validate(), Ok(()));
+        }
         assert_eq!(
             Policy::SpinLeft {
                 speed_mm_s: i16::MIN

@@ -15,21 +15,25 @@ pub enum LearnError {
     /// Two input signals or two stimuli with the same name.
     #[error("signal `{0}` is named twice")]
     DuplicateSignal(String),
-    /// τ is not a finite number above 1.
-    #[error("prediction `{name}`: tau must be a finite number of ticks > 1, got {tau}")]
-    InvalidTau { name: String, tau: f64 },
-    /// α is not a finite positive number.
-    #[error("prediction `{name}`: alpha must be finite and > 0, got {alpha}")]
-    InvalidAlpha { name: String, alpha: f64 },
-    /// λ is outside `[0, 1]`.
-    #[error("prediction `{name}`: lambda must be in [0, 1], got {lambda}")]
-    InvalidLambda { name: String, lambda: f64 },
-    /// The initial weight is not finite.
-    #[error("prediction `{name}`: initial_weight must be finite, got {value}")]
-    InvalidInitialWeight { name: String, value: f64 },
-    /// A fixed threshold that is not finite.
-    #[error("prediction `{name}`: a fixed threshold must be finite, got {value}")]
-    InvalidThreshold { name: String, value: f64 },
+    /// A parameter or size outside its bound (`super::bounds`): `field` names the configuration key
+    /// within the prediction (`alpha`, `lambda`, `tau`, `initial_weight`, `threshold`, `features.tiles`,
+    /// `features`), `bound` says what the value breaks.
+    #[error("prediction `{name}`: {field} = {value} {bound}")]
+    OutOfBounds {
+        name: String,
+        field: String,
+        value: String,
+        bound: String,
+    },
+    /// More predictions than `super::bounds::MAX_PREDICTIONS`.
+    #[error("{count} predictions are more than the {max} allowed")]
+    TooManyPredictions { count: usize, max: usize },
+    /// More features in all predictions together than `super::bounds::MAX_FEATURES`.
+    #[error(
+        "the predictions have {total} features together, more than {max} (the weights and traces are \
+         dense f64 vectors, walked on every tick)"
+    )]
+    TooManyFeaturesInAll { total: usize, max: usize },
     /// A tile coder with no tiles per dimension.
     #[error("tile coder: tiles per dimension must be >= 1, got {0}")]
     NoTiles(usize),

@@ -1,6 +1,8 @@
 //! Learning: tile coding and TD(λ) predictions, after Modayil & Sutton, "Prediction Driven Behavior".
 //!
 //! - [`tiles`]: [`TileCoder`], continuous inputs in `[0, 1]` to sparse binary features.
+//! - [`bounds`]: [`ParamBounds`], every parameter's and size's bound (α·‖x‖² ≤ 1, tiles, features), one
+//!   check for the configuration, `set_params` and checkpoints.
 //! - [`sigma`]: [`Sigma`], the output nonlinearity (identity or logistic) and its derivative.
 //! - [`td`]: [`TdLambda`], the paper's TD(λ) update over active-index feature lists.
 //! - [`spec`]: [`PredictionSpec`], one prediction as configuration (TOML).
@@ -11,6 +13,7 @@
 //! Facts: the paper's update equations (TD(λ) with an output nonlinearity σ), tile coding as in [SB] and
 //! [tiles3] (`docs/SOURCES.md`).
 
+pub mod bounds;
 pub mod checkpoint;
 pub mod error;
 pub mod inputs;
@@ -21,11 +24,12 @@ pub mod spec;
 pub mod td;
 pub mod tiles;
 
+pub use bounds::ParamBounds;
 pub use error::LearnError;
 pub use inputs::{FeatureInputs, SignalNames};
 pub use set::{PredictionOut, PredictionSet};
 pub use sigma::Sigma;
 pub use snapshot::{PredictionSnapshot, PreviousStep, SetSnapshot};
 pub use spec::{Cumulant, FeatureSpec, PairSpec, PredictionSpec, Threshold};
-pub use td::{TdLambda, TdParams};
+pub use td::{TdLambda, TdParams, UpdateRefused};
 pub use tiles::{TileCoder, TileSpec};

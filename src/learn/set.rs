@@ -16,14 +16,26 @@
 //! acted on, `σ(wᵀx_t)`, is exactly the bootstrap term of the δ computed in step 2 of the same tick:
 //! acting never waits for learning, and nothing is computed with stale features.
 //!
+//! # Divergence
+//!
+//! The bounds of [`super::bounds`] keep a prediction's step size where TD(λ) does not diverge. Should a
+//! prediction's weights still be about to become non-finite (an extreme weight restored from a
+//! checkpoint, an overflowing sum), [`TdLambda::try_update`] refuses the step, the prediction **stops
+//! learning and keeps its last finite weights**, and it is counted ([`PredictionSet::divergences`]) and
+//! named ([`PredictionSet::diverged`]) so that the caller reports it. A stopped prediction is not valid
+//! for the gate ([`PredictionOut::valid_value`] is `None`), so the gate falls back to the stimulus alone,
+//! exactly as for an invalid input: its value neither engages nor holds off the response. It learns
+//! again after [`PredictionSet::reset`] or [`PredictionSet::restore`].
+//!
 //! The first tick (or the first after a break) only records x_t and γ_t. The chain breaks, and the
 //! traces are cleared, when a tick is predicted without being learned (two `predict` calls in a row:
 //! the skipped transition cannot be learned from) or on [`PredictionSet::break_chain`].
 
 use super::LearnError;
+use super::bounds::{ParamBounds, check_lambda, check_set_size, check_threshold};
 use super::inputs::{FeatureInputs, SignalNames, resolve};
-use super::spec::{Cumulant, PredictionSpec, Threshold, check_threshold};
-use super::td::{TdLambda, check_alpha, check_lambda};
+use super::spec::{Cumulant, PredictionSpec, Threshold};
+use super::td::TdLambda;
 use super::tiles::TileCoder;
 
 /// One prediction's output on one tick.
@@ -39,13 +51,16 @@ pub struct PredictionOut {
     pub active_features: usize,
     /// How many tilings the coder has: the active count for a fully valid input.
     pub tilings: usize,
+    /// The prediction stopped learning because its weights were about to become non-finite.
+    pub diverged: bool,
 }
 
 impl PredictionOut {
-    /// The value when it rests on a fully valid input (every tiling active, finite value), else `None`:
-    /// the gate then falls back to the stimulus alone.
+    /// The value when it rests on a fully valid input (every tiling active), is finite and comes from a
+    /// prediction that has not diverged, else `None`: the gate then falls back to the stimulus alone.
     pub fn valid_value(&self) -> Option<f64> {
-        (self.active_features == self.tilings && self.value.is_finite()).then_some(self.value)
+        (self.active_features == self.tilings && self.value.is_finite() && !self.diverged)
+            .then_some(self.value)
     }
 }
 
@@ -67,14 +82,22 @@ pub(crate) struct Learner {
     pub stimulus: usize,
     pub threshold: f64,
     pub chain: Chain,
+    /// The limits of runtime changes (α·‖x‖² ≤ 1).
+    pub bounds: ParamBounds,
+    /// Learning stopped: the weights were about to become non-finite (see the module documentation).
+    pub diverged: bool,
     scratch: Vec<f64>,
     x_now: Vec<usize>,
     fresh: bool,
 }
 
 impl Learner {
-    fn new(spec: PredictionSpec, names: &SignalNames) -> Result<Self, LearnError> {
-        spec.validate()?;
+    /// `bounds` are those of `spec` ([`PredictionSpec::bounds`]), checked before anything is allocated.
+    fn new(
+        spec: PredictionSpec,
+        bounds: ParamBounds,
+        names: &SignalNames,
+    ) -> Result<Self, LearnError> {
         let resolved = resolve(&spec.name, &spec.features, names)?;
         let stimulus = match &spec.cumulant {
             Cumulant::Stimulus(s) => names.resolve_stimulus(&spec.name, s)?,
@@ -91,6 +114,8 @@ impl Learner {
                 has_prev: false,
             },
             fresh: false,
+            bounds,
+            diverged: false,
             gather: resolved.gather,
             coder: resolved.coder,
             td,
@@ -114,21 +139,33 @@ impl Learner {
             threshold: self.threshold,
             active_features: self.x_now.len(),
             tilings: self.coder.num_tilings(),
+            diverged: self.diverged,
         }
     }
 
+    /// The update into this tick; `None` when there was nothing to learn from, or when the prediction
+    /// has diverged (now or before).
     fn learn(&mut self, stimulus: bool) -> Option<f64> {
         let reward = self.spec.reward(stimulus);
         let gamma = self.spec.gamma(stimulus);
-        let delta = self.chain.has_prev.then(|| {
-            self.td.update(
+        let delta = if self.chain.has_prev && !self.diverged {
+            match self.td.try_update(
                 &self.chain.x_prev,
                 self.chain.gamma_prev,
                 reward,
                 gamma,
                 &self.x_now,
-            )
-        });
+            ) {
+                Ok(delta) => Some(delta),
+                // R is 0 or 1 and γ finite, so any refusal means the weights ran away.
+                Err(_) => {
+                    self.diverged = true;
+                    None
+                }
+            }
+        } else {
+            None
+        };
         std::mem::swap(&mut self.chain.x_prev, &mut self.x_now);
         self.chain.gamma_prev = gamma;
         self.chain.has_prev = true;
@@ -146,6 +183,38 @@ impl Learner {
         self.fresh = false;
         self.td.clear_traces();
     }
+
+    /// Checks α, λ and θ against their bounds, then applies them all (or nothing).
+    pub(crate) fn set_params(
+        &mut self,
+        alpha: Option<f64>,
+        lambda: Option<f64>,
+        threshold: Option<Threshold>,
+    ) -> Result<(), LearnError> {
+        let name = self.spec.name.as_str();
+        if let Some(a) = alpha {
+            self.bounds.check_alpha(name, a)?;
+        }
+        if let Some(l) = lambda {
+            check_lambda(name, l)?;
+        }
+        if let Some(t) = threshold {
+            check_threshold(name, t)?;
+        }
+        if let Some(a) = alpha {
+            self.td.set_alpha(a)?;
+            self.spec.alpha = a;
+        }
+        if let Some(l) = lambda {
+            self.td.set_lambda(l)?;
+            self.spec.lambda = l;
+        }
+        if let Some(t) = threshold {
+            self.spec.threshold = t;
+            self.threshold = self.spec.threshold_value();
+        }
+        Ok(())
+    }
 }
 
 /// A set of predictions learned together from the same inputs.
@@ -153,22 +222,31 @@ impl Learner {
 pub struct PredictionSet {
     pub(crate) learners: Vec<Learner>,
     names: SignalNames,
+    divergences: u64,
 }
 
 impl PredictionSet {
-    /// Validates every spec and resolves its features and cumulant against `names`.
+    /// Validates every spec against its bounds (`super::bounds`: parameters, sizes, and the count and
+    /// features of the whole set, all before any weight is allocated) and resolves its features and
+    /// cumulant against `names`.
     pub fn new(specs: Vec<PredictionSpec>, names: &SignalNames) -> Result<Self, LearnError> {
         names.check_unique()?;
-        let mut learners: Vec<Learner> = Vec::with_capacity(specs.len());
-        for spec in specs {
-            if learners.iter().any(|l| l.spec.name == spec.name) {
-                return Err(LearnError::DuplicatePrediction(spec.name));
+        let mut bounds = Vec::with_capacity(specs.len().min(super::bounds::MAX_PREDICTIONS + 1));
+        for (i, spec) in specs.iter().enumerate() {
+            if specs[..i].iter().any(|s| s.name == spec.name) {
+                return Err(LearnError::DuplicatePrediction(spec.name.clone()));
             }
-            learners.push(Learner::new(spec, names)?);
+            bounds.push(spec.bounds(names.obs.len())?);
+        }
+        check_set_size(&bounds.iter().map(|b| b.features).collect::<Vec<_>>())?;
+        let mut learners: Vec<Learner> = Vec::with_capacity(specs.len());
+        for (spec, bounds) in specs.into_iter().zip(bounds) {
+            learners.push(Learner::new(spec, bounds, names)?);
         }
         Ok(PredictionSet {
             learners,
             names: names.clone(),
+            divergences: 0,
         })
     }
 
@@ -182,7 +260,8 @@ impl PredictionSet {
 
     /// Step 2 of a tick: the TD(λ) update for the transition from the previous tick to this one,
     /// given this tick's stimuli (in [`SignalNames::stimuli`] order). Returns each prediction's δ,
-    /// or `None` where there was no previous tick to learn from.
+    /// or `None` where there was no previous tick to learn from or the prediction has diverged (see the
+    /// module documentation; [`PredictionSet::divergences`] counts the predictions that stopped).
     pub fn learn(&mut self, stimuli: &[bool]) -> Result<Vec<Option<f64>>, LearnError> {
         if stimuli.len() != self.names.stimuli.len() {
             return Err(LearnError::StimulusCountMismatch {
@@ -193,11 +272,41 @@ impl PredictionSet {
         if self.learners.iter().any(|l| !l.fresh) {
             return Err(LearnError::LearnWithoutPredict);
         }
-        Ok(self
+        let mut stopped = 0;
+        let deltas = self
             .learners
             .iter_mut()
-            .map(|l| l.learn(stimuli.get(l.stimulus).copied().unwrap_or(false)))
-            .collect())
+            .map(|l| {
+                let was = l.diverged;
+                let delta = l.learn(stimuli.get(l.stimulus).copied().unwrap_or(false));
+                stopped += u64::from(l.diverged && !was);
+                delta
+            })
+            .collect();
+        self.divergences += stopped;
+        Ok(deltas)
+    }
+
+    /// How many times a prediction stopped learning because its weights were about to become
+    /// non-finite, since the set was built.
+    pub fn divergences(&self) -> u64 {
+        self.divergences
+    }
+
+    /// The predictions that have stopped learning (diverged), by name.
+    pub fn diverged(&self) -> impl Iterator<Item = &str> + '_ {
+        self.learners
+            .iter()
+            .filter(|l| l.diverged)
+            .map(|l| l.spec.name.as_str())
+    }
+
+    /// The bounds of prediction `name`'s runtime changes (α·‖x‖² ≤ 1).
+    pub fn bounds(&self, name: &str) -> Option<ParamBounds> {
+        self.learners
+            .iter()
+            .find(|l| l.spec.name == name)
+            .map(|l| l.bounds)
     }
 
     /// Forgets the previous tick and clears every trace (e.g. after a sensor gap): the next tick
@@ -206,11 +315,12 @@ impl PredictionSet {
         self.learners.iter_mut().for_each(Learner::break_chain);
     }
 
-    /// Back to the initial weights, zero traces and no previous tick.
+    /// Back to the initial weights, zero traces and no previous tick; a diverged prediction learns again.
     pub fn reset(&mut self) {
         for l in &mut self.learners {
             l.break_chain();
             l.td.reset();
+            l.diverged = false;
         }
     }
 
@@ -250,31 +360,31 @@ impl PredictionSet {
             .map(|l| &l.coder)
     }
 
-    /// Changes α of prediction `name` from the next update on.
+    /// Changes α of prediction `name` from the next update on (within α·‖x‖² ≤ 1).
     pub fn set_alpha(&mut self, name: &str, alpha: f64) -> Result<(), LearnError> {
-        check_alpha(name, alpha)?;
-        let l = self.find_mut(name)?;
-        l.td.set_alpha(alpha)?;
-        l.spec.alpha = alpha;
-        Ok(())
+        self.set_params(name, Some(alpha), None, None)
     }
 
     /// Changes λ of prediction `name` from the next update on.
     pub fn set_lambda(&mut self, name: &str, lambda: f64) -> Result<(), LearnError> {
-        check_lambda(name, lambda)?;
-        let l = self.find_mut(name)?;
-        l.td.set_lambda(lambda)?;
-        l.spec.lambda = lambda;
-        Ok(())
+        self.set_params(name, None, Some(lambda), None)
     }
 
     /// Changes the threshold of prediction `name` from the next prediction on.
     pub fn set_threshold(&mut self, name: &str, threshold: Threshold) -> Result<(), LearnError> {
-        check_threshold(name, threshold)?;
-        let l = self.find_mut(name)?;
-        l.spec.threshold = threshold;
-        l.threshold = l.spec.threshold_value();
-        Ok(())
+        self.set_params(name, None, None, Some(threshold))
+    }
+
+    /// Changes any of α, λ and θ of prediction `name`: every value is checked against its bound
+    /// (`super::bounds`) first, and on error nothing changes.
+    pub fn set_params(
+        &mut self,
+        name: &str,
+        alpha: Option<f64>,
+        lambda: Option<f64>,
+        threshold: Option<Threshold>,
+    ) -> Result<(), LearnError> {
+        self.find_mut(name)?.set_params(alpha, lambda, threshold)
     }
 
     fn find_mut(&mut self, name: &str) -> Result<&mut Learner, LearnError> {

@@ -110,23 +110,12 @@ fn apply(l: &mut super::set::Learner, s: &PredictionSnapshot) -> Result<(), Lear
             return Err(LearnError::NonFiniteSnapshot(name.clone()));
         }
     }
-    super::spec::check_threshold(name, s.threshold)?;
+    // The runtime parameters go through the same bounds as `set_params` (α·‖x‖² ≤ 1). Both calls
+    // check before they write; `restore` runs this on a copy first, so the set never half-changes.
+    l.set_params(Some(s.alpha), Some(s.lambda), Some(s.threshold))?;
     l.td.set_state(&s.weights, &s.traces)
         .map_err(|_| LearnError::NonFiniteSnapshot(name.clone()))?;
-    l.td.set_alpha(s.alpha)
-        .map_err(|_| LearnError::InvalidAlpha {
-            name: name.clone(),
-            alpha: s.alpha,
-        })?;
-    l.td.set_lambda(s.lambda)
-        .map_err(|_| LearnError::InvalidLambda {
-            name: name.clone(),
-            lambda: s.lambda,
-        })?;
-    l.spec.alpha = s.alpha;
-    l.spec.lambda = s.lambda;
-    l.spec.threshold = s.threshold;
-    l.threshold = l.spec.threshold_value();
+    l.diverged = false;
     l.chain = match &s.previous {
         Some(prev) => Chain {
             x_prev: prev.active.clone(),

@@ -28,7 +28,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::td::{TdParams, check_alpha, check_lambda};
+use super::bounds::{ParamBounds, check_initial_value, check_tau, check_threshold, feature_bounds};
+use super::td::TdParams;
 use super::{LearnError, Sigma};
 
 /// The threshold θ of the mixing function `f_E(v) = I{E ∨ v > θ}`.
@@ -135,33 +136,28 @@ impl PredictionSpec {
         }
     }
 
-    /// Checks the scalar fields (name, τ, α, λ, initial weight, threshold); the features are checked
-    /// when they are resolved against the available signals.
+    /// Checks the scalar fields (name, τ, α > 0, λ, initial weight, threshold) that need no feature
+    /// count; [`PredictionSpec::bounds`] checks everything.
     pub fn validate(&self) -> Result<(), LearnError> {
         let name = self.name.as_str();
         if name.is_empty() {
             return Err(LearnError::EmptyName);
         }
-        if !(self.tau.is_finite() && self.tau > 1.0) {
-            return Err(LearnError::InvalidTau {
-                name: name.to_string(),
-                tau: self.tau,
-            });
-        }
-        check_alpha(name, self.alpha)?;
-        check_lambda(name, self.lambda)?;
+        check_tau(name, self.tau)?;
         self.td_params().validate(name)?;
         check_threshold(name, self.threshold)
     }
-}
 
-pub(crate) fn check_threshold(name: &str, threshold: Threshold) -> Result<(), LearnError> {
-    match threshold {
-        Threshold::Fixed(value) if !value.is_finite() => Err(LearnError::InvalidThreshold {
-            name: name.to_string(),
-            value,
-        }),
-        _ => Ok(()),
+    /// Checks every field against its bound (`super::bounds`) for a robot with `obs_dims` observation
+    /// dimensions, without allocating anything: the scalars, the tile count and the feature count, the
+    /// step size α·‖x‖² ≤ 1 with ‖x‖² the number of tilings, and a finite initial prediction w₀·‖x‖².
+    /// Returns the bounds for runtime changes.
+    pub fn bounds(&self, obs_dims: usize) -> Result<ParamBounds, LearnError> {
+        self.validate()?;
+        let bounds = feature_bounds(&self.name, &self.features, obs_dims)?;
+        bounds.check_alpha(&self.name, self.alpha)?;
+        check_initial_value(&self.name, self.initial_weight, bounds.active_features)?;
+        Ok(bounds)
     }
 }
 
@@ -252,43 +248,58 @@ mod tests {
             f(&mut s);
             s.validate()
         };
-        assert!(matches!(
-            with(&|s| s.tau = 1.0),
-            Err(LearnError::InvalidTau { .. })
-        ));
-        assert!(matches!(
-            with(&|s| s.tau = f64::INFINITY),
-            Err(LearnError::InvalidTau { .. })
-        ));
-        assert!(matches!(
-            with(&|s| s.alpha = 0.0),
-            Err(LearnError::InvalidAlpha { .. })
-        ));
-        assert!(matches!(
-            with(&|s| s.alpha = f64::NAN),
-            Err(LearnError::InvalidAlpha { .. })
-        ));
-        assert!(matches!(
-            with(&|s| s.lambda = 1.01),
-            Err(LearnError::InvalidLambda { .. })
-        ));
-        assert!(matches!(
-            with(&|s| s.lambda = -0.1),
-            Err(LearnError::InvalidLambda { .. })
-        ));
-        assert!(matches!(
-            with(&|s| s.initial_weight = f64::NAN),
-            Err(LearnError::InvalidInitialWeight { .. })
-        ));
-        assert!(matches!(
-            with(&|s| s.threshold = Threshold::Fixed(f64::NAN)),
-            Err(LearnError::InvalidThreshold { .. })
-        ));
+        let field = |r: Result<(), LearnError>| match r {
+            Err(LearnError::OutOfBounds { field, .. }) => field,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(field(with(&|s| s.tau = 1.0)), "tau");
+        assert_eq!(field(with(&|s| s.tau = f64::INFINITY)), "tau");
+        assert_eq!(field(with(&|s| s.alpha = 0.0)), "alpha");
+        assert_eq!(field(with(&|s| s.alpha = f64::NAN)), "alpha");
+        assert_eq!(field(with(&|s| s.lambda = 1.01)), "lambda");
+        assert_eq!(field(with(&|s| s.lambda = -0.1)), "lambda");
+        assert_eq!(
+            field(with(&|s| s.initial_weight = f64::NAN)),
+            "initial_weight"
+        );
+        assert_eq!(
+            field(with(&|s| s.threshold = Threshold::Fixed(f64::NAN))),
+            "threshold"
+        );
         assert_eq!(with(&|s| s.name.clear()), Err(LearnError::EmptyName));
         let message = with(&|s| s.tau = 0.5).unwrap_err().to_string();
         assert!(
             message.contains("stall") && message.contains("tau"),
             "{message}"
         );
+    }
+
+    #[test]
+    fn the_step_size_is_bounded_by_the_feature_construction() {
+        let stall: PredictionSpec = toml::from_str(STALL).unwrap();
+        assert_eq!(stall.bounds(44).unwrap().active_features, 44);
+        let mut fast = stall.clone();
+        fast.alpha = 1.0;
+        fast.validate().unwrap();
+        let e = fast.bounds(44).unwrap_err().to_string();
+        assert!(e.contains("exceeds 1/44"), "{e}");
+        // The same α fits a construction with fewer active features.
+        fast.alpha = 0.1;
+        assert!(fast.bounds(44).is_err());
+        assert!(fast.bounds(10).is_ok());
+        let command: PredictionSpec = toml::from_str(COMMAND).unwrap();
+        assert_eq!(command.bounds(44).unwrap().max_alpha, 0.2);
+        // A finite initial weight whose prediction over 44 features overflows.
+        let mut huge = stall;
+        huge.initial_weight = 1e307;
+        match huge.bounds(44) {
+            Err(LearnError::OutOfBounds { field, bound, .. }) => {
+                assert_eq!(field, "initial_weight");
+                assert!(bound.contains("44 active features"), "{bound}");
+            }
+            other => panic!("{other:?}"),
+        }
+        huge.initial_weight = -1e300;
+        huge.bounds(44).unwrap();
     }
 }

@@ -18,6 +18,7 @@
 //! vectors (the paper's sizes are 440 and 500 features, where a sparse trace would not pay: with
 //! λ = 0.5 and 44 active features the trace covers every feature within a few steps).
 
+use super::bounds::{check_alpha_positive, check_initial_weight, check_lambda};
 use super::{LearnError, Sigma};
 
 /// The learning parameters of one TD(λ) learner.
@@ -34,39 +35,38 @@ pub struct TdParams {
 }
 
 impl TdParams {
-    /// Checks α, λ and the initial weight; `name` labels the errors.
+    /// Checks α (finite, > 0: the learner does not know its feature count, so the bound α·‖x‖² ≤ 1 is
+    /// checked where it is known, see [`super::bounds`]), λ and the initial weight; `name` labels the errors.
     pub fn validate(&self, name: &str) -> Result<(), LearnError> {
-        check_alpha(name, self.alpha)?;
+        check_alpha_positive(name, self.alpha)?;
         check_lambda(name, self.lambda)?;
-        if !self.initial_weight.is_finite() {
-            return Err(LearnError::InvalidInitialWeight {
-                name: name.to_string(),
-                value: self.initial_weight,
-            });
+        check_initial_weight(name, self.initial_weight)
+    }
+}
+
+/// Why [`TdLambda::try_update`] changed nothing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum UpdateRefused {
+    /// δ_t or γ_t is not finite: a prediction that overflowed, or a non-finite cumulant or discount.
+    NonFiniteInput {
+        /// δ_t as computed.
+        delta: f64,
+    },
+    /// The step would have made a weight or a trace non-finite: the learner is diverging.
+    WouldDiverge {
+        /// δ_t as computed.
+        delta: f64,
+    },
+}
+
+impl UpdateRefused {
+    /// δ_t as computed.
+    pub fn delta(self) -> f64 {
+        match self {
+            UpdateRefused::NonFiniteInput { delta } | UpdateRefused::WouldDiverge { delta } => {
+                delta
+            }
         }
-        Ok(())
-    }
-}
-
-pub(crate) fn check_alpha(name: &str, alpha: f64) -> Result<(), LearnError> {
-    if alpha.is_finite() && alpha > 0.0 {
-        Ok(())
-    } else {
-        Err(LearnError::InvalidAlpha {
-            name: name.to_string(),
-            alpha,
-        })
-    }
-}
-
-pub(crate) fn check_lambda(name: &str, lambda: f64) -> Result<(), LearnError> {
-    if (0.0..=1.0).contains(&lambda) {
-        Ok(())
-    } else {
-        Err(LearnError::InvalidLambda {
-            name: name.to_string(),
-            lambda,
-        })
     }
 }
 
@@ -108,8 +108,7 @@ impl TdLambda {
     /// `x_t` and `gamma_t` are the features and discount of step t, `reward_next`, `gamma_next` and
     /// `x_next` the cumulant R_{t+1}, discount γ_{t+1} and features x_{t+1}. Returns δ_t.
     ///
-    /// If δ_t or γ_t is not finite (a NaN cumulant or discount), nothing changes and the non-finite δ
-    /// is returned: one bad input must not poison every weight.
+    /// A refused step (see [`TdLambda::try_update`]) changes nothing and returns its δ.
     pub fn update(
         &mut self,
         x_t: &[usize],
@@ -118,28 +117,69 @@ impl TdLambda {
         gamma_next: f64,
         x_next: &[usize],
     ) -> f64 {
+        self.try_update(x_t, gamma_t, reward_next, gamma_next, x_next)
+            .unwrap_or_else(UpdateRefused::delta)
+    }
+
+    /// [`TdLambda::update`], or nothing at all when the step cannot be taken safely: when δ_t or γ_t is
+    /// not finite (one bad input must not poison every weight), or when the step would make any weight
+    /// or trace non-finite (a diverging learner keeps its last finite weights). The second check runs
+    /// the step's arithmetic once without writing, in the same order, so it refuses exactly the steps
+    /// that would produce a non-finite number; it costs one more read of the weights and traces.
+    pub fn try_update(
+        &mut self,
+        x_t: &[usize],
+        gamma_t: f64,
+        reward_next: f64,
+        gamma_next: f64,
+        x_next: &[usize],
+    ) -> Result<f64, UpdateRefused> {
         let sigma = self.params.sigma;
         let y_t = self.dot(x_t);
         let delta = reward_next + gamma_next * sigma.value(self.dot(x_next)) - sigma.value(y_t);
         if !delta.is_finite() || !gamma_t.is_finite() {
-            return delta;
+            return Err(UpdateRefused::NonFiniteInput { delta });
         }
         let decay = gamma_t * self.params.lambda;
         let step = self.params.alpha * delta;
+        let grad = sigma.derivative(y_t);
+        if !self.step_stays_finite(x_t, decay, step, grad) {
+            return Err(UpdateRefused::WouldDiverge { delta });
+        }
         // e ← γ_t λ e, then w ← w + αδ·(γ_t λ e) in the same pass ...
         for (w, e) in self.weights.iter_mut().zip(self.traces.iter_mut()) {
             *e *= decay;
             *w += step * *e;
         }
         // ... then the σ′(w_tᵀx_t)·x_t part of e_t, and its share of the weight change.
-        let grad = sigma.derivative(y_t);
         for &i in x_t {
             if let (Some(e), Some(w)) = (self.traces.get_mut(i), self.weights.get_mut(i)) {
                 *e += grad;
                 *w += step * grad;
             }
         }
-        delta
+        Ok(delta)
+    }
+
+    /// Whether the step of [`TdLambda::try_update`] leaves every weight and trace finite: the same
+    /// operations in the same order, without writing.
+    fn step_stays_finite(&self, x_t: &[usize], decay: f64, step: f64, grad: f64) -> bool {
+        let decayed = self
+            .weights
+            .iter()
+            .zip(&self.traces)
+            .all(|(&w, &e)| (e * decay).is_finite() && (w + step * (e * decay)).is_finite());
+        decayed
+            && x_t
+                .iter()
+                .all(|&i| match (self.weights.get(i), self.traces.get(i)) {
+                    (Some(&w), Some(&e)) => {
+                        let e1 = e * decay;
+                        let w1 = w + step * e1;
+                        (e1 + grad).is_finite() && (w1 + step * grad).is_finite()
+                    }
+                    _ => true,
+                })
     }
 
     /// The learning parameters.
@@ -162,9 +202,10 @@ impl TdLambda {
         &self.traces
     }
 
-    /// Changes α (must be finite and > 0); takes effect on the next update.
+    /// Changes α (must be finite and > 0; the bound α·‖x‖² ≤ 1 is the caller's, who knows ‖x‖²); takes
+    /// effect on the next update.
     pub fn set_alpha(&mut self, alpha: f64) -> Result<(), LearnError> {
-        check_alpha("td", alpha)?;
+        check_alpha_positive("td", alpha)?;
         self.params.alpha = alpha;
         Ok(())
     }

@@ -46,7 +46,8 @@ pub struct TileCoder {
 }
 
 impl TileCoder {
-    /// Validates `spec`: at least one tile and one tiling, offsets in `[0, 1)`, a feature count that fits.
+    /// Validates `spec`: at least one tile and one tiling, offsets in `[0, 1)`, at most
+    /// [`super::bounds::MAX_FEATURES`] features.
     pub fn new(spec: TileSpec) -> Result<Self, LearnError> {
         let (tilings, tiles_per_tiling, num_inputs) = match &spec {
             TileSpec::OneDimTilings { dims, tiles } => (*dims, Some(*tiles), *dims),
@@ -73,7 +74,7 @@ impl TileCoder {
         }
         let num_features = tiles_per_tiling
             .and_then(|b| b.checked_mul(tilings))
-            .filter(|&n| n <= isize::MAX as usize / 8)
+            .filter(|&n| n <= super::bounds::MAX_FEATURES)
             .ok_or(LearnError::TooManyFeatures(tilings, tiles))?;
         Ok(TileCoder {
             spec,

@@ -10,7 +10,8 @@ fn stall_toml() -> String {
         .expect("config/stall.toml")
 }
 
-fn serve_with(config: &str) -> (bool, String) {
+/// Runs `pavlov serve` on `config`; its exit code (`None` when killed by a signal, e.g. an abort) and stderr.
+fn serve_with(config: &str) -> (Option<i32>, String) {
     let dir = std::env::temp_dir().join(format!("pavlov-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let path = dir.join(format!(
@@ -24,7 +25,7 @@ fn serve_with(config: &str) -> (bool, String) {
         .output()
         .expect("run pavlov");
     (
-        out.status.success(),
+        out.status.code(),
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
 }
@@ -38,12 +39,45 @@ fn bad_configurations_name_the_key_and_stop_start_up() {
         ("stream = [6]", "stream = [6, 6, 6]", "robot.stream"),
         ("mode = \"pavlovian\"", "mode = \"psychic\"", "psychic"),
         ("period_ms = 20", "period_ms = \"fast\"", "period_ms"),
+        // Values that once made the robot unsafe or the process crash: each names its key and bound,
+        // and the process exits with status 1 (a 2000 mm/s speed was clamped, a 4e9-tick timeout
+        // disabled the stale-stream stop, 10⁸ tiles aborted with an allocation failure, status 134).
+        (
+            "default_policy = { kind = \"stall_cycle\" }",
+            "default_policy = { kind = \"stall_cycle\", drive_mm_s = 2000 }",
+            "control.default_policy.drive_mm_s: 2000 mm/s is outside the Drive Direct range -500..=500",
+        ),
+        (
+            "max_obs_age_ticks = 5",
+            "max_obs_age_ticks = 4000000000",
+            "safety.max_obs_age_ticks: 4000000000 ticks is outside 1..=50",
+        ),
+        (
+            "max_action_age_ticks = 3",
+            "max_action_age_ticks = 4000000000",
+            "safety.max_action_age_ticks: 4000000000 ticks is outside 1..=50",
+        ),
+        (
+            "tiles = 10",
+            "tiles = 100000000",
+            "predictions[0] (stall).features.tiles: 100000000 is outside 1..=1000",
+        ),
+        (
+            "alpha = 0.022727272727272728",
+            "alpha = 1.0",
+            "predictions[0] (stall).alpha: 1.0 exceeds 1/44 = 0.0227 (α·‖x‖² ≤ 1 with 44 active features)",
+        ),
+        (
+            "alpha = 0.022727272727272728",
+            "alpha = 1e308",
+            "predictions[0] (stall).alpha: 1e308 exceeds 1/44",
+        ),
     ];
     for (from, to, key) in cases {
         let bad = good.replace(from, to);
         assert_ne!(bad, good, "{from} not in stall.toml");
-        let (ok, stderr) = serve_with(&bad);
-        assert!(!ok, "{to}: the server started");
+        let (code, stderr) = serve_with(&bad);
+        assert_eq!(code, Some(1), "{to}: exit status {code:?}:\n{stderr}");
         assert!(
             stderr.contains(key),
             "{to}: the error does not name `{key}`:\n{stderr}"

@@ -3,7 +3,7 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  Backoff, GapCounter, SUBPROTOCOL, Window, alignedData, connectionTarget, fmt, fmtDuration, fmtLead, parseParam, teleopWheels, tokenFromHash,
+  Backoff, GapCounter, SUBPROTOCOL, Window, alignedData, connectionTarget, fmt, fmtDuration, fmtLead, paramLimits, parseParam, teleopWheels, tokenFromHash,
 } from '../lib.js';
 
 test('the token comes from the URL fragment', () => {
@@ -79,6 +79,29 @@ test('learning parameters are checked before they are sent', () => {
   assert.deepEqual(parseParam(' 0.1 ', 'α', 0, 1), { value: 0.1 });
   assert.match(parseParam('abc', 'α', 0, 1).error, /number/);
   assert.match(parseParam('2', 'λ', 0, 1).error, /between 0 and 1/);
+  // An open lower bound: α > 0.
+  assert.match(parseParam('0', 'α', 0, 0.5, true).error, /above 0 and at most 0.5/);
+  assert.deepEqual(parseParam('0.5', 'α', 0, 0.5, true), { value: 0.5 });
+});
+
+test('the form takes its limits from the server\'s bounds', () => {
+  const bounds = {
+    predictions: [{ name: 'stall', active_features: 44, features: 440, max_alpha: 1 / 44, min_lambda: 0, max_lambda: 1 }],
+    max_request_ms: 10000,
+  };
+  const l = paramLimits(bounds, 'stall');
+  assert.equal(l.alpha.hi, 1 / 44);
+  assert.equal(l.alpha.loOpen, true);
+  assert.match(l.alpha.hint, /1\/44 = 0.0227/);
+  // α = 1 and α = 1e308 are refused before they are sent; α at the bound is not.
+  assert.ok(parseParam('1', 'α', l.alpha.lo, l.alpha.hi, l.alpha.loOpen).error);
+  assert.ok(parseParam('1e308', 'α', l.alpha.lo, l.alpha.hi, l.alpha.loOpen).error);
+  assert.deepEqual(parseParam(String(1 / 44), 'α', l.alpha.lo, l.alpha.hi, l.alpha.loOpen), { value: 1 / 44 });
+  assert.deepEqual([l.lambda.lo, l.lambda.hi], [0, 1]);
+  // Another prediction, or no bounds at all: α in (0, 1].
+  assert.equal(paramLimits(bounds, 'other').alpha.hi, 1);
+  assert.equal(paramLimits(undefined, 'stall').alpha.hi, 1);
+  assert.equal(paramLimits({ predictions: [{ name: 'stall', max_alpha: 'x' }] }, 'stall').alpha.hi, 1);
 });
 
 test('response leads show their sign: + before the command, − after', () => {

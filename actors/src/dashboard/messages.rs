@@ -198,6 +198,58 @@ pub(crate) struct Signals {
     pub(crate) predictions: Vec<String>,
     /// The prediction that drives the Pavlovian gate.
     pub(crate) gate_prediction: String,
+    /// What `set_params` and `human_request` accept, for a client's form.
+    pub(crate) bounds: LearningBounds,
+}
+
+/// The bounds of the learning commands, announced in `hello` (`signals.bounds`): the same bounds the
+/// server checks (`pavlov::learn::bounds`, `pavlov::agent::learning::MAX_REQUEST_MS`).
+#[derive(Debug, Clone, Default, Serialize)]
+pub(crate) struct LearningBounds {
+    /// Each prediction's bounds, in the order of `signals.predictions`.
+    pub(crate) predictions: Vec<PredictionBounds>,
+    /// The longest `human_request` `duration_ms`.
+    pub(crate) max_request_ms: u64,
+}
+
+/// One prediction's bounds of `set_params`: 0 < α ≤ `max_alpha`, `min_lambda` ≤ λ ≤ `max_lambda`, θ finite.
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct PredictionBounds {
+    /// The prediction's name.
+    pub(crate) name: String,
+    /// Active features for a fully valid input (‖x‖²).
+    pub(crate) active_features: usize,
+    /// The length of its weight vector.
+    pub(crate) features: usize,
+    /// The largest α: 1 / `active_features` (α·‖x‖² ≤ 1).
+    pub(crate) max_alpha: f64,
+    /// The smallest λ.
+    pub(crate) min_lambda: f64,
+    /// The largest λ.
+    pub(crate) max_lambda: f64,
+}
+
+impl LearningBounds {
+    /// The bounds of `config`'s predictions (an already validated configuration).
+    pub(crate) fn for_config(config: &pavlov::config::Config) -> Self {
+        let predictions = config
+            .prediction_bounds()
+            .unwrap_or_default()
+            .into_iter()
+            .map(|(name, b)| PredictionBounds {
+                name,
+                active_features: b.active_features,
+                features: b.features,
+                max_alpha: b.max_alpha,
+                min_lambda: 0.0,
+                max_lambda: 1.0,
+            })
+            .collect();
+        LearningBounds {
+            predictions,
+            max_request_ms: pavlov::agent::learning::MAX_REQUEST_MS,
+        }
+    }
 }
 
 /// The `hello` message.
@@ -331,6 +383,20 @@ mod tests {
         assert_eq!(
             (v["stimulus"].clone(), v["gate"].clone(), v["estop"].clone()),
             (json!(true), json!(true), json!(true))
+        );
+    }
+
+    #[test]
+    fn hello_announces_the_learning_bounds() {
+        let config =
+            pavlov::config::Config::from_toml(include_str!("../../../config/stall.toml")).unwrap();
+        let bounds = LearningBounds::for_config(&config);
+        let v = serde_json::to_value(&bounds).unwrap();
+        assert_eq!(
+            v,
+            json!({"predictions":[{"name":"stall","active_features":44,"features":440,
+                   "max_alpha":1.0 / 44.0,"min_lambda":0.0,"max_lambda":1.0}],
+                   "max_request_ms":10000})
         );
     }
 }

@@ -43,7 +43,7 @@ use crate::server::Server;
 pub(crate) use crate::telemetry::counters::DashboardStats;
 use auth::AccessPolicy;
 use hub::{Hub, HubCounters};
-use messages::Signals;
+use messages::{LearningBounds, Signals};
 use session::SessionCounters;
 
 /// Kernel send buffer of each client socket. Kept small so that a slow client's backlog sits in its
@@ -208,6 +208,7 @@ impl Dashboard {
                     .map(|p| p.name.clone())
                     .collect(),
                 gate_prediction: server.config.control.gate_prediction.clone(),
+                bounds: LearningBounds::for_config(&server.config),
             },
             config: redacted_config(&server.config),
             max_message_bytes: cfg.max_message_bytes,

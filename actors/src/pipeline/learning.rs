@@ -10,6 +10,7 @@
 //! ([`crate::storage::checkpoint_files`]). A state holding a NaN or an infinity is never checkpointed:
 //! the refusal is logged with the prediction's name and counted.
 
+use pavlov::agent::learning::request_end;
 use pavlov::agent::safety::observation_is_fresh;
 use pavlov::agent::{LearnInput, LearnOutput, LearningStage};
 use pavlov::config::Config;
@@ -221,6 +222,13 @@ impl Learning {
 
     /// Writes the final checkpoint and waits until every checkpoint is on disk.
     async fn finish(mut self, seq: u64) {
+        let divergences = self.stage.divergences();
+        if divergences > 0 {
+            tracing::warn!(
+                divergences,
+                "predictions stopped learning because they diverged"
+            );
+        }
         if self.skipped_stale > 0 {
             tracing::info!(
                 ticks = self.skipped_stale,
@@ -257,7 +265,9 @@ impl Learning {
         let rejected = |e: String| CommandError::Rejected(e);
         match cmd {
             LearningCommand::HumanRequest { duration_ms } => {
-                self.request_until = seq + duration_ms.div_ceil(self.period_ms);
+                // At most MAX_REQUEST_MS: a request forces the stimulus, and so the response, on.
+                self.request_until = request_end(seq, duration_ms, self.period_ms)
+                    .map_err(|e| rejected(e.to_string()))?;
                 Ok(Applied::Request {
                     request_until_tick: self.request_until,
                 })
@@ -345,8 +355,19 @@ pub(crate) async fn run(
                     tracing::debug!("gating is behind; a prediction was dropped");
                 }
                 if fresh {
-                    if let Err(e) = learning.stage.learn() {
-                        tracing::error!("learning step failed: {e}");
+                    match learning.stage.learn() {
+                        Ok(report) => {
+                            for name in &report.newly_diverged {
+                                tracing::error!(
+                                    prediction = %name,
+                                    divergences = report.divergences,
+                                    "prediction `{name}` diverged: its weights were about to become \
+                                     non-finite, so it stopped learning, keeps its last finite weights and \
+                                     no longer drives the gate (the stimulus alone does) until reset_weights"
+                                );
+                            }
+                        }
+                        Err(e) => tracing::error!("learning step failed: {e}"),
                     }
                 } else {
                     learning.skipped_stale += 1;

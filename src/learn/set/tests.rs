@@ -206,7 +206,14 @@ fn construction_errors_are_precise() {
     bad.tau = 1.0;
     assert!(matches!(
         PredictionSet::new(vec![bad], &n),
-        Err(LearnError::InvalidTau { .. })
+        Err(LearnError::OutOfBounds { field, .. }) if field == "tau"
+    ));
+    // α·‖x‖² ≤ 1: one input, one active feature, so α ≤ 1.
+    let mut bad = good.clone();
+    bad.alpha = 1.5;
+    assert!(matches!(
+        PredictionSet::new(vec![bad], &n),
+        Err(LearnError::OutOfBounds { field, .. }) if field == "alpha"
     ));
     let mut bad = good;
     bad.features = FeatureSpec::OneDim {
@@ -214,10 +221,10 @@ fn construction_errors_are_precise() {
         inputs: vec!["u".into()],
         tiles: 0,
     };
-    assert_eq!(
+    assert!(matches!(
         PredictionSet::new(vec![bad], &n).unwrap_err(),
-        LearnError::NoTiles(0)
-    );
+        LearnError::OutOfBounds { field, .. } if field == "features.tiles"
+    ));
 }
 
 #[test]
@@ -310,12 +317,19 @@ fn runtime_changes_apply_and_are_checked() {
     assert!((out[0].threshold - 0.96f64.powi(15)).abs() < 1e-15);
     assert!(matches!(
         set.set_alpha("p", 0.0),
-        Err(LearnError::InvalidAlpha { .. })
+        Err(LearnError::OutOfBounds { field, .. }) if field == "alpha"
     ));
     assert!(matches!(
         set.set_lambda("p", 1.5),
-        Err(LearnError::InvalidLambda { .. })
+        Err(LearnError::OutOfBounds { field, .. }) if field == "lambda"
     ));
+    // Above α·‖x‖² ≤ 1, and a change that is refused in part changes nothing.
+    let e = set.set_alpha("p", 1.01).unwrap_err().to_string();
+    assert!(e.contains("exceeds 1/1"), "{e}");
+    assert!(set.set_params("p", Some(0.5), Some(2.0), None).is_err());
+    assert_eq!(set.learner("p").unwrap().params().alpha, 0.3);
+    set.set_alpha("p", 1.0).unwrap();
+    set.set_alpha("p", 0.3).unwrap();
     assert!(set.set_threshold("p", Threshold::Fixed(f64::NAN)).is_err());
     assert_eq!(
         set.set_alpha("q", 0.1),
@@ -368,4 +382,107 @@ fn snapshot_restore_continues_exactly() {
     bad.predictions[0].name = "other".into();
     assert!(b.restore(&bad).is_err());
     assert_eq!(b.snapshot(), before);
+}
+
+/// Two features of one input (u < 0.5: feature 0, else 1), α = 1 (the bound for one active feature),
+/// λ = 1, τ = 25 (γ = 0.96); the snapshot puts the weights at −0.9e308 and +0.9e308 with a trace of 1 on
+/// feature 1 and the previous tick on feature 0. Moving to feature 1 then gives δ = 0.96·0.9e308 + 0.9e308
+/// = 1.764e308 (finite), and the decayed trace would add 0.96·δ to w₁ = 0.9e308: beyond f64::MAX.
+fn about_to_diverge() -> PredictionSet {
+    let n = names(&["u"], &["e"]);
+    let mut set =
+        PredictionSet::new(vec![spec(25.0, 1.0, 1.0, Sigma::Identity, 0.0, 2)], &n).unwrap();
+    let mut snap = set.snapshot();
+    snap.predictions[0].weights = vec![-0.9e308, 0.9e308];
+    snap.predictions[0].traces = vec![0.0, 1.0];
+    snap.predictions[0].previous = Some(crate::learn::PreviousStep {
+        active: vec![0],
+        gamma: 0.96,
+    });
+    set.restore(&snap).unwrap();
+    set
+}
+
+#[test]
+fn a_diverging_prediction_stops_keeps_its_finite_weights_and_leaves_the_gate() {
+    let mut set = about_to_diverge();
+    let high = FeatureInputs {
+        obs: &[],
+        extra: &[0.8],
+    };
+    let out = set.predict(&high);
+    assert_eq!(
+        out[0].valid_value(),
+        Some(0.9e308),
+        "valid before it diverges"
+    );
+    assert_eq!(set.learn(&[false]).unwrap(), vec![None]);
+    assert_eq!(set.divergences(), 1);
+    assert_eq!(set.diverged().collect::<Vec<_>>(), vec!["p"]);
+    let weights = set.learner("p").unwrap().weights().to_vec();
+    assert_eq!(
+        weights,
+        vec![-0.9e308, 0.9e308],
+        "the last finite weights are kept"
+    );
+    // Its value is finite and far above θ = 0.5, yet it does not drive the gate.
+    let out = set.predict(&high);
+    assert_eq!(out[0].value, 0.9e308);
+    assert!(out[0].diverged);
+    assert_eq!(out[0].valid_value(), None);
+    use crate::control::{Mode, gate};
+    assert!(!gate(
+        Mode::Pavlovian,
+        false,
+        out[0].valid_value(),
+        out[0].threshold
+    ));
+    assert!(gate(
+        Mode::Pavlovian,
+        true,
+        out[0].valid_value(),
+        out[0].threshold
+    ));
+    // Stopped: no further update, no second count, weights unchanged over many ticks.
+    for k in 0..100 {
+        tick(&mut set, if k % 2 == 0 { 0.2 } else { 0.8 }, k % 7 == 0);
+    }
+    assert_eq!(set.divergences(), 1);
+    assert_eq!(set.learner("p").unwrap().weights(), &weights[..]);
+    // Reset: it learns again.
+    set.reset();
+    assert_eq!(set.diverged().count(), 0);
+    tick(&mut set, 0.2, false);
+    assert!(tick(&mut set, 0.8, true).1.is_some());
+    // δ = R = 1 with γ = 0 on the stimulus, α = 1: feature 0 (u = 0.2) now predicts it exactly.
+    assert_eq!(set.learner("p").unwrap().weights(), &[1.0, 0.0]);
+}
+
+#[test]
+fn at_the_step_size_bound_the_weights_stay_bounded() {
+    // 8 inputs tiled in 4: 8 active features, α = 1/8 (the bound); a random stream with stimuli.
+    let n = names(&["a", "b", "c", "d", "e", "f", "g", "h"], &["s"]);
+    let mut s = spec(25.0, 0.9, 1.0 / 8.0, Sigma::Identity, 0.0, 4);
+    s.features = FeatureSpec::OneDim {
+        all_obs: false,
+        inputs: ["a", "b", "c", "d", "e", "f", "g", "h"]
+            .map(String::from)
+            .to_vec(),
+        tiles: 4,
+    };
+    s.cumulant = Cumulant::Stimulus("s".into());
+    let mut set = PredictionSet::new(vec![s], &n).unwrap();
+    let mut rng = Rng::new(5);
+    for _ in 0..20_000 {
+        let x: Vec<f64> = (0..8).map(|_| rng.next_f64()).collect();
+        set.predict(&FeatureInputs {
+            obs: &[],
+            extra: &x,
+        });
+        set.learn(&[rng.chance(0.05)]).unwrap();
+    }
+    assert_eq!(set.divergences(), 0);
+    let w = set.learner("p").unwrap().weights();
+    // The return is at most 1; the weights of 8 features summing to it stay small.
+    assert!(w.iter().all(|v| v.abs() < 2.0), "{w:?}");
 }

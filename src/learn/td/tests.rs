@@ -94,6 +94,40 @@ fn non_finite_inputs_change_nothing() {
 }
 
 #[test]
+fn a_step_that_would_overflow_is_refused_and_changes_nothing() {
+    // An extreme cumulant: δ = 1e308 + 0 − 0 is finite, but α·δ on a trace of 1 plus the new
+    // σ′·x_t would take weight 0 from 1e308 to 2e308 = ∞.
+    let mut l = td(2, 1.0, 1.0, Sigma::Identity, 0.0);
+    l.set_state(&[1e308, 0.0], &[1.0, 0.0]).unwrap();
+    let before = l.clone();
+    assert_eq!(
+        l.try_update(&[1], 1.0, 1e308, 0.0, &[1]),
+        Err(UpdateRefused::WouldDiverge { delta: 1e308 })
+    );
+    assert_eq!(l, before);
+    // The same through `update`: δ comes back, nothing changes.
+    assert_eq!(l.update(&[1], 1.0, 1e308, 0.0, &[1]), 1e308);
+    assert_eq!(l, before);
+    // Overflowing through the σ′·x_t part alone (no trace yet) is refused too; this needs α above the
+    // bound α·‖x‖² ≤ 1, which the learner itself does not know (its set checks it).
+    let mut fresh = td(1, 4.0, 0.0, Sigma::Identity, 1e308);
+    let untouched = fresh.clone();
+    assert!(matches!(
+        fresh.try_update(&[0], 0.5, 1.5e308, 1.0, &[]),
+        Err(UpdateRefused::WouldDiverge { .. })
+    ));
+    assert_eq!(fresh, untouched);
+    // A non-finite δ is refused as such.
+    assert!(matches!(
+        l.try_update(&[0], 1.0, f64::INFINITY, 0.0, &[1]),
+        Err(UpdateRefused::NonFiniteInput { .. })
+    ));
+    // A large but safe step is taken.
+    assert_eq!(l.try_update(&[1], 1.0, 1.0, 0.0, &[1]), Ok(1.0));
+    assert!(l.weights().iter().all(|w| w.is_finite()));
+}
+
+#[test]
 fn out_of_range_indices_are_ignored() {
     let mut l = td(2, 0.5, 0.0, Sigma::Identity, 1.0);
     assert_eq!(l.dot(&[0, 7]), 1.0);

@@ -3,5 +3,6 @@
 mod abuse;
 mod abusers;
 mod browser;
+mod learning_bounds;
 mod metrics;
 mod protocol;
