@@ -25,6 +25,10 @@ use strum::VariantNames;
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio_util::sync::CancellationToken;
 
+use crate::pipeline::events::EventLog;
+use crate::pipeline::feed::TickFeed;
+use pavlov::event::EventKind;
+
 // Argument-less commands are empty struct variants (`Estop {}`), so that unknown fields are rejected for
 // them too: serde ignores extra fields on unit variants of an internally tagged enum.
 
@@ -343,6 +347,8 @@ pub(crate) const INBOX_CAPACITY: usize = 16;
 pub(crate) struct Routes {
     /// The e-stop latch that actuation and gating watch.
     pub(crate) estop: watch::Sender<bool>,
+    /// Where e-stop changes are announced, and the feed that tells the newest tick.
+    pub(crate) events: Option<(EventLog, TickFeed)>,
     /// Gating's inbox.
     pub(crate) gating: mpsc::Sender<Envelope<GatingCommand>>,
     /// Learning's inbox.
@@ -374,8 +380,9 @@ pub(crate) async fn route(
                 routes.estop.send_replace(on);
                 if on {
                     tracing::warn!("e-stop latched");
-                } else {
-                    tracing::info!("e-stop released");
+                }
+                if let Some((events, feed)) = &routes.events {
+                    events.emit(feed.last_seq(), EventKind::EStop { latched: on });
                 }
                 let _ = reply.send(Ok(Applied::Estop { estop: on }));
             }
@@ -452,6 +459,7 @@ mod tests {
             rx,
             Routes {
                 estop,
+                events: None,
                 gating,
                 learning,
                 link,

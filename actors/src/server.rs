@@ -32,6 +32,7 @@ use crate::link::opener::LinkOpener;
 use crate::link::serial::{SerialOpener, open_serial};
 use crate::link::supervisor::Supervisor;
 use crate::link::{LinkError, OpenLink, writer};
+use crate::pipeline::events::EventLog;
 use crate::pipeline::feed::TickFeed;
 use crate::pipeline::learning::Learning;
 use crate::pipeline::sensor_ingest::IngestLink;
@@ -39,7 +40,7 @@ use crate::pipeline::skeleton_ingest::{self, SkeletonIngest};
 use crate::pipeline::{self, PipelineParts};
 use crate::simulated::{SimStatus, robot};
 use crate::storage::checkpoint_files::{self, Resumed};
-use crate::storage::recorder::RecorderLink;
+use crate::storage::recorder::{RecorderInput, RecorderLink};
 use crate::telemetry::Health;
 use crate::telemetry::counters::SharedWriterStats;
 
@@ -163,15 +164,22 @@ impl ServerBuilder {
             writer_stats.clone(),
         ));
         let obs_names = learning.obs_names();
-        let (feed, recorder_commands) = match recorder {
-            Some(r) => (TickFeed::new().with_recorder(r.records), Some(r.commands)),
-            None => (TickFeed::new(), None),
+        let (feed, events, recorder_commands) = match &recorder {
+            Some(r) => {
+                let feed = TickFeed::new().with_recorder(r.input.clone());
+                let dropped = feed.recorder_dropped_counter();
+                let events = EventLog::new().with_recorder(r.input.clone(), dropped);
+                (feed, events, Some(r.commands.clone()))
+            }
+            None => (TickFeed::new(), EventLog::new(), None),
         };
         let ingest = IngestLink {
             reader,
             parser,
-            supervisor: Supervisor::new(&config, opener, control_tx, link_up_at),
+            supervisor: Supervisor::new(&config, opener, control_tx, link_up_at)
+                .with_events(events.clone()),
         };
+        let initial = Box::new(learning.initial_start_state(&events));
         let pipeline = pipeline::spawn(
             &config,
             PipelineParts {
@@ -181,9 +189,21 @@ impl ServerBuilder {
                 feed: feed.clone(),
                 recorder: recorder_commands,
                 started,
+                events: events.clone(),
             },
             &cancel,
         );
+        if let Some(r) = &recorder {
+            // The recorder may now ask for the learner's state, and begin a recording waiting for it.
+            let attach = RecorderInput::Attach {
+                snapshots: pipeline.snapshots.clone(),
+                events: events.clone(),
+                initial,
+            };
+            if r.input.send(attach).await.is_err() {
+                tracing::error!("the recorder has stopped: nothing will be recorded");
+            }
+        }
         let mut actors = pipeline.tasks;
         let pose = pipeline.pose;
         // The bound skeleton socket starts publishing into the pipeline's pose channel.
@@ -207,6 +227,7 @@ impl ServerBuilder {
         )));
         Ok(Server {
             feed,
+            events,
             commands: pipeline.commands,
             pose,
             started,
@@ -293,6 +314,8 @@ impl Stopper {
 pub struct Server {
     /// Every tick's record.
     pub feed: TickFeed,
+    /// Every change made at run time.
+    pub events: EventLog,
     /// Inject commands here.
     pub commands: mpsc::Sender<ControlRequest>,
     /// Publish skeleton poses here (the skeleton ingest actor, or a test).

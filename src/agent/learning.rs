@@ -81,6 +81,15 @@ pub struct LearnReport {
     pub divergences: u64,
 }
 
+/// The whole state of a [`LearningStage`] between two ticks.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StageSnapshot {
+    /// Weights, traces, parameters in force and the previous step of every prediction.
+    pub predictions: SetSnapshot,
+    /// The stall detector's level.
+    pub stall_level: u8,
+}
+
 /// A prediction's learning parameters in force.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ParamsInForce {
@@ -331,6 +340,23 @@ impl LearningStage {
     pub fn restore(&mut self, snapshot: &SetSnapshot) -> Result<(), LearnError> {
         self.set.restore(snapshot)?;
         self.reported.clear();
+        Ok(())
+    }
+
+    /// Everything the stage carries from one tick to the next: the predictions' learned state and the
+    /// stall detector's level. A stage restored from it (between ticks) continues exactly.
+    pub fn stage_snapshot(&self) -> StageSnapshot {
+        StageSnapshot {
+            predictions: self.set.snapshot(),
+            stall_level: self.stall.level(),
+        }
+    }
+
+    /// Restores a [`LearningStage::stage_snapshot`] of a stage of the same configuration.
+    pub fn restore_stage(&mut self, snapshot: &StageSnapshot) -> Result<(), LearnError> {
+        self.set.restore(&snapshot.predictions)?;
+        self.stall.set_level(snapshot.stall_level);
+        self.pending_stimulus = None;
         Ok(())
     }
 }

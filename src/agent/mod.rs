@@ -16,4 +16,4 @@ pub mod safety;
 pub mod tick_record;
 
 pub use gating::{GateOutput, GatingStage};
-pub use learning::{LearnInput, LearnOutput, LearningStage};
+pub use learning::{LearnInput, LearnOutput, LearningStage, StageSnapshot};

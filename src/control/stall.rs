@@ -52,6 +52,11 @@ impl StallDetector {
         self.level
     }
 
+    /// Sets the level (clamped to `[0, max]`), as when restoring a snapshot.
+    pub fn set_level(&mut self, level: u8) {
+        self.level = level.min(self.max);
+    }
+
     /// Back to level 0.
     pub fn reset(&mut self) {
         self.level = 0;

@@ -19,6 +19,8 @@ use super::opener::LinkOpener;
 use super::writer::WriterControl;
 use super::{LinkError, LinkReader, LinkWriter};
 use crate::command::{Applied, CommandError, Envelope, LinkCommand};
+use crate::pipeline::events::EventLog;
+use pavlov::event::EventKind;
 use pavlov::oi::handshake;
 
 /// How long a reopen waits for the writer to close the old port.
@@ -37,6 +39,10 @@ pub(crate) struct Supervisor {
     base: Instant,
     reopening: Option<Reopen>,
     baud_rescues: u64,
+    /// The newest tick (`None` before the first).
+    last_tick: Option<u64>,
+    /// Where link changes and re-arms are announced.
+    events: Option<EventLog>,
 }
 
 impl Supervisor {
@@ -64,6 +70,8 @@ impl Supervisor {
             base,
             reopening: None,
             baud_rescues: 0,
+            last_tick: None,
+            events: None,
         }
     }
 
@@ -88,8 +96,15 @@ impl Supervisor {
         self.log_change(before);
     }
 
-    /// Once per tick: acts on what the monitor asks.
-    pub(crate) fn on_tick(&mut self) {
+    /// Announces link changes and re-arms on `events` from now on.
+    pub(crate) fn with_events(mut self, events: EventLog) -> Self {
+        self.events = Some(events);
+        self
+    }
+
+    /// Once per tick (`seq`): acts on what the monitor asks.
+    pub(crate) fn on_tick(&mut self, seq: u64) {
+        self.last_tick = Some(seq);
         let before = (self.monitor.state(), self.monitor.trip());
         let now = self.now_ms();
         match self.monitor.on_tick(now) {
@@ -218,6 +233,15 @@ impl Supervisor {
                             cause.describe(),
                             self.mode
                         );
+                        if let Some(events) = &self.events {
+                            events.emit(
+                                self.last_tick,
+                                EventKind::Rearm {
+                                    cause,
+                                    mode: self.mode,
+                                },
+                            );
+                        }
                         Ok(Applied::Rearmed {
                             rearmed: cause,
                             mode: self.mode,
@@ -248,6 +272,17 @@ impl Supervisor {
         let (state, trip) = (self.monitor.state(), self.monitor.trip());
         if (state, trip) == before {
             return;
+        }
+        if let Some(events) = &self.events {
+            let reconnects = self.monitor.counters().reconnects;
+            events.emit(
+                self.last_tick,
+                EventKind::Link {
+                    state,
+                    trip,
+                    reconnects,
+                },
+            );
         }
         let c = self.monitor.counters();
         match state {

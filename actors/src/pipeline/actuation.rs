@@ -20,6 +20,9 @@ use pavlov::record::TickRecord;
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 
+use pavlov::event::EventKind;
+
+use super::events::EventLog;
 use super::feed::TickFeed;
 use super::gating::Decision;
 use super::ticker::Tick;
@@ -165,6 +168,8 @@ pub(crate) struct ActuationChannels {
     pub(crate) feed: TickFeed,
     /// Actuation's counters, published after each decision.
     pub(crate) stats: watch::Sender<ActuationStats>,
+    /// Where a pipeline stall is announced.
+    pub(crate) events: EventLog,
 }
 
 /// Runs until `cancel` fires or the decision channel closes; the writer then sends the shut-down sequence.
@@ -180,6 +185,7 @@ pub(crate) async fn run(
         writer,
         feed,
         stats,
+        events,
     } = channels;
     loop {
         tokio::select! {
@@ -203,7 +209,15 @@ pub(crate) async fn run(
                 if changed.is_err() { break; }
                 let tick = *ticks.borrow_and_update();
                 if let Some(tick) = tick {
+                    let stalls = actuation.stats().pipeline_stalls;
                     actuation.on_tick(&tick, &writer);
+                    if actuation.stats().pipeline_stalls > stalls {
+                        events.emit(
+                            actuation.last_decision_seq,
+                            EventKind::PipelineStall { ticks: actuation.safety.max_action_age_ticks },
+                        );
+                        stats.send_replace(actuation.stats());
+                    }
                 }
             }
         }

@@ -10,6 +10,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use pavlov::record::{LinkStatus, TickRecord};
 
+use crate::storage::recorder::RecorderInput;
 use crate::telemetry::counters::RecorderGauge;
 use tokio::sync::{broadcast, mpsc, watch};
 
@@ -21,7 +22,9 @@ pub(crate) const LIVE_CAPACITY: usize = 1024;
 pub struct TickFeed {
     live: broadcast::Sender<Arc<TickRecord>>,
     latest_link: Arc<watch::Sender<Option<LinkStatus>>>,
-    recorder: Option<mpsc::Sender<Arc<TickRecord>>>,
+    /// The newest record's tick + 1 (0: none yet).
+    next_seq: Arc<AtomicU64>,
+    recorder: Option<mpsc::Sender<RecorderInput>>,
     recorder_dropped: Arc<AtomicU64>,
 }
 
@@ -32,13 +35,14 @@ impl TickFeed {
         TickFeed {
             live,
             latest_link: Arc::new(watch::Sender::new(None)),
+            next_seq: Arc::new(AtomicU64::new(0)),
             recorder: None,
             recorder_dropped: Arc::new(AtomicU64::new(0)),
         }
     }
 
     /// Attaches a recorder queue.
-    pub(crate) fn with_recorder(mut self, tx: mpsc::Sender<Arc<TickRecord>>) -> Self {
+    pub(crate) fn with_recorder(mut self, tx: mpsc::Sender<RecorderInput>) -> Self {
         self.recorder = Some(tx);
         self
     }
@@ -46,11 +50,12 @@ impl TickFeed {
     /// Sends a record to every consumer without waiting.
     pub(crate) fn publish(&self, record: Arc<TickRecord>) {
         if let Some(rec) = &self.recorder
-            && rec.try_send(record.clone()).is_err()
+            && rec.try_send(RecorderInput::Tick(record.clone())).is_err()
         {
             self.recorder_dropped.fetch_add(1, Ordering::Relaxed);
         }
         self.latest_link.send_replace(Some(record.link));
+        self.next_seq.store(record.seq + 1, Ordering::Relaxed);
         // An error only means nobody is subscribed right now.
         let _ = self.live.send(record);
     }
@@ -60,9 +65,19 @@ impl TickFeed {
         self.live.subscribe()
     }
 
+    /// The newest record's tick (`None` before the first).
+    pub(crate) fn last_seq(&self) -> Option<u64> {
+        self.next_seq.load(Ordering::Relaxed).checked_sub(1)
+    }
+
     /// The link summary of the newest record (`None` before the first).
     pub(crate) fn latest_link(&self) -> watch::Receiver<Option<LinkStatus>> {
         self.latest_link.subscribe()
+    }
+
+    /// The counter of what the recorder's queue could not take (shared with the event log).
+    pub(crate) fn recorder_dropped_counter(&self) -> Arc<AtomicU64> {
+        self.recorder_dropped.clone()
     }
 
     /// Records the recorder could not take.

@@ -9,6 +9,9 @@ use pavlov::control::Action;
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 
+use pavlov::event::EventKind;
+
+use super::events::EventLog;
 use super::learning::Learned;
 use crate::command::{Applied, CommandError, Envelope, GatingCommand, Inbox, Outcome};
 
@@ -24,11 +27,18 @@ pub(crate) struct Decision {
     pub(crate) gate: GateOutput,
 }
 
-fn apply(stage: &mut GatingStage, cmd: GatingCommand, seq: u64) -> Outcome {
+/// Applies `cmd` after tick `after` (`None`: before the first) and announces what changed.
+fn apply(
+    stage: &mut GatingStage,
+    cmd: GatingCommand,
+    after: Option<u64>,
+    events: &EventLog,
+) -> Outcome {
+    let seq = after.unwrap_or(0);
     match cmd {
         GatingCommand::SetMode { mode } => {
             stage.set_mode(mode);
-            tracing::info!(?mode, "control mode changed");
+            events.emit(after, EventKind::ModeSet { mode });
             Ok(Applied::Mode { mode })
         }
         GatingCommand::Teleop {
@@ -47,8 +57,9 @@ fn apply(stage: &mut GatingStage, cmd: GatingCommand, seq: u64) -> Outcome {
             };
             stage
                 .teleop(action, seq)
-                .map(|()| Applied::Teleop { teleop: action })
-                .map_err(|e| CommandError::Rejected(e.to_string()))
+                .map_err(|e| CommandError::Rejected(e.to_string()))?;
+            events.emit(after, EventKind::Teleop { action });
+            Ok(Applied::Teleop { teleop: action })
         }
     }
 }
@@ -63,6 +74,8 @@ pub(crate) struct GatingChannels {
     pub(crate) estop: watch::Receiver<bool>,
     /// Where decisions go (to actuation).
     pub(crate) out: mpsc::Sender<Decision>,
+    /// Where changes are announced.
+    pub(crate) events: EventLog,
 }
 
 /// Runs until its input closes or `cancel` fires.
@@ -76,8 +89,9 @@ pub(crate) async fn run(
         mut commands,
         mut estop,
         out,
+        events,
     } = channels;
-    let mut last_seq = 0;
+    let mut after = None;
     let mut engaged = false;
     loop {
         tokio::select! {
@@ -90,11 +104,12 @@ pub(crate) async fn run(
                 stage.set_estop(*estop.borrow_and_update());
             }
             Some(Envelope { command, reply }) = commands.recv() => {
-                let _ = reply.send(apply(&mut stage, command, last_seq));
+                let _ = reply.send(apply(&mut stage, command, after, &events));
             }
             p = learned.recv() => {
                 let Some(p) = p else { break };
-                last_seq = p.observation.tick.seq;
+                let last_seq = p.observation.tick.seq;
+                after = Some(last_seq);
                 let o = &p.output;
                 let gate = stage.decide(last_seq, o.stimulus, o.gate_value, o.gate_threshold);
                 if gate.gate != engaged {

@@ -14,18 +14,21 @@ use pavlov::agent::learning::request_end;
 use pavlov::agent::safety::observation_is_fresh;
 use pavlov::agent::{LearnInput, LearnOutput, LearningStage};
 use pavlov::config::Config;
+use pavlov::event::EventKind;
 use pavlov::learn::LearnError;
 use pavlov::learn::checkpoint::{Checkpoint, CheckpointError};
 use pavlov::skeleton::{ElbowFeatureTracker, PoseTracker};
-use tokio::sync::{mpsc, watch};
+use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
+use super::events::EventLog;
 use super::sensor_ingest::Observation;
 use crate::command::{Applied, CommandError, Envelope, Inbox, LearningCommand, Outcome, Reply};
 use crate::storage::checkpoint_files::layout::create_run_dir;
 use crate::storage::checkpoint_files::saves::{SaveQuota, check_save_name, saved_dir};
 use crate::storage::checkpoint_files::writer::{CheckpointWriter, SaveJob, WriterSettings};
+use crate::storage::recording::StartState;
 use crate::storage::utc;
 
 /// Learning's output for one tick.
@@ -60,6 +63,10 @@ pub(crate) struct Learning {
     max_obs_age_ticks: u32,
     /// Ticks not learned from because the observation was stale or the link not up.
     skipped_stale: u64,
+    /// The last tick handled (`None` before the first): changes take effect after it.
+    after: Option<u64>,
+    /// Where changes are announced.
+    events: Option<EventLog>,
 }
 
 /// Periodic and final checkpoints of the learned state, into this run's folder.
@@ -99,6 +106,8 @@ impl Learning {
             refused_non_finite: 0,
             max_obs_age_ticks: config.safety.max_obs_age_ticks,
             skipped_stale: 0,
+            after: None,
+            events: None,
         })
     }
 
@@ -206,7 +215,33 @@ impl Learning {
                 unique,
                 checkpoint,
                 reply,
+                announce: self.events.clone().map(|e| (e, self.after)),
             });
+        }
+    }
+
+    /// Announces a change that took effect after the last tick handled.
+    fn announce(&self, kind: EventKind) {
+        if let Some(events) = &self.events {
+            events.emit(self.after, kind);
+        }
+    }
+
+    /// The learner's state before the first tick, for a recording that begins with the run.
+    pub(crate) fn initial_start_state(&self, events: &EventLog) -> StartState {
+        StartState {
+            after: None,
+            events_before: events.next_id(),
+            learner: self.stage.stage_snapshot(),
+        }
+    }
+
+    /// The learner's complete state now, between two ticks, for a recording that begins here.
+    fn start_state(&self) -> StartState {
+        StartState {
+            after: self.after,
+            events_before: self.events.as_ref().map_or(0, EventLog::next_id),
+            learner: self.stage.stage_snapshot(),
         }
     }
 
@@ -268,6 +303,9 @@ impl Learning {
                 // At most MAX_REQUEST_MS: a request forces the stimulus, and so the response, on.
                 self.request_until = request_end(seq, duration_ms, self.period_ms)
                     .map_err(|e| rejected(e.to_string()))?;
+                self.announce(EventKind::HumanRequest {
+                    until_tick: self.request_until,
+                });
                 Ok(Applied::Request {
                     request_until_tick: self.request_until,
                 })
@@ -280,15 +318,24 @@ impl Learning {
             } => self
                 .stage
                 .set_params(prediction.as_deref(), alpha, lambda, threshold)
-                .map(|p| Applied::Params {
-                    prediction: p.prediction,
-                    alpha: p.alpha,
-                    lambda: p.lambda,
-                    threshold: p.threshold,
+                .map(|p| {
+                    self.announce(EventKind::ParamsSet {
+                        prediction: p.prediction.clone(),
+                        alpha: p.alpha,
+                        lambda: p.lambda,
+                        threshold: p.threshold,
+                    });
+                    Applied::Params {
+                        prediction: p.prediction,
+                        alpha: p.alpha,
+                        lambda: p.lambda,
+                        threshold: p.threshold,
+                    }
                 })
                 .map_err(|e| rejected(e.to_string())),
             LearningCommand::ResetWeights {} => {
                 self.stage.reset();
+                self.announce(EventKind::WeightsReset);
                 Ok(Applied::Reset { reset: true })
             }
             // `command` hands saves to the writer, which answers them; this arm is never reached.
@@ -309,6 +356,10 @@ pub(crate) struct LearningChannels {
     pub(crate) commands: Inbox<LearningCommand>,
     /// Where each tick's output goes (to gating).
     pub(crate) out: mpsc::Sender<Learned>,
+    /// Where changes are announced.
+    pub(crate) events: EventLog,
+    /// Requests for the learner's state between two ticks (a recording begins).
+    pub(crate) snapshots: mpsc::Receiver<oneshot::Sender<StartState>>,
 }
 
 /// Runs until `cancel` fires or observations stop.
@@ -323,7 +374,10 @@ pub(crate) async fn run(
         pose,
         mut commands,
         out,
+        events,
+        mut snapshots,
     } = channels;
+    learning.events = Some(events);
     let mut seq = 0;
     loop {
         tokio::select! {
@@ -332,9 +386,13 @@ pub(crate) async fn run(
             Some(Envelope { command, reply }) = commands.recv() => {
                 learning.command(command, seq, reply);
             }
+            Some(request) = snapshots.recv() => {
+                let _ = request.send(learning.start_state());
+            }
             o = observations.recv() => {
                 let Some(obs) = o else { break };
                 seq = obs.tick.seq;
+                learning.after = Some(seq);
                 let since = obs.tick.deadline.saturating_duration_since(started);
                 let now_ms = since.as_millis() as u64;
                 let elbow = learning.elbows.as_mut().map(|t| t.step(&pose.borrow(), now_ms));

@@ -20,6 +20,7 @@
 //! its oldest input (and actuation's watchdog stops the wheels), it never makes an earlier stage wait.
 
 pub(crate) mod actuation;
+pub mod events;
 pub(crate) mod feed;
 pub(crate) mod gating;
 pub(crate) mod learning;
@@ -32,16 +33,18 @@ use std::time::Duration;
 use pavlov::agent::GatingStage;
 use pavlov::config::Config;
 use pavlov::skeleton::PoseTracker;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::{mpsc, oneshot, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
 use crate::command::{self, ControlRequest, Envelope, INBOX_CAPACITY, RecorderCommand, Routes};
 use crate::link::writer::WriteRequest;
+use crate::storage::recording::StartState;
 use crate::telemetry::counters::{ActuationStats, SharedTickStats};
 
 use actuation::{Actuation, ActuationChannels};
+use events::EventLog;
 use feed::TickFeed;
 use gating::GatingChannels;
 use learning::{Learning, LearningChannels};
@@ -67,6 +70,8 @@ pub(crate) struct PipelineParts {
     pub(crate) recorder: Option<mpsc::Sender<Envelope<RecorderCommand>>>,
     /// When the first tick is due.
     pub(crate) started: Instant,
+    /// Where changes made at run time are announced.
+    pub(crate) events: EventLog,
 }
 
 /// The running pipeline.
@@ -81,6 +86,8 @@ pub(crate) struct Pipeline {
     pub(crate) actuation: watch::Receiver<ActuationStats>,
     /// The actor tasks, in start order.
     pub(crate) tasks: Vec<JoinHandle<()>>,
+    /// Asks learning for the learner's state between two ticks (for a recording that begins).
+    pub(crate) snapshots: mpsc::Sender<oneshot::Sender<StartState>>,
 }
 
 /// Starts every actor of the tick graph for `config`; they stop when `cancel` fires.
@@ -92,6 +99,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
         feed,
         recorder,
         started,
+        events,
     } = parts;
     let period = Duration::from_millis(config.tick.period_ms);
     let gating = GatingStage::new(
@@ -113,6 +121,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
     let (stats_tx, stats_rx) = watch::channel(ActuationStats::default());
     let (pose_tx, pose_rx) = watch::channel(PoseTracker::new(config.skeleton.max_joint_age_ms));
     let ticks = SharedTickStats::default();
+    let (snapshots_tx, snapshots_rx) = mpsc::channel(2);
 
     let tasks = vec![
         tokio::spawn(ticker::run(
@@ -140,6 +149,8 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
                 pose: pose_rx,
                 commands: learning_cmd_rx,
                 out: learned_tx,
+                events: events.clone(),
+                snapshots: snapshots_rx,
             },
             cancel.clone(),
         )),
@@ -150,6 +161,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
                 commands: gating_cmd_rx,
                 estop: estop_rx.clone(),
                 out: decision_tx,
+                events: events.clone(),
             },
             cancel.clone(),
         )),
@@ -160,8 +172,9 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
                 ticks: tick_rx,
                 estop: estop_rx,
                 writer,
-                feed,
+                feed: feed.clone(),
                 stats: stats_tx,
+                events: events.clone(),
             },
             cancel.clone(),
         )),
@@ -169,6 +182,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
             command_rx,
             Routes {
                 estop: estop_tx,
+                events: Some((events, feed)),
                 gating: gating_cmd_tx,
                 learning: learning_cmd_tx,
                 link: link_cmd_tx,
@@ -183,5 +197,6 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
         ticks,
         actuation: stats_rx,
         tasks,
+        snapshots: snapshots_tx,
     }
 }

@@ -91,7 +91,7 @@ pub(crate) async fn run(
                     break;
                 }
                 let Some(tick) = *ticks.borrow_and_update() else { continue };
-                supervisor.on_tick();
+                supervisor.on_tick(tick.seq);
                 if supervisor.reopening() {
                     // The old port is being closed and reopened; its reader goes with it.
                     reader = None;

@@ -1,20 +1,37 @@
 //! The recording format (JSON Lines) and its reader.
 //!
-//! A recording is one file, `ticks.jsonl`: a header line ([`RecordingHeader`]: format tag, the
-//! configuration, the observation names, a free label) followed by one [`TickRecord`] per line. A process
-//! killed mid-write leaves at most a torn last line, which the reader skips and reports
+//! A recording is one file, `ticks.jsonl`: a header line ([`RecordingHeader`]: format tag, the program's
+//! version, a free label, the configuration in force, the observation names, and where the run stood when
+//! the recording began — [`StartState`]: the last tick before it, and the learner's complete state then)
+//! followed by one [`TickRecord`] per line and, between them, `{"event": …}` lines for every change made
+//! at run time ([`Event`]). So a recording replays from its first tick wherever it was started from. A
+//! process killed mid-write leaves at most a torn last line, which the reader skips and reports
 //! ([`Recording::torn_tail`]); a bad line anywhere else is an error naming the line.
 //!
 //! Reading is synchronous and pure apart from the file read in [`load`].
 
 use std::path::{Path, PathBuf};
 
+use pavlov::agent::StageSnapshot;
 use pavlov::config::Config;
+use pavlov::event::Event;
 use pavlov::record::TickRecord;
 use serde::{Deserialize, Serialize};
 
 /// The format tag of the header line.
-pub(crate) const FORMAT: &str = "pavlov-recording/1";
+pub(crate) const FORMAT: &str = "pavlov-recording/2";
+
+/// Where the run stood when a recording began.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StartState {
+    /// The last tick the learner had handled (`None`: the recording begins with the run); the recording
+    /// holds the ticks after it.
+    pub after: Option<u64>,
+    /// Events with a smaller id happened before the recording (the learner's state includes them).
+    pub events_before: u64,
+    /// The learner's complete state: weights, traces, parameters in force, previous step, stall level.
+    pub learner: StageSnapshot,
+}
 
 /// The file name of a recording inside its directory.
 pub const TICKS_FILE: &str = "ticks.jsonl";
@@ -24,27 +41,50 @@ pub const TICKS_FILE: &str = "ticks.jsonl";
 pub struct RecordingHeader {
     /// Always [`FORMAT`].
     pub(crate) format: String,
-    /// The configuration the run started with.
-    pub config: Config,
-    /// Names of the `obs` vector's dimensions, in order.
-    pub(crate) obs_names: Vec<String>,
+    /// The program that wrote it (`pavlov <version>`).
+    #[serde(default)]
+    pub program: String,
     /// A free label (e.g. the experiment run), empty if none.
     #[serde(default)]
     pub label: String,
+    /// The configuration in force (its `[sim] seed` is the run's seed).
+    pub config: Config,
+    /// Names of the `obs` vector's dimensions, in order.
+    pub(crate) obs_names: Vec<String>,
+    /// When the recording began, UTC (`20261124T013000Z`).
+    #[serde(default)]
+    pub started_utc: String,
+    /// Where the run stood when the recording began.
+    #[serde(default)]
+    pub start: Option<StartState>,
 }
 
 impl RecordingHeader {
-    /// A header for a run of `config`, with the observation names of its robot model.
+    /// A header for a run of `config`, with the observation names of its robot model; the recorder
+    /// fills in when and from what state the recording starts.
     pub fn new(config: &Config, label: impl Into<String>) -> Self {
         let layout = pavlov::obs::ObsLayout::for_model(config.robot.model);
         RecordingHeader {
             format: FORMAT.to_string(),
+            program: concat!("pavlov ", env!("CARGO_PKG_VERSION")).to_string(),
+            label: label.into(),
             config: config.clone(),
             obs_names: layout.names().map(str::to_string).collect(),
-            label: label.into(),
+            started_utc: String::new(),
+            start: None,
         }
     }
 }
+
+/// An event's line: `{"event": …}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub(crate) struct EventLine {
+    /// The event.
+    pub(crate) event: Event,
+}
+
+/// The prefix that tells an event's line from a tick's.
+const EVENT_PREFIX: &str = "{\"event\":";
 
 /// A recording read back.
 #[derive(Debug, Clone, PartialEq)]
@@ -53,6 +93,8 @@ pub struct Recording {
     pub header: RecordingHeader,
     /// Every complete tick record, in file order.
     pub records: Vec<TickRecord>,
+    /// Every event, in file order.
+    pub events: Vec<Event>,
     /// True when the last line was incomplete (the writer was killed) and was skipped.
     pub torn_tail: bool,
 }
@@ -74,8 +116,8 @@ pub enum RecordingError {
     /// The header line is not a recording header.
     #[error("line 1 is not a {FORMAT} header: {0}")]
     BadHeader(String),
-    /// A line before the last one is not a tick record.
-    #[error("line {line}: not a tick record: {message}")]
+    /// A line before the last one is not a tick record or an event.
+    #[error("line {line}: not a tick record or an event: {message}")]
     BadRecord {
         /// 1-based line number.
         line: usize,
@@ -102,10 +144,16 @@ pub fn parse(text: &str) -> Result<Recording, RecordingError> {
     }
     let rest: Vec<(usize, &str)> = lines.collect();
     let mut records = Vec::with_capacity(rest.len());
+    let mut events = Vec::new();
     let mut torn_tail = false;
     for (k, (i, line)) in rest.iter().enumerate() {
-        match serde_json::from_str::<TickRecord>(line) {
-            Ok(r) => records.push(r),
+        let parsed = if line.starts_with(EVENT_PREFIX) {
+            serde_json::from_str::<EventLine>(line).map(|l| events.push(l.event))
+        } else {
+            serde_json::from_str::<TickRecord>(line).map(|r| records.push(r))
+        };
+        match parsed {
+            Ok(()) => {}
             // Only the very last line may be torn: the writer appends whole lines.
             Err(_) if k + 1 == rest.len() && !ends_with_newline => torn_tail = true,
             Err(e) => {
@@ -119,6 +167,7 @@ pub fn parse(text: &str) -> Result<Recording, RecordingError> {
     Ok(Recording {
         header,
         records,
+        events,
         torn_tail,
     })
 }

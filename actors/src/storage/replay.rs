@@ -1,21 +1,29 @@
 //! `pavlov replay DIR`: runs a recording back through the core's learning, gating and safety stages and
 //! checks that they reproduce the recorded stimulus, predictions, gate, safety stop and command exactly.
 //!
-//! Each record carries the learning stage's exact inputs ([`pavlov::record::TickInputs`]: the raw sensor
-//! snapshot and the forced-stimulus flag; the elbow features are the record's `elbow` angles). Mode
-//! changes and the e-stop are taken from the records. The safety stop and the command are checked on
-//! every tick with the same predicate actuation used ([`pavlov::agent::safety`]); only a manual-mode
-//! command that no safety stop overrode is not compared (teleop is not in the record). What replay cannot
-//! reproduce yet: learning-parameter commands and weight resets during the run, and ticks the runtime
-//! dropped between learning and actuation (the first such gap shows up as a mismatch, and is reported as
-//! a gap in `seq`).
+//! The learner starts from the state the recording began with (its header's [`StartState`]: weights,
+//! traces, parameters in force, the stall detector — so a recording made after `--resume` or started from
+//! the dashboard mid-run replays too). Each record carries the learning stage's exact inputs
+//! ([`pavlov::record::TickInputs`]: the raw sensor snapshot and the forced-stimulus flag; the elbow features
+//! are the record's `elbow` angles). The recording's events are applied where they took effect: learning
+//! parameters and weight resets before the learning step after their tick, mode changes and teleop before
+//! the gating step after theirs. The e-stop and the mode are also taken from the records. The safety stop
+//! and the command are checked on every tick with the same predicate actuation used
+//! ([`pavlov::agent::safety`]); a manual-mode command is compared once the teleop state is known (from the
+//! start of the run, or half a second into the recording, when any teleop from before it has expired).
+//! What replay cannot reproduce: ticks the runtime dropped between learning and actuation (the first such
+//! gap shows up as a mismatch, and is reported as a gap in `seq`).
 
+use std::collections::VecDeque;
+
+use pavlov::agent::gating::TELEOP_HOLD_TICKS;
 use pavlov::agent::{GatingStage, LearnInput, LearningStage, safety};
 use pavlov::control::{Action, Mode};
+use pavlov::event::{Event, EventKind};
 use pavlov::skeleton::ElbowFeatures;
 use serde::Serialize;
 
-use crate::storage::recording::Recording;
+use crate::storage::recording::{Recording, StartState};
 
 /// One difference between the recording and the replay.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -43,6 +51,8 @@ pub struct ReplayReport {
     pub commands_compared: usize,
     /// Ticks where `seq` jumped (records missing from the recording).
     pub(crate) seq_gaps: usize,
+    /// Recorded events applied to learning or gating.
+    pub events_applied: usize,
     /// Total mismatching fields.
     pub mismatch_count: usize,
     /// The first few mismatches.
@@ -94,6 +104,19 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
         config.control.default_policy,
         config.control.response,
     );
+    let start: Option<&StartState> = rec.header.start.as_ref();
+    if let Some(start) = start {
+        learning
+            .restore_stage(&start.learner)
+            .map_err(|e| ReplayError::Config(format!("the recording's start state: {e}")))?;
+    }
+    let mut learning_events = queue(&rec.events, EventKind::changes_learning);
+    let mut gating_events = queue(&rec.events, EventKind::changes_gating);
+    // Manual commands follow teleop, which expires; before the recording it is unknown.
+    let manual_known_from = match (start.map(|s| s.after), rec.records.first()) {
+        (Some(Some(_)), Some(first)) => first.seq + TELEOP_HOLD_TICKS + 1,
+        _ => 0,
+    };
     let mut estop = false;
     let mut report = ReplayReport::default();
     let mut last_seq: Option<u64> = None;
@@ -103,6 +126,14 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
             report.seq_gaps += 1;
         }
         last_seq = Some(r.seq);
+        for e in due(&mut learning_events, r.seq) {
+            report.events_applied += 1;
+            apply_to_learning(&mut learning, &e.kind)?;
+        }
+        for e in due(&mut gating_events, r.seq) {
+            report.events_applied += 1;
+            apply_to_gating(&mut gating, e);
+        }
         if gating.mode() != r.mode {
             gating.set_mode(r.mode);
         }
@@ -193,7 +224,7 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
         } else {
             g.action
         };
-        if stop.is_some() || r.mode != Mode::Manual {
+        if stop.is_some() || r.mode != Mode::Manual || r.seq >= manual_known_from {
             report.commands_compared += 1;
             if command != r.command {
                 report.note(r.seq, "command", fmt_action(r.command), fmt_action(command));
@@ -203,6 +234,61 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
     Ok(report)
 }
 
+/// The events `wanted` keeps, in the order they were made.
+fn queue(events: &[Event], wanted: fn(&EventKind) -> bool) -> VecDeque<&Event> {
+    let mut q: Vec<&Event> = events.iter().filter(|e| wanted(&e.kind)).collect();
+    q.sort_by_key(|e| e.id);
+    q.into()
+}
+
+/// The queued events that took effect before tick `seq` (after an earlier tick, or before the first).
+fn due<'a>(q: &mut VecDeque<&'a Event>, seq: u64) -> Vec<&'a Event> {
+    let mut out = Vec::new();
+    while let Some(e) = q.front().copied() {
+        if e.after.is_some_and(|a| a >= seq) {
+            break;
+        }
+        out.push(e);
+        q.pop_front();
+    }
+    out
+}
+
+fn apply_to_learning(learning: &mut LearningStage, kind: &EventKind) -> Result<(), ReplayError> {
+    match kind {
+        EventKind::ParamsSet {
+            prediction,
+            alpha,
+            lambda,
+            threshold,
+        } => learning
+            .set_params(
+                Some(prediction),
+                Some(*alpha),
+                Some(*lambda),
+                Some(*threshold),
+            )
+            .map(|_| ())
+            .map_err(|e| ReplayError::Config(format!("a recorded params_set: {e}"))),
+        EventKind::WeightsReset => {
+            learning.reset();
+            Ok(())
+        }
+        _ => Ok(()),
+    }
+}
+
+fn apply_to_gating(gating: &mut GatingStage, event: &Event) {
+    match &event.kind {
+        EventKind::ModeSet { mode } => gating.set_mode(*mode),
+        EventKind::Teleop { action } => {
+            // Refused teleop is not recorded, so this one was accepted then and is now.
+            let _ = gating.teleop(*action, event.after.unwrap_or(0));
+        }
+        _ => {}
+    }
+}
+
 fn fmt_action(a: Action) -> String {
     format!("({}, {})", a.left_mm_s, a.right_mm_s)
 }
@@ -210,8 +296,9 @@ fn fmt_action(a: Action) -> String {
 /// The report as text for the terminal.
 pub fn describe(report: &ReplayReport) -> String {
     let mut s = format!(
-        "replayed {} ticks: {} prediction values, {} safety stops and {} commands compared, {} seq gaps: ",
+        "replayed {} ticks and {} events: {} prediction values, {} safety stops and {} commands compared, {} seq gaps: ",
         report.ticks,
+        report.events_applied,
         report.predictions_compared,
         report.stops_compared,
         report.commands_compared,

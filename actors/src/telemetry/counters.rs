@@ -5,7 +5,6 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
-use pavlov::record::TickRecord;
 use tokio::sync::mpsc;
 
 use super::histogram::LatencyHistogram;
@@ -60,14 +59,14 @@ pub(crate) struct ActuationStats {
 /// The recorder queue's figures, readable without keeping the queue open.
 #[derive(Clone)]
 pub(crate) struct RecorderGauge {
-    queue: Option<mpsc::WeakSender<Arc<TickRecord>>>,
+    queue: Option<mpsc::WeakSender<crate::storage::recorder::RecorderInput>>,
     dropped: Arc<AtomicU64>,
 }
 
 impl RecorderGauge {
     /// A gauge on a recorder queue (`None`: no recorder) and its drop counter.
     pub(crate) fn new(
-        queue: Option<mpsc::WeakSender<Arc<TickRecord>>>,
+        queue: Option<mpsc::WeakSender<crate::storage::recorder::RecorderInput>>,
         dropped: Arc<AtomicU64>,
     ) -> Self {
         RecorderGauge { queue, dropped }

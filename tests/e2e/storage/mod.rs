@@ -7,4 +7,5 @@ mod fixtures;
 mod recording_crash;
 mod recording_names;
 mod recording_roundtrip;
+mod replay_cases;
 mod saves;

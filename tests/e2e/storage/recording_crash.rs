@@ -130,9 +130,10 @@ async fn a_recording_killed_with_sigkill_loses_at_most_a_second_and_loads() {
         "the kill lost {loss} ticks (more than {MAX_LOSS_TICKS})"
     );
     assert!(seqs.windows(2).all(|w| w[0] < w[1]), "records out of order");
-    // Every complete line loaded (the header is the first); an incomplete last one is reported as torn.
+    // Every complete line loaded (the header is the first, events are lines too); an incomplete last one
+    // is reported as torn.
     let complete_lines = text.matches('\n').count();
-    assert_eq!(rec.records.len() + 1, complete_lines);
+    assert_eq!(rec.records.len() + rec.events.len() + 1, complete_lines);
     assert_eq!(rec.torn_tail, !text.ends_with('\n'));
 
     // A kill in the middle of a write leaves a torn last line: tolerated and reported.

@@ -7,6 +7,9 @@
 //! another is pending is answered `busy`, so clients can neither fill the queue nor crowd out the
 //! automatic checkpoints. A save's reply is sent once the file is on disk (or refused).
 
+use pavlov::event::EventKind;
+
+use crate::pipeline::events::EventLog;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -42,6 +45,8 @@ pub(crate) struct SaveJob {
     pub(crate) checkpoint: Checkpoint,
     /// Where the outcome goes.
     pub(crate) reply: Reply,
+    /// Where a successful save is announced, and after which tick.
+    pub(crate) announce: Option<(EventLog, Option<u64>)>,
 }
 
 enum Job {
@@ -135,6 +140,11 @@ fn write_loop(settings: &WriterSettings, rx: &Receiver<Job>, save_pending: &Atom
             Job::Save(job) => {
                 let outcome = save(settings, &job.name, job.unique, &job.checkpoint);
                 save_pending.store(false, Ordering::Release);
+                if let (Ok(Applied::Saved { path }), Some((events, after))) =
+                    (&outcome, &job.announce)
+                {
+                    events.emit(*after, EventKind::WeightsSaved { path: path.clone() });
+                }
                 let _ = job.reply.send(outcome);
             }
         }

@@ -1,0 +1,125 @@
+//! The event log: every change made at run time (see [`pavlov::event`]) goes out from here, numbered, to
+//! the log (once, at INFO with its arguments; teleop at DEBUG), to live subscribers (the dashboard hub,
+//! tests) and to the recorder, without ever blocking the actor that made it.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use pavlov::event::{Event, EventKind};
+use tokio::sync::{broadcast, mpsc};
+
+use crate::storage::recorder::RecorderInput;
+
+/// Capacity of the live broadcast, in events.
+pub(crate) const LIVE_CAPACITY: usize = 256;
+
+/// The publishing side of the event log; cheap to clone, one per emitting actor.
+#[derive(Clone)]
+pub struct EventLog {
+    next_id: Arc<AtomicU64>,
+    live: broadcast::Sender<Arc<Event>>,
+    recorder: Option<mpsc::Sender<RecorderInput>>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl EventLog {
+    /// A log with no recorder attached.
+    pub(crate) fn new() -> Self {
+        let (live, _) = broadcast::channel(LIVE_CAPACITY);
+        EventLog {
+            next_id: Arc::new(AtomicU64::new(1)),
+            live,
+            recorder: None,
+            dropped: Arc::new(AtomicU64::new(0)),
+        }
+    }
+
+    /// Also hands every event to the recorder's queue, counting what it cannot take in `dropped` (the
+    /// tick feed's counter: one queue, one count).
+    pub(crate) fn with_recorder(
+        mut self,
+        recorder: mpsc::Sender<RecorderInput>,
+        dropped: Arc<AtomicU64>,
+    ) -> Self {
+        self.recorder = Some(recorder);
+        self.dropped = dropped;
+        self
+    }
+
+    /// Records that `kind` took effect after tick `after` (the emitting actor's last tick) and returns
+    /// the event.
+    pub(crate) fn emit(&self, after: Option<u64>, kind: EventKind) -> Arc<Event> {
+        let id = self.next_id.fetch_add(1, Ordering::Relaxed);
+        let event = Arc::new(Event { id, after, kind });
+        let args = serde_json::to_string(&event.kind).unwrap_or_default();
+        if event.kind.is_frequent() {
+            tracing::debug!(id, after = ?event.after, event = %args, "event");
+        } else {
+            tracing::info!(id, after = ?event.after, event = %args, "event");
+        }
+        if let Some(rec) = &self.recorder
+            && rec.try_send(RecorderInput::Event(event.clone())).is_err()
+        {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+        // An error only means nobody is subscribed right now.
+        let _ = self.live.send(event.clone());
+        event
+    }
+
+    /// The same log without the recorder's queue: for the recorder's own announcements, which it writes
+    /// itself (holding its own queue's sender would keep the recorder from ever seeing the end).
+    pub(crate) fn detached(&self) -> Self {
+        EventLog {
+            recorder: None,
+            ..self.clone()
+        }
+    }
+
+    /// The id the next event will get: every event with a smaller id has already been made.
+    pub(crate) fn next_id(&self) -> u64 {
+        self.next_id.load(Ordering::Relaxed)
+    }
+
+    /// A new live subscription, starting with the next event.
+    pub fn subscribe(&self) -> broadcast::Receiver<Arc<Event>> {
+        self.live.subscribe()
+    }
+
+    /// Events the recorder's queue could not take.
+    #[cfg(test)]
+    pub(crate) fn dropped(&self) -> u64 {
+        self.dropped.load(Ordering::Relaxed)
+    }
+}
+
+impl std::fmt::Debug for EventLog {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EventLog")
+            .field("next_id", &self.next_id())
+            .field("recorder", &self.recorder.is_some())
+            .finish()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pavlov::control::Mode;
+
+    #[test]
+    fn events_are_numbered_in_order_and_reach_subscribers_and_the_recorder() {
+        let (tx, mut rx) = mpsc::channel(1);
+        let log = EventLog::new().with_recorder(tx, Arc::default());
+        let mut live = log.subscribe();
+        assert_eq!(log.next_id(), 1);
+        let a = log.emit(None, EventKind::WeightsReset);
+        let b = log.emit(Some(3), EventKind::ModeSet { mode: Mode::Manual });
+        assert_eq!((a.id, b.id, log.next_id()), (1, 2, 3));
+        assert_eq!(live.try_recv().unwrap().id, 1);
+        assert_eq!(live.try_recv().unwrap().after, Some(3));
+        // The recorder's queue holds one: the second event was dropped and counted, never waited for.
+        assert!(matches!(rx.try_recv(), Ok(RecorderInput::Event(e)) if e.id == 1));
+        assert_eq!(log.dropped(), 1);
+    }
+}

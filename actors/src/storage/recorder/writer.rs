@@ -1,0 +1,516 @@
+//! The recorder thread's writer: one recording open at a time, written as JSON Lines (the format is in
+//! [`crate::storage::recording`]).
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Instant, SystemTime};
+
+use pavlov::event::{Event, EventKind};
+use pavlov::record::TickRecord;
+use tokio::sync::{mpsc, oneshot};
+
+use super::{FLUSH_EVERY, RecorderInput, RecorderReport, SnapshotSource};
+use crate::command::{Applied, CommandError, Envelope, Inbox, Outcome, RecorderCommand};
+use crate::pipeline::events::EventLog;
+use crate::storage::names::{NAME_RULES, check_plain_name};
+use crate::storage::recording::{EventLine, RecordingHeader, StartState, TICKS_FILE};
+use crate::storage::utc;
+
+/// What opening a recording does to one already there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Existing {
+    Replace,
+    Refuse,
+}
+
+/// Where a recording learns the run's state at its start.
+pub(super) trait StartSource: Send {
+    /// The learner's state between two ticks, now.
+    fn start_state(&mut self) -> Result<StartState, String>;
+}
+
+impl StartSource for SnapshotSource {
+    fn start_state(&mut self) -> Result<StartState, String> {
+        let (tx, rx) = oneshot::channel();
+        self.blocking_send(tx)
+            .map_err(|_| "the learning actor is not running".to_string())?;
+        rx.blocking_recv()
+            .map_err(|_| "the learning actor stopped before answering".to_string())
+    }
+}
+
+struct OpenFile {
+    out: BufWriter<File>,
+    path: PathBuf,
+    /// Where the run stood when the recording began (`None`: reserved, not begun yet).
+    start: Option<(Option<u64>, u64)>,
+    dirty: bool,
+    last_flush: Instant,
+}
+
+pub(super) struct Writer {
+    header: RecordingHeader,
+    root: PathBuf,
+    file: Option<OpenFile>,
+    source: Option<Box<dyn StartSource>>,
+    /// The event log without the recorder's own queue (events the recorder makes are written directly).
+    events: Option<EventLog>,
+    pub(super) report: RecorderReport,
+}
+
+fn create(dir: &Path, existing: Existing) -> std::io::Result<(File, PathBuf)> {
+    std::fs::create_dir_all(dir)?;
+    let path = dir.join(TICKS_FILE);
+    let file = match existing {
+        Existing::Replace => File::create(&path),
+        Existing::Refuse => File::options()
+            .write(true)
+            .create_new(true)
+            .open(&path)
+            .map_err(|e| match e.kind() {
+                std::io::ErrorKind::AlreadyExists => std::io::Error::new(
+                    e.kind(),
+                    format!(
+                        "{} already holds a recording, and a recording is never overwritten",
+                        path.display()
+                    ),
+                ),
+                _ => e,
+            }),
+    }?;
+    Ok((file, path))
+}
+
+impl Writer {
+    pub(super) fn new(header: RecordingHeader, root: PathBuf) -> Self {
+        Writer {
+            header,
+            root,
+            file: None,
+            source: None,
+            events: None,
+            report: RecorderReport::default(),
+        }
+    }
+
+    /// Creates the recording file in `dir` now; it begins once the run's state is known.
+    pub(super) fn reserve(&mut self, dir: &Path, existing: Existing) -> std::io::Result<()> {
+        let (file, path) = create(dir, existing)?;
+        self.report.files.push(path.clone());
+        self.file = Some(OpenFile {
+            out: BufWriter::with_capacity(256 * 1024, file),
+            path,
+            start: None,
+            dirty: false,
+            last_flush: Instant::now(),
+        });
+        Ok(())
+    }
+
+    /// Writes the header of the reserved recording, with the run's state now (or `known`).
+    fn begin(&mut self, known: Option<StartState>) -> Result<(), String> {
+        let Some(f) = self.file.as_mut().filter(|f| f.start.is_none()) else {
+            return Ok(());
+        };
+        let start = match known {
+            Some(start) => start,
+            None => self
+                .source
+                .as_mut()
+                .ok_or_else(|| "the server is not running yet".to_string())?
+                .start_state()?,
+        };
+        let (after, events_before) = (start.after, start.events_before);
+        let mut header = self.header.clone();
+        header.started_utc = utc::stamp(SystemTime::now());
+        header.start = Some(start);
+        let text = serde_json::to_string(&header).map_err(|e| e.to_string())?;
+        f.out
+            .write_all(text.as_bytes())
+            .and_then(|()| f.out.write_all(b"\n"))
+            .and_then(|()| f.out.flush())
+            .map_err(|e| format!("{}: {e}", f.path.display()))?;
+        f.start = Some((after, events_before));
+        let path = f.path.display().to_string();
+        self.announce(after, EventKind::RecordingStarted { path });
+        Ok(())
+    }
+
+    /// Makes an event about the recorder, and writes it into the open recording.
+    fn announce(&mut self, after: Option<u64>, kind: EventKind) {
+        if let Some(events) = &self.events {
+            let event = events.emit(after, kind);
+            self.write_event(&event);
+        }
+    }
+
+    fn close(&mut self) {
+        let Some(f) = self.file.as_ref() else { return };
+        if let Some((after, _)) = f.start {
+            let path = f.path.display().to_string();
+            self.announce(after, EventKind::RecordingStopped { path });
+        }
+        if let Some(mut f) = self.file.take()
+            && let Err(e) = f.out.flush()
+        {
+            self.report
+                .errors
+                .push(format!("{}: {e}", f.path.display()));
+        }
+    }
+
+    fn fail(&mut self, e: std::io::Error) {
+        let path = self
+            .file
+            .as_ref()
+            .map(|f| f.path.display().to_string())
+            .unwrap_or_default();
+        let msg = format!("{path}: {e}");
+        tracing::error!("recording stopped: {msg}");
+        self.report.errors.push(msg);
+        self.file = None;
+    }
+
+    fn write(&mut self, record: &TickRecord) {
+        let Some(f) = self.file.as_mut() else {
+            self.report.discarded += 1;
+            return;
+        };
+        match f.start {
+            Some((after, _)) if after.is_none_or(|a| record.seq > a) => {}
+            _ => {
+                self.report.discarded += 1;
+                return;
+            }
+        }
+        let result = serde_json::to_writer(&mut f.out, record)
+            .map_err(std::io::Error::other)
+            .and_then(|()| f.out.write_all(b"\n"));
+        match result {
+            Ok(()) => {
+                self.report.written += 1;
+                f.dirty = true;
+            }
+            Err(e) => self.fail(e),
+        }
+    }
+
+    fn write_event(&mut self, event: &Event) {
+        let Some(f) = self.file.as_mut() else { return };
+        match f.start {
+            Some((_, before)) if event.id >= before => {}
+            _ => return,
+        }
+        let line = EventLine {
+            event: event.clone(),
+        };
+        let result = serde_json::to_writer(&mut f.out, &line)
+            .map_err(std::io::Error::other)
+            .and_then(|()| f.out.write_all(b"\n"));
+        match result {
+            Ok(()) => {
+                self.report.events += 1;
+                f.dirty = true;
+            }
+            Err(e) => self.fail(e),
+        }
+    }
+
+    fn flush(&mut self, force: bool) {
+        let Some(f) = self.file.as_mut() else { return };
+        if f.dirty && (force || f.last_flush.elapsed() >= FLUSH_EVERY) {
+            if let Err(e) = f.out.flush() {
+                self.report
+                    .errors
+                    .push(format!("{}: {e}", f.path.display()));
+            }
+            f.dirty = false;
+            f.last_flush = Instant::now();
+        }
+    }
+
+    /// Connects the running server; a recording reserved at spawn begins with the run (`initial`).
+    fn attach(&mut self, source: Box<dyn StartSource>, events: EventLog, initial: StartState) {
+        self.source = Some(source);
+        self.events = Some(events.detached());
+        if let Err(e) = self.begin(Some(initial)) {
+            tracing::error!("the recording could not begin: {e}");
+            self.report.errors.push(e);
+            self.file = None;
+        }
+    }
+
+    fn command(&mut self, cmd: RecorderCommand) -> Outcome {
+        match cmd {
+            RecorderCommand::StartRecording { dir } => {
+                let dir = match dir {
+                    Some(name) => {
+                        check_plain_name(&name).map_err(|e| {
+                            CommandError::Rejected(format!(
+                                "start_recording takes {NAME_RULES}, of a folder inside the recordings folder {}; {e}",
+                                self.root.display()
+                            ))
+                        })?;
+                        self.root.join(name)
+                    }
+                    None => self.new_default_dir(),
+                };
+                if self.source.is_none() {
+                    return Err(CommandError::Rejected(
+                        "start_recording: the server is not running yet".into(),
+                    ));
+                }
+                let (file, path) = create(&dir, Existing::Refuse)
+                    .map_err(|e| CommandError::Rejected(format!("start_recording: {e}")))?;
+                // Only now is the running recording closed: a refused start leaves it open.
+                self.close();
+                self.report.files.push(path.clone());
+                self.file = Some(OpenFile {
+                    out: BufWriter::with_capacity(256 * 1024, file),
+                    path: path.clone(),
+                    start: None,
+                    dirty: false,
+                    last_flush: Instant::now(),
+                });
+                self.begin(None).map_err(|e| {
+                    self.file = None;
+                    CommandError::Rejected(format!("start_recording: {e}"))
+                })?;
+                Ok(Applied::Recording {
+                    recording: path.display().to_string(),
+                })
+            }
+            RecorderCommand::StopRecording {} => match self.file.as_ref().map(|f| f.path.clone()) {
+                Some(p) => {
+                    self.close();
+                    Ok(Applied::Stopped {
+                        stopped: p.display().to_string(),
+                    })
+                }
+                None => Err(CommandError::Rejected("no recording is running".into())),
+            },
+        }
+    }
+
+    /// `root/recording-<UTC time>`, with `-2`, `-3`, … when that folder exists (twice in a second).
+    fn new_default_dir(&self) -> PathBuf {
+        let base = format!("recording-{}", utc::stamp(SystemTime::now()));
+        let mut dir = self.root.join(&base);
+        let mut n = 2;
+        while dir.exists() {
+            dir = self.root.join(format!("{base}-{n}"));
+            n += 1;
+        }
+        dir
+    }
+
+    fn take(&mut self, input: RecorderInput) {
+        match input {
+            RecorderInput::Tick(record) => self.write(&record),
+            RecorderInput::Event(event) => self.write_event(&event),
+            RecorderInput::Attach {
+                snapshots,
+                events,
+                initial,
+            } => self.attach(Box::new(snapshots), events, *initial),
+        }
+    }
+
+    pub(super) fn run(
+        mut self,
+        mut input: mpsc::Receiver<RecorderInput>,
+        mut commands: Inbox<RecorderCommand>,
+    ) -> RecorderReport {
+        loop {
+            let next = match input.try_recv() {
+                Ok(r) => r,
+                Err(mpsc::error::TryRecvError::Empty) => {
+                    // The queue ran dry: flush before waiting, so a kill loses nothing already taken.
+                    self.flush(true);
+                    match input.blocking_recv() {
+                        Some(r) => r,
+                        None => break,
+                    }
+                }
+                Err(mpsc::error::TryRecvError::Disconnected) => break,
+            };
+            // A command sent before this item arrived applies to it; one that arrives while these are being
+            // applied waits for the next item.
+            for _ in 0..commands.len() {
+                if let Ok(Envelope { command, reply }) = commands.try_recv() {
+                    let _ = reply.send(self.command(command));
+                }
+            }
+            self.take(next);
+            self.flush(false);
+        }
+        while let Ok(Envelope { command, reply }) = commands.try_recv() {
+            let _ = reply.send(self.command(command));
+        }
+        self.close();
+        self.report
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pavlov::agent::LearningStage;
+    use pavlov::config::Config;
+    use pavlov::control::Mode;
+    use std::sync::Arc;
+
+    fn record(seq: u64) -> Arc<TickRecord> {
+        Arc::new(TickRecord {
+            obs: vec![0.5],
+            ..TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Pavlovian)
+        })
+    }
+
+    fn config() -> Config {
+        Config::from_toml(include_str!("../../../../config/stall.toml")).unwrap()
+    }
+
+    fn header() -> RecordingHeader {
+        RecordingHeader::new(&config(), "unit")
+    }
+
+    /// A learner that always stands after tick `after`.
+    struct Fixed(Option<u64>);
+
+    impl StartSource for Fixed {
+        fn start_state(&mut self) -> Result<StartState, String> {
+            let stage = LearningStage::new(&config()).map_err(|e| e.to_string())?;
+            Ok(StartState {
+                after: self.0,
+                events_before: 1,
+                learner: stage.stage_snapshot(),
+            })
+        }
+    }
+
+    fn writer(root: &Path, after: Option<u64>) -> Writer {
+        let mut w = Writer::new(header(), root.to_path_buf());
+        let initial = Fixed(None).start_state().unwrap();
+        w.attach(Box::new(Fixed(after)), EventLog::new(), initial);
+        w
+    }
+
+    fn start(w: &mut Writer, dir: Option<&str>) -> Outcome {
+        w.command(RecorderCommand::StartRecording {
+            dir: dir.map(str::to_string),
+        })
+    }
+
+    fn fresh(name: &str) -> PathBuf {
+        let root = std::env::temp_dir().join(format!("pavlov-rec-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        root
+    }
+
+    #[test]
+    fn a_reserved_recording_begins_on_attach_with_the_learner_state() {
+        let root = fresh("reserved");
+        let mut w = Writer::new(header(), root.clone());
+        w.reserve(&root.join("run"), Existing::Refuse).unwrap();
+        // Before the server is attached, nothing can be written.
+        w.write(&record(0));
+        assert_eq!(w.report.written, 0);
+        let initial = Fixed(None).start_state().unwrap();
+        w.attach(Box::new(Fixed(Some(99))), EventLog::new(), initial);
+        for i in 0..10 {
+            w.write(&record(i));
+        }
+        w.close();
+        assert_eq!(w.report.written, 10);
+        let back = crate::storage::recording::load(&root.join("run")).unwrap();
+        assert_eq!(back.records.len(), 10);
+        assert_eq!(back.records[9], *record(9));
+        assert_eq!(back.header.label, "unit");
+        assert!(back.header.program.starts_with("pavlov "));
+        let start = back.header.start.expect("start state");
+        assert_eq!(start.after, None);
+        assert_eq!(start.learner.predictions.predictions.len(), 1);
+        // Started and stopped are events of the recording itself.
+        let kinds: Vec<&str> = back.events.iter().map(|e| e.kind.name()).collect();
+        assert_eq!(kinds, vec!["recording_started", "recording_stopped"]);
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn a_recording_started_mid_run_holds_only_the_ticks_and_events_after_its_snapshot() {
+        let root = fresh("midrun");
+        let mut w = writer(&root, Some(41));
+        assert!(start(&mut w, Some("mid")).is_ok());
+        for i in 38..45 {
+            w.write(&record(i));
+        }
+        let log = EventLog::new();
+        let old = Event {
+            id: 0,
+            after: Some(30),
+            kind: EventKind::WeightsReset,
+        };
+        w.write_event(&old);
+        w.write_event(&log.emit(Some(42), EventKind::WeightsReset));
+        w.close();
+        let back = crate::storage::recording::load(&root.join("mid")).unwrap();
+        let seqs: Vec<u64> = back.records.iter().map(|r| r.seq).collect();
+        assert_eq!(seqs, vec![42, 43, 44]);
+        let resets = back
+            .events
+            .iter()
+            .filter(|e| e.kind == EventKind::WeightsReset)
+            .count();
+        assert_eq!(resets, 1, "the event from before the snapshot is left out");
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn default_names_are_new_even_twice_in_a_second() {
+        let root = fresh("default");
+        let mut w = writer(&root, None);
+        let mut paths = Vec::new();
+        for _ in 0..3 {
+            match start(&mut w, None) {
+                Ok(Applied::Recording { recording }) => paths.push(recording),
+                other => panic!("{other:?}"),
+            }
+        }
+        w.close();
+        paths.sort();
+        paths.dedup();
+        assert_eq!(paths.len(), 3, "{paths:?}");
+        for p in &paths {
+            assert!(Path::new(p).starts_with(&root), "{p}");
+        }
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn a_refused_start_leaves_the_running_recording_open() {
+        let root = fresh("keep");
+        let mut w = writer(&root, None);
+        assert!(start(&mut w, Some("first")).is_ok());
+        let err = start(&mut w, Some("first")).unwrap_err().to_string();
+        assert!(err.contains("never overwritten"), "{err}");
+        let err = start(&mut w, Some("../x")).unwrap_err().to_string();
+        assert!(err.contains("separator"), "{err}");
+        w.write(&record(1));
+        w.close();
+        assert_eq!(w.report.written, 1, "the first recording kept going");
+        let back = crate::storage::recording::load(&root.join("first")).unwrap();
+        assert_eq!(back.records.len(), 1);
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn start_is_refused_before_the_server_runs() {
+        let root = fresh("early");
+        let mut w = Writer::new(header(), root.clone());
+        let err = start(&mut w, Some("x")).unwrap_err().to_string();
+        assert!(err.contains("not running yet"), "{err}");
+        assert!(!root.join("x").exists());
+    }
+}
