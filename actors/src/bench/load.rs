@@ -213,10 +213,10 @@ async fn run_with(
     abuse: Option<Abuse>,
 ) -> Result<(LoadReport, Option<Thrown>), LoadError> {
     config.dashboard.bind = "127.0.0.1:0".into();
-    config.dashboard.max_clients = match abuse {
+    config.dashboard.max_operators = match abuse {
         // Room for the abusers' long-lived connections and a few storm connections; storms go beyond it.
         Some(a) => load.clients + 2 + a.connections() + 8,
-        None => config.dashboard.max_clients.max(load.clients + 2),
+        None => config.dashboard.max_operators.max(load.clients + 2),
     };
     let abuse_config = config.clone();
     let server = Server::builder(config, RobotTarget::Simulated)

@@ -8,7 +8,9 @@ use pavlov_actors::dashboard::Dashboard;
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::storage::{checkpoint_files, recorder, recording};
 
-use super::args::{ConfigArgs, DashboardArgs, load_config, shutdown_signal, skeleton_format_name};
+use super::args::{
+    ConfigArgs, DashboardArgs, read_config, shutdown_signal, skeleton_format_name, validate,
+};
 
 /// `pavlov serve`'s own arguments.
 #[derive(clap::Args)]
@@ -39,8 +41,9 @@ pub async fn run(args: ServeArgs) -> Result<()> {
         record,
         resume,
     } = args;
-    let mut cfg = load_config(&config_args)?;
-    dashboard.apply(&mut cfg)?;
+    let (mut cfg, origin) = read_config(&config_args)?;
+    let generated_token = dashboard.apply(&mut cfg)?;
+    validate(&cfg, &origin)?;
     // The server checkpoints its weights periodically and at shutdown.
     cfg.checkpoint.autosave = true;
     cfg.checkpoint.resume |= resume;
@@ -97,7 +100,13 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     };
     println!("pavlov is driving {robot_name}; press Ctrl-C to stop");
     println!("dashboard: {}", dash.url());
-    if server.config.dashboard.token.is_some() {
+    if let Some(token) = &generated_token {
+        println!(
+            "no token was given for {}, so commands need this random one (pass --token to choose one): {token}",
+            server.config.dashboard.bind
+        );
+        println!("operator page: {}#token={token}", dash.url());
+    } else if server.config.dashboard.token.is_some() {
         println!(
             "dashboard commands need the token: open {}#token=<your token>",
             dash.url()
