@@ -196,6 +196,21 @@ fn malformed_message(i: u64) -> Message {
     }
 }
 
+/// Tries `connect` every 50 ms until it succeeds (a storm from the same address may have the first tries
+/// closed on arrival) or `stop` turns true.
+async fn connect_until_stopped<T, E, F: std::future::Future<Output = Result<T, E>>>(
+    connect: impl Fn() -> F,
+    stop: &watch::Receiver<bool>,
+) -> Option<T> {
+    while !*stop.borrow() {
+        if let Ok(c) = connect().await {
+            return Some(c);
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    None
+}
+
 /// Floods one connection until `stop`, keeping at most [`WINDOW`] replies outstanding.
 async fn flood(
     url: String,
@@ -204,7 +219,8 @@ async fn flood(
     tally: Arc<Tally>,
     mut stop: watch::Receiver<bool>,
 ) {
-    let Ok((ws, _)) = tokio_tungstenite::connect_async(url.as_str()).await else {
+    let connect = || async { tokio_tungstenite::connect_async(url.as_str()).await };
+    let Some((ws, _)) = connect_until_stopped(connect, &stop).await else {
         return;
     };
     let (mut tx, mut rx) = ws.split();
@@ -289,7 +305,7 @@ async fn never_reader(
     tally: Arc<Tally>,
     mut stop: watch::Receiver<bool>,
 ) {
-    let connected = async {
+    let connect = || async {
         let sock = tokio::net::TcpSocket::new_v4()?;
         sock.set_recv_buffer_size(4096)?;
         let tcp = sock.connect(addr).await?;
@@ -297,7 +313,7 @@ async fn never_reader(
             .await
             .map_err(std::io::Error::other)
     };
-    let Ok((mut ws, _)) = connected.await else {
+    let Some((mut ws, _)) = connect_until_stopped(connect, &stop).await else {
         return;
     };
     tokio::select! {
