@@ -156,7 +156,8 @@ async fn two_hundred_reopened_idle_sockets_leave_healthz_and_the_operator_a_way_
     let lab = Lab::start(|_| {}).await;
     let addr = lab.addr();
     let max_pending = lab.server.config.dashboard.max_pending;
-    // The flood: 200 idle sockets from 20 addresses, each reopened as soon as it is closed.
+    // The flood: 200 idle sockets from 20 addresses, each reopened as soon as it is closed. It keeps a core
+    // busy for the few seconds of the test (reopening as fast as the server closes is a busy loop).
     let flood = runtime("idle-flood");
     let opened = Arc::new(AtomicU64::new(0));
     let stop = Arc::new(AtomicBool::new(false));
@@ -187,7 +188,7 @@ async fn two_hundred_reopened_idle_sockets_leave_healthz_and_the_operator_a_way_
     // …the operator's handshake succeeds and the e-stop latches at once…
     let (mut op, hello) = ws_from(loopback(1), addr, Some(TOKEN)).await.unwrap();
     assert_eq!(hello["can_command"], true);
-    let latencies = estops(&mut op, 20).await;
+    let latencies = estops(&mut op, 10).await;
     // …and so does a watcher's.
     let (_watcher, hello) = ws_from(loopback(2), addr, None).await.unwrap();
     assert_eq!(hello["can_command"], false);
