@@ -13,8 +13,6 @@
 //!   weight, θ, tiles per dimension, pair offsets, features per prediction and in all, the number of
 //!   predictions), all before anything is allocated: `tiles = 100000000` is an error naming the key,
 //!   not an allocation failure.
-//! - **`[dashboard] client_queue`** at most [`MAX_CLIENT_QUEUE`]: a stalled client's queue holds that
-//!   many ticks (about 1 KB each).
 //!
 //! The other keys' bounds sit with their tables (`[tick]`, `[link]`, `[skeleton]`, the rest of
 //! `[dashboard]`, `[checkpoint]`).
@@ -26,24 +24,12 @@ use crate::obs::ObsLayout;
 
 /// The longest a safety timeout may last, ms (see the module documentation).
 pub const MAX_SAFETY_TIMEOUT_MS: u64 = 1000;
-/// The longest per-client outgoing queue, messages: 200 s of ticks at 50 Hz, about 10 MB. A client that
-/// reads nothing is disconnected after 10 s anyway; a longer queue only holds memory and delay.
-pub const MAX_CLIENT_QUEUE: usize = 10_000;
 
 /// Checks every bound of this module; `[tick] period_ms` must already be valid.
 pub(super) fn check(cfg: &Config) -> Result<(), ConfigError> {
     check_safety(cfg)?;
     check_policies(cfg)?;
     cfg.prediction_bounds()?;
-    if cfg.dashboard.client_queue > MAX_CLIENT_QUEUE {
-        return Err(invalid(
-            "dashboard.client_queue",
-            format!(
-                "{} exceeds {MAX_CLIENT_QUEUE} messages",
-                cfg.dashboard.client_queue
-            ),
-        ));
-    }
     Ok(())
 }
 

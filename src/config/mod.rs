@@ -11,8 +11,10 @@ use crate::learn::PredictionSpec;
 use crate::oi::Model;
 
 mod bounds;
+mod dashboard;
 mod link;
-pub use bounds::{MAX_CLIENT_QUEUE, MAX_SAFETY_TIMEOUT_MS};
+pub use bounds::MAX_SAFETY_TIMEOUT_MS;
+pub use dashboard::{DashboardConfig, MAX_CLIENT_QUEUE, MIN_PUBLIC_TOKEN_CHARS};
 pub use link::LinkConfig;
 
 /// A configuration error, naming the offending key.
@@ -167,40 +169,6 @@ impl SimConfig {
         self.faults
             .parse()
             .map_err(|e: crate::sim::faults::FaultSpecError| invalid("sim.faults", e.to_string()))
-    }
-}
-
-/// `[dashboard]`: the HTTP/websocket endpoint that serves the dashboard and takes commands.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct DashboardConfig {
-    /// Address to listen on. Binding anything but loopback requires `token`.
-    pub bind: String,
-    /// Shared secret a client presents in the websocket handshake before any command is accepted.
-    pub token: Option<String>,
-    /// Whether a client without the token may watch (receive ticks) without sending commands.
-    pub watch_without_token: bool,
-    /// Extra allowed `Origin` values (the server's own origin and loopback origins are always allowed).
-    pub allowed_origins: Vec<String>,
-    /// Largest websocket message accepted, bytes.
-    pub max_message_bytes: usize,
-    /// Per-client queue of outgoing messages; when full, the oldest ticks are dropped.
-    pub client_queue: usize,
-    /// Most websocket clients at once.
-    pub max_clients: usize,
-}
-
-impl Default for DashboardConfig {
-    fn default() -> Self {
-        DashboardConfig {
-            bind: "127.0.0.1:8080".into(),
-            token: None,
-            watch_without_token: true,
-            allowed_origins: Vec::new(),
-            max_message_bytes: 64 * 1024,
-            client_queue: 256,
-            max_clients: 64,
-        }
     }
 }
 
@@ -419,31 +387,7 @@ impl Config {
         {
             return Err(invalid("checkpoint.resume_from", "must name a file"));
         }
-        let d = &self.dashboard;
-        let bind: std::net::SocketAddr = d.bind.parse().map_err(|_| {
-            invalid(
-                "dashboard.bind",
-                format!("`{}` is not an address like 127.0.0.1:8080", d.bind),
-            )
-        })?;
-        if !bind.ip().is_loopback() && d.token.as_deref().is_none_or(str::is_empty) {
-            return Err(invalid(
-                "dashboard.token",
-                format!("binding {} (not loopback) requires a token", d.bind),
-            ));
-        }
-        if !(1024..=16 * 1024 * 1024).contains(&d.max_message_bytes) {
-            return Err(invalid(
-                "dashboard.max_message_bytes",
-                "must be between 1024 and 16777216",
-            ));
-        }
-        if d.client_queue == 0 {
-            return Err(invalid("dashboard.client_queue", "must be at least 1"));
-        }
-        if d.max_clients == 0 {
-            return Err(invalid("dashboard.max_clients", "must be at least 1"));
-        }
+        self.dashboard.validate()?;
         if self.predictions.is_empty() {
             return Err(invalid("predictions", "at least one prediction is needed"));
         }
@@ -533,7 +477,9 @@ mod tests {
             Err(ConfigError::Invalid { key, .. }) => assert_eq!(key, "dashboard.token"),
             other => panic!("{other:?}"),
         }
-        let ok = format!("{STALL}\n[dashboard]\nbind = \"0.0.0.0:8080\"\ntoken = \"s3cret\"\n");
+        let ok = format!(
+            "{STALL}\n[dashboard]\nbind = \"0.0.0.0:8080\"\ntoken = \"0123456789abcdef\"\n"
+        );
         assert!(Config::from_toml(&ok).is_ok());
     }
 }

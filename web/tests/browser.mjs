@@ -1,4 +1,4 @@
-// What the browser scripts (dashboard.e2e.mjs, trip.e2e.mjs) share: their arguments, failing loudly,
+// What the browser scripts (dashboard.e2e.mjs, trip.e2e.mjs, watcher.e2e.mjs) share: their arguments, failing loudly,
 // waiting for a condition, and launching Debian's Chromium through playwright-core. Never downloads a
 // browser: Chromium comes from apt (`apt-get install chromium`); set CHROMIUM to use another binary.
 

@@ -1,7 +1,10 @@
 //! Abusive websocket clients for the dashboard benchmark (`pavlov bench --ws-clients N --ws-abuse`):
 //! connections that flood valid commands and malformed messages as fast as the server takes them, a
-//! churn of over-size messages, connection storms beyond `max_clients` once a second, and clients that
-//! never read. They run until told to stop and count what they threw and what came back.
+//! churn of over-size messages, connection storms once a second, clients that never read, and (in
+//! [`super::floods`]) a flood of watchers and one of idle sockets reopened as soon as they are closed.
+//! The command flooders hold the operators' token (the worst case: a runaway script of an operator); the
+//! storms and the watchers have none. They run until told to stop and count what they threw and what
+//! came back.
 //!
 //! `tests/ws_abuse.rs` checks the server's answers one by one; this module only counts, for figures.
 
@@ -33,6 +36,10 @@ pub struct Abuse {
     pub(crate) storm: usize,
     /// Whether one client keeps connecting and sending over-size messages.
     pub(crate) oversize: bool,
+    /// Watchers (no token) from ten addresses, each reconnecting when refused or dropped.
+    pub(crate) watchers: usize,
+    /// Idle sockets from twenty addresses, each reopened as soon as the server closes it.
+    pub(crate) idle_sockets: usize,
 }
 
 impl Default for Abuse {
@@ -43,11 +50,26 @@ impl Default for Abuse {
             never_readers: 2,
             storm: 50,
             oversize: true,
+            watchers: 100,
+            idle_sockets: 200,
         }
     }
 }
 
 impl Abuse {
+    /// No abuse at all (the baseline of a comparison).
+    pub(crate) fn none() -> Self {
+        Abuse {
+            flooders: 0,
+            malformed: 0,
+            never_readers: 0,
+            storm: 0,
+            oversize: false,
+            watchers: 0,
+            idle_sockets: 0,
+        }
+    }
+
     /// Connections the abuse keeps open at once (before storms).
     pub(crate) fn connections(&self) -> usize {
         self.flooders + self.malformed + self.never_readers + usize::from(self.oversize)
@@ -77,6 +99,12 @@ pub(crate) struct Thrown {
     pub(crate) storm_refused: u64,
     /// Pings sent by clients that never read.
     pub(crate) unread_pings: u64,
+    /// Watcher handshakes that got in (each reconnect counts).
+    pub(crate) watchers_admitted: u64,
+    /// Watcher handshakes refused.
+    pub(crate) watchers_refused: u64,
+    /// Idle sockets opened (each reopen counts).
+    pub(crate) idle_opened: u64,
 }
 
 impl std::fmt::Display for Thrown {
@@ -90,6 +118,11 @@ impl std::fmt::Display for Thrown {
             f,
             "answers: {} acks, {} rate_limited, {} other errors, {} closes with 1009, {} storm handshakes refused",
             self.acks, self.rate_limited, self.errors, self.closed_1009, self.storm_refused
+        )?;
+        writeln!(
+            f,
+            "floods: {} watcher handshakes admitted, {} refused; {} idle sockets opened",
+            self.watchers_admitted, self.watchers_refused, self.idle_opened
         )
     }
 }
@@ -116,6 +149,9 @@ impl Tally {
     fn thrown(&self) -> Thrown {
         let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
         Thrown {
+            watchers_admitted: 0,
+            watchers_refused: 0,
+            idle_opened: 0,
             valid: get(&self.valid),
             malformed: get(&self.malformed),
             acks: get(&self.acks),
@@ -160,6 +196,21 @@ fn malformed_message(i: u64) -> Message {
     }
 }
 
+/// Tries `connect` every 50 ms until it succeeds (a storm from the same address may have the first tries
+/// closed on arrival) or `stop` turns true.
+async fn connect_until_stopped<T, E, F: std::future::Future<Output = Result<T, E>>>(
+    connect: impl Fn() -> F,
+    stop: &watch::Receiver<bool>,
+) -> Option<T> {
+    while !*stop.borrow() {
+        if let Ok(c) = connect().await {
+            return Some(c);
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    None
+}
+
 /// Floods one connection until `stop`, keeping at most [`WINDOW`] replies outstanding.
 async fn flood(
     url: String,
@@ -168,7 +219,8 @@ async fn flood(
     tally: Arc<Tally>,
     mut stop: watch::Receiver<bool>,
 ) {
-    let Ok((ws, _)) = tokio_tungstenite::connect_async(url.as_str()).await else {
+    let connect = || async { tokio_tungstenite::connect_async(url.as_str()).await };
+    let Some((ws, _)) = connect_until_stopped(connect, &stop).await else {
         return;
     };
     let (mut tx, mut rx) = ws.split();
@@ -247,9 +299,13 @@ async fn storm(url: String, n: usize, tally: Arc<Tally>, stop: watch::Receiver<b
 }
 
 /// A client with a tiny receive buffer that never reads; after 2 s it sends 150 pings, then waits.
-async fn never_reader(addr: SocketAddr, tally: Arc<Tally>, mut stop: watch::Receiver<bool>) {
-    let url = format!("ws://{addr}/ws");
-    let connected = async {
+async fn never_reader(
+    addr: SocketAddr,
+    url: String,
+    tally: Arc<Tally>,
+    mut stop: watch::Receiver<bool>,
+) {
+    let connect = || async {
         let sock = tokio::net::TcpSocket::new_v4()?;
         sock.set_recv_buffer_size(4096)?;
         let tcp = sock.connect(addr).await?;
@@ -257,7 +313,7 @@ async fn never_reader(addr: SocketAddr, tally: Arc<Tally>, mut stop: watch::Rece
             .await
             .map_err(std::io::Error::other)
     };
-    let Ok((mut ws, _)) = connected.await else {
+    let Some((mut ws, _)) = connect_until_stopped(connect, &stop).await else {
         return;
     };
     tokio::select! {
@@ -279,17 +335,20 @@ async fn never_reader(addr: SocketAddr, tally: Arc<Tally>, mut stop: watch::Rece
 
 /// Runs `abuse` against the endpoint at `addr` until `stop` turns true. `control` is the JSON text of a
 /// harmless control command (it goes to the server's command router); over-size messages are
-/// `max_message_bytes` + 1 KiB.
+/// `max_message_bytes` + 1 KiB; `token` is the operators' token.
 pub(crate) async fn run(
     addr: SocketAddr,
     abuse: Abuse,
     control: String,
     max_message_bytes: usize,
+    token: String,
     stop: watch::Receiver<bool>,
 ) -> Thrown {
-    let url = format!("ws://{addr}/ws");
+    let url = format!("ws://{addr}/ws?token={token}");
+    let storm_url = format!("ws://{addr}/ws");
     let tally = Arc::new(Tally::default());
-    let mut tasks = Vec::new();
+    let floods = Arc::new(super::floods::FloodTally::default());
+    let mut tasks = super::floods::spawn(addr, abuse.watchers, abuse.idle_sockets, &floods, &stop);
     for i in 0..abuse.flooders + abuse.malformed {
         tasks.push(tokio::spawn(flood(
             url.clone(),
@@ -302,6 +361,7 @@ pub(crate) async fn run(
     for _ in 0..abuse.never_readers {
         tasks.push(tokio::spawn(never_reader(
             addr,
+            url.clone(),
             tally.clone(),
             stop.clone(),
         )));
@@ -316,7 +376,7 @@ pub(crate) async fn run(
     }
     if abuse.storm > 0 {
         tasks.push(tokio::spawn(storm(
-            url.clone(),
+            storm_url,
             abuse.storm,
             tally.clone(),
             stop.clone(),
@@ -325,7 +385,13 @@ pub(crate) async fn run(
     for t in tasks {
         let _ = t.await;
     }
-    tally.thrown()
+    let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
+    Thrown {
+        watchers_admitted: get(&floods.watchers_admitted),
+        watchers_refused: get(&floods.watchers_refused),
+        idle_opened: get(&floods.idle_opened),
+        ..tally.thrown()
+    }
 }
 
 #[cfg(test)]

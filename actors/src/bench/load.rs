@@ -2,7 +2,9 @@
 //! endpoint on an ephemeral loopback port, connects `N` websocket clients that read every message, plus
 //! optionally one that never reads (with a tiny receive buffer, so its backlog reaches the server at
 //! once), and measures tick lateness meanwhile. [`run_abuse_comparison`] runs the same load twice, the
-//! second time with [`super::abuse`] clients attacking the endpoint, and reports both.
+//! second time with [`super::abuse`] clients attacking the endpoint, and reports both, with an operator's
+//! e-stop latency ([`super::estop_probe`]) in each. The dashboard has a token in these runs, so that the
+//! reading clients (which hold it) are operators and the floods' token-less clients are watchers.
 //!
 //! The clients run on their own single-threaded runtime in their own OS thread, like browsers in other
 //! processes would: they compete for the CPU, not for the server's runtime. A benchmark, not a test: it
@@ -18,9 +20,15 @@ use pavlov::config::Config;
 use tokio::sync::watch;
 
 use super::abuse::{Abuse, Thrown};
+use super::estop_probe::{self, EstopLatency};
 use crate::bench::{BenchReport, measure};
 use crate::dashboard::{Dashboard, DashboardError, DashboardStats};
 use crate::server::{RobotTarget, Server, ServerError};
+
+/// The operators' token in the benchmark's runs.
+const BENCH_TOKEN: &str = "pavlov-bench-operator-token";
+/// E-stops the operator latches in each abuse-comparison run.
+const ESTOPS: usize = 20;
 
 /// What to connect.
 #[derive(Debug, Clone, Copy)]
@@ -56,6 +64,8 @@ pub struct LoadReport {
     pub(crate) ticks_per_client: Vec<u64>,
     /// The endpoint's counters at the end.
     pub(crate) dashboard: DashboardStats,
+    /// The operator's e-stop latency during the run (abuse comparisons only).
+    pub(crate) estop: Option<EstopLatency>,
 }
 
 impl fmt::Display for LoadReport {
@@ -139,6 +149,16 @@ impl fmt::Display for AbuseReport {
             d.closed_write_stall,
             d.telemetry_dropped
         )?;
+        writeln!(
+            f,
+            "pending connections: {} evicted, {} refused on arrival, {} out of time; {} watchers connected at the end (of {} clients)",
+            d.closed_evicted, d.tcp_refused, d.closed_no_upgrade, d.watchers, d.clients
+        )?;
+        for (name, r) in [("without abuse", b), ("with abuse", a)] {
+            if let Some(e) = &r.estop {
+                writeln!(f, "operator e-stop send → ack, {name}: {e}")?;
+            }
+        }
         let min = |r: &LoadReport| r.ticks_per_client.first().copied().unwrap_or(0);
         writeln!(
             f,
@@ -159,7 +179,14 @@ pub async fn run_abuse_comparison(
     load: Load,
     abuse: Abuse,
 ) -> Result<AbuseReport, LoadError> {
-    let (baseline, _) = run_with(config.clone(), duration, web_dir.clone(), load, None).await?;
+    let (baseline, _) = run_with(
+        config.clone(),
+        duration,
+        web_dir.clone(),
+        load,
+        Some(Abuse::none()),
+    )
+    .await?;
     let (abused, thrown) = run_with(config, duration, web_dir, load, Some(abuse)).await?;
     Ok(AbuseReport {
         abuse,
@@ -190,6 +217,7 @@ fn spawn_abusers(
 ) -> std::thread::JoinHandle<Result<Thrown, String>> {
     let control = serde_json::json!({"cmd": "set_mode", "mode": config.control.mode}).to_string();
     let max_message_bytes = config.dashboard.max_message_bytes;
+    let token = config.dashboard.token.clone().unwrap_or_default();
     std::thread::spawn(move || {
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
@@ -200,6 +228,7 @@ fn spawn_abusers(
             abuse,
             control,
             max_message_bytes,
+            token,
             stop,
         )))
     })
@@ -213,11 +242,15 @@ async fn run_with(
     abuse: Option<Abuse>,
 ) -> Result<(LoadReport, Option<Thrown>), LoadError> {
     config.dashboard.bind = "127.0.0.1:0".into();
-    config.dashboard.max_clients = match abuse {
-        // Room for the abusers' long-lived connections and a few storm connections; storms go beyond it.
+    config.dashboard.max_operators = match abuse {
+        // Room for the abusers' long-lived operator connections and the e-stop probe.
         Some(a) => load.clients + 2 + a.connections() + 8,
-        None => config.dashboard.max_clients.max(load.clients + 2),
+        None => config.dashboard.max_operators.max(load.clients + 2),
     };
+    let token = abuse.map(|_| BENCH_TOKEN.to_string());
+    if let Some(t) = &token {
+        config.dashboard.token = Some(t.clone());
+    }
     let abuse_config = config.clone();
     let server = Server::builder(config, RobotTarget::Simulated)
         .start()
@@ -233,12 +266,13 @@ async fn run_with(
     let (stop_tx, stop_rx) = watch::channel(false);
     let stop_rx_abuse = stop_rx.clone();
     let (ready_tx, ready_rx) = tokio::sync::oneshot::channel();
+    let client_token = token.clone();
     let clients = std::thread::spawn(move || {
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build();
         match rt {
-            Ok(rt) => rt.block_on(run_clients(addr, load, stop_rx, ready_tx)),
+            Ok(rt) => rt.block_on(run_clients(addr, load, client_token, stop_rx, ready_tx)),
             Err(e) => Err(e.to_string()),
         }
     });
@@ -247,13 +281,26 @@ async fn run_with(
         .await
         .unwrap_or_else(|_| Err("the client thread ended".into()));
     let abusers = match (&connected, abuse) {
-        (Ok(()), Some(abuse)) => Some(spawn_abusers(addr, abuse, &abuse_config, stop_rx_abuse)),
+        (Ok(()), Some(abuse)) if abuse != Abuse::none() => {
+            Some(spawn_abusers(addr, abuse, &abuse_config, stop_rx_abuse))
+        }
+        _ => None,
+    };
+    let probe = match (&connected, &token) {
+        (Ok(()), Some(t)) => Some(spawn_probe(addr, t.clone(), duration)),
         _ => None,
     };
     let result = match connected {
         Ok(()) => {
             let bench = measure(&server, duration).await;
             let dashboard = dash.stats();
+            let estop = match probe {
+                Some(p) => tokio::task::spawn_blocking(move || p.join().ok())
+                    .await
+                    .ok()
+                    .flatten(),
+                None => None,
+            };
             let _ = stop_tx.send(true);
             let thrown = match abusers {
                 Some(t) => match tokio::task::spawn_blocking(move || t.join()).await {
@@ -273,6 +320,7 @@ async fn run_with(
                                 bench,
                                 ticks_per_client,
                                 dashboard,
+                                estop,
                             },
                             thrown,
                         )
@@ -292,13 +340,46 @@ async fn run_with(
     result
 }
 
+/// Starts the e-stop probe on its own thread and runtime: [`ESTOPS`] e-stops spread over the middle of a
+/// run of `duration`.
+fn spawn_probe(
+    addr: SocketAddr,
+    token: String,
+    duration: Duration,
+) -> std::thread::JoinHandle<EstopLatency> {
+    let start_after = duration / 10;
+    let spacing = (duration * 7 / 10) / ESTOPS as u32;
+    std::thread::spawn(move || {
+        match tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+        {
+            Ok(rt) => rt.block_on(estop_probe::probe(
+                addr,
+                token,
+                ESTOPS,
+                start_after,
+                spacing,
+            )),
+            Err(e) => EstopLatency {
+                refused: Some(e.to_string()),
+                ..EstopLatency::default()
+            },
+        }
+    })
+}
+
 async fn run_clients(
     addr: SocketAddr,
     load: Load,
+    token: Option<String>,
     stop: watch::Receiver<bool>,
     ready: tokio::sync::oneshot::Sender<Result<(), String>>,
 ) -> Result<Vec<u64>, String> {
-    let url = format!("ws://{addr}/ws");
+    let url = match &token {
+        Some(t) => format!("ws://{addr}/ws?token={t}"),
+        None => format!("ws://{addr}/ws"),
+    };
     let mut readers = Vec::with_capacity(load.clients);
     let connected = async {
         let mut streams = Vec::new();

@@ -3,9 +3,13 @@
 //! prints figures and asserts nothing about them.
 //!
 //! - [`load`]: websocket clients reading the dashboard stream during the run;
-//! - [`abuse`]: abusive clients (floods, storms, never-reading sockets) for `--ws-abuse`.
+//! - [`abuse`]: abusive clients (floods, storms, never-reading sockets) for `--ws-abuse`, and [`floods`],
+//!   its watcher and idle-socket floods;
+//! - [`estop_probe`]: the operator's e-stop, timed from send to ack, during the run.
 
 pub mod abuse;
+pub mod estop_probe;
+pub(crate) mod floods;
 pub mod load;
 
 use std::fmt;

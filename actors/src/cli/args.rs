@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use pavlov::config::{Config, SkeletonFormat};
+use pavlov::config::{Config, ConfigError, SkeletonFormat};
 use pavlov::control::Mode;
 use pavlov::oi::Model;
 
@@ -37,11 +37,11 @@ pub struct ConfigArgs {
 #[derive(clap::Args, Clone)]
 pub struct DashboardArgs {
     /// Override [dashboard] bind: where the dashboard page and its websocket listen (default 127.0.0.1:8080).
-    /// Any non-loopback address requires --token.
+    /// On any non-loopback address commands need a token: --token, or a random one printed at start-up.
     #[arg(long, value_name = "ADDR")]
     pub bind: Option<String>,
     /// Override [dashboard] token: the secret a websocket client presents before it may send commands
-    /// (open the page as http://HOST:PORT/#token=TOKEN).
+    /// (open the page as http://HOST:PORT/#token=TOKEN); at least 16 characters on a non-loopback address.
     #[arg(long, value_name = "TOKEN")]
     pub token: Option<String>,
     /// Where the dashboard's npm packages are installed (its node_modules/uplot); default: the repository's web/.
@@ -50,17 +50,25 @@ pub struct DashboardArgs {
 }
 
 impl DashboardArgs {
-    /// Applies the overrides to `cfg` and checks the result.
-    pub fn apply(&self, cfg: &mut Config) -> Result<()> {
+    /// Applies the overrides to `cfg`; when the result binds a non-loopback address without a token, sets a
+    /// random one (returned, so that it can be shown to the operator). The caller validates the result.
+    pub fn apply(&self, cfg: &mut Config) -> Result<Option<String>> {
         if let Some(b) = &self.bind {
             cfg.dashboard.bind = b.clone();
         }
         if let Some(t) = &self.token {
             cfg.dashboard.token = Some(t.clone());
         }
-        cfg.validate()
-            .context("invalid dashboard settings (--bind / --token)")?;
-        Ok(())
+        let generated = if cfg.dashboard.is_public() && cfg.dashboard.token().is_none() {
+            let token = pavlov_actors::dashboard::generate_token().context(
+                "cannot generate a dashboard token (reading /dev/urandom); pass --token",
+            )?;
+            cfg.dashboard.token = Some(token.clone());
+            Some(token)
+        } else {
+            None
+        };
+        Ok(generated)
     }
 
     /// Where the dashboard's npm packages are.
@@ -87,6 +95,21 @@ fn parse_mode(s: &str) -> Result<Mode, String> {
 
 /// Reads the configuration and applies the overrides.
 pub fn load_config(args: &ConfigArgs) -> Result<Config> {
+    let (cfg, origin) = read_config(args)?;
+    validate(&cfg, &origin)?;
+    Ok(cfg)
+}
+
+/// Checks a configuration read from `origin`, with the command-line overrides applied.
+pub fn validate(cfg: &Config, origin: &str) -> Result<()> {
+    cfg.validate().with_context(|| {
+        format!("invalid configuration in {origin} (with the command-line overrides)")
+    })
+}
+
+/// Reads the configuration and applies the overrides without checking the values (the caller completes
+/// the configuration and validates it); returns it with where it came from.
+pub fn read_config(args: &ConfigArgs) -> Result<(Config, String)> {
     let (text, origin) = match &args.config {
         Some(path) => (
             std::fs::read_to_string(path)
@@ -98,8 +121,9 @@ pub fn load_config(args: &ConfigArgs) -> Result<Config> {
             "built-in config/stall.toml".into(),
         ),
     };
-    let mut cfg =
-        Config::from_toml(&text).with_context(|| format!("invalid configuration in {origin}"))?;
+    let mut cfg: Config = toml::from_str(&text)
+        .map_err(|e| ConfigError::Parse(e.to_string()))
+        .with_context(|| format!("invalid configuration in {origin}"))?;
     if let Some(m) = args.model {
         cfg.robot.model = m;
         // The built-in stream list names the Create 1's group; follow the model unless one was configured.
@@ -116,10 +140,7 @@ pub fn load_config(args: &ConfigArgs) -> Result<Config> {
     if let Some(f) = &args.faults {
         cfg.sim.faults = f.clone();
     }
-    cfg.validate().with_context(|| {
-        format!("invalid configuration in {origin} after command-line overrides")
-    })?;
-    Ok(cfg)
+    Ok((cfg, origin))
 }
 
 /// Parses a skeleton wire format's name.

@@ -8,7 +8,9 @@ use pavlov_actors::dashboard::Dashboard;
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::storage::{checkpoint_files, recorder, recording};
 
-use super::args::{ConfigArgs, DashboardArgs, load_config, shutdown_signal, skeleton_format_name};
+use super::args::{
+    ConfigArgs, DashboardArgs, read_config, shutdown_signal, skeleton_format_name, validate,
+};
 
 /// `pavlov serve`'s own arguments.
 #[derive(clap::Args)]
@@ -48,8 +50,9 @@ pub async fn run(args: ServeArgs) -> Result<()> {
         resume,
         resume_from,
     } = args;
-    let mut cfg = load_config(&config_args)?;
-    dashboard.apply(&mut cfg)?;
+    let (mut cfg, origin) = read_config(&config_args)?;
+    let generated_token = dashboard.apply(&mut cfg)?;
+    validate(&cfg, &origin)?;
     // The server checkpoints its weights periodically and at shutdown.
     cfg.checkpoint.autosave = true;
     cfg.checkpoint.resume |= resume;
@@ -119,7 +122,13 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     }
     say!("pavlov is driving {robot_name}; press Ctrl-C to stop");
     say!("dashboard: {}", dash.url());
-    if server.config.dashboard.token.is_some() {
+    if let Some(token) = &generated_token {
+        say!(
+            "no token was given for {}, so commands need this random one (pass --token to choose one): {token}",
+            server.config.dashboard.bind
+        );
+        say!("operator page: {}#token={token}", dash.url());
+    } else if server.config.dashboard.token.is_some() {
         say!(
             "dashboard commands need the token: open {}#token=<your token>",
             dash.url()

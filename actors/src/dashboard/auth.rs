@@ -141,6 +141,18 @@ fn host_is_ip_literal(host: &str) -> bool {
     bare.parse::<IpAddr>().is_ok_and(|ip| !ip.is_unspecified())
 }
 
+/// Bytes of randomness in a generated token (128 bits).
+const GENERATED_TOKEN_BYTES: usize = 16;
+
+/// A random token for a server that binds a non-loopback address without one: 128 bits from the
+/// operating system's generator (`/dev/urandom`), as 32 lowercase hex digits.
+pub fn generate_token() -> std::io::Result<String> {
+    use std::io::Read;
+    let mut bytes = [0u8; GENERATED_TOKEN_BYTES];
+    std::fs::File::open("/dev/urandom")?.read_exact(&mut bytes)?;
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
+}
+
 /// Compares without stopping at the first difference, so timing does not reveal how much of a guess is right.
 fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     let mut diff = a.len() ^ b.len();
@@ -271,6 +283,24 @@ mod tests {
         );
         assert_eq!(presented_token(Some("q"), ["pavlov.v1"]), Some("q"));
         assert_eq!(presented_token(None, Vec::<&str>::new()), None);
+    }
+
+    #[test]
+    fn generated_tokens_are_128_bit_hex_and_differ() {
+        let a = generate_token().unwrap();
+        let b = generate_token().unwrap();
+        assert_eq!(a.len(), 32);
+        assert!(
+            a.bytes()
+                .all(|c| c.is_ascii_hexdigit() && !c.is_ascii_uppercase())
+        );
+        assert_ne!(a, b);
+        let public = DashboardConfig {
+            bind: "0.0.0.0:8080".into(),
+            token: Some(a),
+            ..DashboardConfig::default()
+        };
+        assert_eq!(public.validate(), Ok(()));
     }
 
     #[test]

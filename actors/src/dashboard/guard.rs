@@ -1,85 +1,117 @@
-//! Limits below HTTP: at most a fixed number of TCP connections at once, and a deadline for a connection
-//! to become a websocket.
+//! Limits below HTTP: every TCP connection that is not (yet) a websocket sits in the [`PendingPool`]
+//! (bounded in total and per source address, evicting its oldest rather than refusing newcomers), and has
+//! [`PRE_UPGRADE_LIMIT`] to become a websocket.
 //!
-//! `max_clients` bounds websocket clients, but a TCP connection costs memory before it is one: an abuser
-//! could open thousands and send nothing (or half a request). [`GuardedListener`] accepts a connection only
-//! while fewer than its limit are open (the rest are closed at once and counted), and [`GuardedIo`] ends a
-//! connection that has not switched to the websocket protocol within [`PRE_UPGRADE_LIMIT`] — page
-//! and asset requests take milliseconds, and browsers simply reopen an idle keep-alive connection. It
-//! recognises the switch by the `101` status line the server writes.
+//! A TCP connection costs memory before it is a websocket, and the operator and watcher limits only apply
+//! at the handshake: an abuser could open thousands of sockets and send nothing (or half a request), and
+//! reopen each one as soon as it is closed. [`GuardedListener`] admits every new connection into the pool,
+//! evicting the oldest pending connection of the source holding the most when the pool (or the new
+//! connection's own source) is full, so a fresh connection — the operator's handshake, a `/healthz`
+//! probe — from an address holding fewer always gets in. Only a source bursting past its own share
+//! faster than [`super::pending::GRACE`] has its newest connections closed at once (refused), so that it does
+//! not kill its own handshakes in flight. [`GuardedIo`] ends a connection that is evicted, or that has not switched to
+//! the websocket protocol within [`PRE_UPGRADE_LIMIT`] (page and asset requests take milliseconds, and
+//! browsers simply reopen an idle keep-alive connection). It recognises the switch by the `101` status line
+//! the server writes; from then on the connection is a websocket and leaves the pool.
 
 use std::io;
+use std::net::SocketAddr;
 use std::pin::Pin;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::task::{Context, Poll};
 use std::time::Duration;
 
-use axum::serve::Listener;
+use axum::extract::connect_info::Connected;
+use axum::serve::{IncomingStream, Listener};
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
-use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 use tokio::time::Sleep;
+use tokio_util::sync::WaitForCancellationFutureOwned;
+
+use super::pending::{Admission, Admitted, PendingPool};
+use super::session::worth_logging;
+use super::source::Source;
 
 /// How long a connection may stay plain HTTP (not a websocket).
-pub const PRE_UPGRADE_LIMIT: Duration = Duration::from_secs(10);
-/// TCP connections allowed beyond `max_clients`, for page loads, `/metrics` and handshakes in progress.
-pub const EXTRA_CONNECTIONS: usize = 64;
+pub const PRE_UPGRADE_LIMIT: Duration = Duration::from_secs(3);
+pub use super::pending::GRACE;
 
-/// What the guard refused, shared with the endpoint's counters.
+/// What the guard did, shared with the endpoint's counters.
 #[derive(Debug, Default)]
 pub(crate) struct GuardCounters {
-    /// Connections closed at once because the limit was reached.
+    /// New connections closed at once: their source was bursting past its share.
     pub(crate) refused: AtomicU64,
+    /// Pending connections closed to make room for a new one.
+    pub(crate) evicted: AtomicU64,
     /// Connections closed because they did not become a websocket in time.
     pub(crate) timed_out: AtomicU64,
 }
 
-/// A listener that holds at most `limit` connections open.
+/// The pool shared by the listener and its connections.
+pub(crate) type SharedPool = Arc<Mutex<PendingPool>>;
+
+fn lock(pool: &Mutex<PendingPool>) -> MutexGuard<'_, PendingPool> {
+    pool.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The peer's address, for handlers (`ConnectInfo<Peer>`).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Peer(pub(crate) SocketAddr);
+
+impl<L> Connected<IncomingStream<'_, GuardedListener<L>>> for Peer
+where
+    L: Listener<Addr = SocketAddr>,
+{
+    fn connect_info(stream: IncomingStream<'_, GuardedListener<L>>) -> Self {
+        Peer(*stream.remote_addr())
+    }
+}
+
+/// A listener whose connections are pending (bounded, evicting) until they become websockets.
 pub(crate) struct GuardedListener<L> {
     inner: L,
-    slots: Arc<Semaphore>,
+    pool: SharedPool,
     counters: Arc<GuardCounters>,
     pre_upgrade_limit: Duration,
 }
 
 impl<L> GuardedListener<L> {
-    /// Wraps `inner`: at most `limit` connections at once, each plain HTTP for at most `pre_upgrade_limit`.
+    /// Wraps `inner`: pending connections in `pool`, each plain HTTP for at most `pre_upgrade_limit`.
     pub(crate) fn new(
         inner: L,
-        limit: usize,
+        pool: SharedPool,
         pre_upgrade_limit: Duration,
         counters: Arc<GuardCounters>,
     ) -> Self {
         GuardedListener {
             inner,
-            slots: Arc::new(Semaphore::new(limit.max(1))),
+            pool,
             counters,
             pre_upgrade_limit,
         }
     }
 }
 
-impl<L: Listener> Listener for GuardedListener<L> {
+impl<L: Listener<Addr = SocketAddr>> Listener for GuardedListener<L> {
     type Io = GuardedIo<L::Io>;
-    type Addr = L::Addr;
+    type Addr = SocketAddr;
 
     async fn accept(&mut self) -> (Self::Io, Self::Addr) {
         loop {
             let (io, addr) = self.inner.accept().await;
-            match self.slots.clone().try_acquire_owned() {
-                Ok(permit) => {
-                    let io = GuardedIo {
-                        inner: io,
-                        _permit: permit,
-                        deadline: Some(Box::pin(tokio::time::sleep(self.pre_upgrade_limit))),
-                        expired: false,
-                        counters: self.counters.clone(),
-                    };
-                    return (io, addr);
-                }
-                Err(_) => {
-                    self.counters.refused.fetch_add(1, Ordering::Relaxed);
-                    tracing::debug!("too many TCP connections to the dashboard; closing a new one");
+            let source = Source::of(addr.ip());
+            let admission = lock(&self.pool).admit(source, tokio::time::Instant::now());
+            match admission {
+                Admission::Admitted(admitted) => return self.guard(io, addr, source, admitted),
+                Admission::Refused => {
+                    let n = self.counters.refused.fetch_add(1, Ordering::Relaxed) + 1;
+                    if worth_logging(n) {
+                        tracing::info!(
+                            total = n,
+                            %source,
+                            "{source} opens dashboard connections faster than they are served; closing a new one"
+                        );
+                    }
                 }
             }
         }
@@ -90,14 +122,64 @@ impl<L: Listener> Listener for GuardedListener<L> {
     }
 }
 
-/// A connection holding its slot; plain HTTP only until its deadline.
+impl<L: Listener<Addr = SocketAddr>> GuardedListener<L> {
+    /// Wraps an admitted connection.
+    fn guard(
+        &self,
+        io: L::Io,
+        addr: SocketAddr,
+        source: Source,
+        admitted: Admitted,
+    ) -> (GuardedIo<L::Io>, SocketAddr) {
+        if let Some(victim) = admitted.evicted {
+            let n = self.counters.evicted.fetch_add(1, Ordering::Relaxed) + 1;
+            if worth_logging(n) {
+                tracing::info!(
+                    total = n,
+                    %victim,
+                    "too many pending connections to the dashboard; evicting the oldest of {victim}"
+                );
+            }
+        }
+        let seat = PendingSeat {
+            pool: self.pool.clone(),
+            source,
+            id: admitted.id,
+            deadline: Box::pin(tokio::time::sleep(self.pre_upgrade_limit)),
+            evicted: Box::pin(admitted.evict.cancelled_owned()),
+        };
+        let io = GuardedIo {
+            inner: io,
+            pending: Some(seat),
+            ended: false,
+            counters: self.counters.clone(),
+        };
+        (io, addr)
+    }
+}
+
+/// A connection's place in the pool while it is pending; leaving it (drop) frees the place.
+struct PendingSeat {
+    pool: SharedPool,
+    source: Source,
+    id: u64,
+    deadline: Pin<Box<Sleep>>,
+    evicted: Pin<Box<WaitForCancellationFutureOwned>>,
+}
+
+impl Drop for PendingSeat {
+    fn drop(&mut self) {
+        lock(&self.pool).remove(self.source, self.id);
+    }
+}
+
+/// A connection: pending (bounded in time, evictable) until it becomes a websocket.
 pub(crate) struct GuardedIo<T> {
     inner: T,
-    _permit: OwnedSemaphorePermit,
-    /// `None` once the connection is a websocket.
-    deadline: Option<Pin<Box<Sleep>>>,
-    /// The deadline passed: every read fails from then on.
-    expired: bool,
+    /// `None` once the connection is a websocket, or once it ended.
+    pending: Option<PendingSeat>,
+    /// Evicted or out of time: every read and write fails from then on.
+    ended: bool,
     counters: Arc<GuardCounters>,
 }
 
@@ -107,31 +189,37 @@ fn is_switch(buf: &[u8]) -> bool {
 }
 
 impl<T> GuardedIo<T> {
-    fn expired(&mut self, cx: &mut Context<'_>) -> bool {
-        if !self.expired
-            && self
-                .deadline
-                .as_mut()
-                .is_some_and(|d| d.as_mut().poll(cx).is_ready())
-        {
-            self.counters.timed_out.fetch_add(1, Ordering::Relaxed);
-            self.expired = true;
-            self.deadline = None;
+    /// Whether the connection has ended (evicted, or pending too long); registers the waker otherwise.
+    fn ended(&mut self, cx: &mut Context<'_>) -> bool {
+        if self.ended {
+            return true;
         }
-        self.expired
+        let Some(seat) = self.pending.as_mut() else {
+            return false;
+        };
+        if seat.evicted.as_mut().poll(cx).is_ready() {
+            self.ended = true;
+        } else if seat.deadline.as_mut().poll(cx).is_ready() {
+            self.counters.timed_out.fetch_add(1, Ordering::Relaxed);
+            self.ended = true;
+        }
+        if self.ended {
+            self.pending = None;
+        }
+        self.ended
     }
 
     fn saw_write(&mut self, first: &[u8]) {
-        if !self.expired && self.deadline.is_some() && is_switch(first) {
-            self.deadline = None;
+        if self.pending.is_some() && is_switch(first) {
+            self.pending = None;
         }
     }
 }
 
-fn timed_out() -> io::Error {
+fn ended_error() -> io::Error {
     io::Error::new(
         io::ErrorKind::TimedOut,
-        "the connection did not become a websocket in time",
+        "the connection did not become a websocket in time, or made room for a newer one",
     )
 }
 
@@ -141,8 +229,8 @@ impl<T: AsyncRead + Unpin> AsyncRead for GuardedIo<T> {
         cx: &mut Context<'_>,
         buf: &mut ReadBuf<'_>,
     ) -> Poll<io::Result<()>> {
-        if self.expired(cx) {
-            return Poll::Ready(Err(timed_out()));
+        if self.ended(cx) {
+            return Poll::Ready(Err(ended_error()));
         }
         Pin::new(&mut self.inner).poll_read(cx, buf)
     }
@@ -154,6 +242,9 @@ impl<T: AsyncWrite + Unpin> AsyncWrite for GuardedIo<T> {
         cx: &mut Context<'_>,
         buf: &[u8],
     ) -> Poll<io::Result<usize>> {
+        if self.ended(cx) {
+            return Poll::Ready(Err(ended_error()));
+        }
         self.saw_write(buf);
         Pin::new(&mut self.inner).poll_write(cx, buf)
     }
@@ -163,6 +254,9 @@ impl<T: AsyncWrite + Unpin> AsyncWrite for GuardedIo<T> {
         cx: &mut Context<'_>,
         bufs: &[io::IoSlice<'_>],
     ) -> Poll<io::Result<usize>> {
+        if self.ended(cx) {
+            return Poll::Ready(Err(ended_error()));
+        }
         if let Some(first) = bufs.iter().find(|b| !b.is_empty()) {
             self.saw_write(first);
         }
@@ -174,6 +268,9 @@ impl<T: AsyncWrite + Unpin> AsyncWrite for GuardedIo<T> {
     }
 
     fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        if self.ended(cx) {
+            return Poll::Ready(Err(ended_error()));
+        }
         Pin::new(&mut self.inner).poll_flush(cx)
     }
 
@@ -187,75 +284,137 @@ mod tests {
     use super::*;
     use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
 
-    /// A listener handing out one end of in-memory pipes.
-    struct Pipes(tokio::sync::mpsc::Receiver<DuplexStream>);
+    /// A listener handing out one end of in-memory pipes, each from the address it was sent with.
+    struct Pipes(tokio::sync::mpsc::Receiver<(DuplexStream, SocketAddr)>);
 
     impl Listener for Pipes {
         type Io = DuplexStream;
-        type Addr = ();
-        async fn accept(&mut self) -> (DuplexStream, ()) {
+        type Addr = SocketAddr;
+        async fn accept(&mut self) -> (DuplexStream, SocketAddr) {
             match self.0.recv().await {
-                Some(io) => (io, ()),
+                Some(io) => io,
                 None => std::future::pending().await,
             }
         }
-        fn local_addr(&self) -> io::Result<()> {
-            Ok(())
+        fn local_addr(&self) -> io::Result<SocketAddr> {
+            Ok(SocketAddr::from(([127, 0, 0, 1], 1)))
+        }
+    }
+
+    fn from(last: u8) -> SocketAddr {
+        SocketAddr::from(([10, 0, 0, last], 40000))
+    }
+
+    struct Rig {
+        tx: tokio::sync::mpsc::Sender<(DuplexStream, SocketAddr)>,
+        listener: GuardedListener<Pipes>,
+        pool: SharedPool,
+        counters: Arc<GuardCounters>,
+    }
+
+    fn rig(total: usize, per_source: usize) -> Rig {
+        let (tx, rx) = tokio::sync::mpsc::channel(64);
+        let counters = Arc::new(GuardCounters::default());
+        let pool = Arc::new(Mutex::new(PendingPool::new(total, per_source)));
+        let listener =
+            GuardedListener::new(Pipes(rx), pool.clone(), PRE_UPGRADE_LIMIT, counters.clone());
+        Rig {
+            tx,
+            listener,
+            pool,
+            counters,
+        }
+    }
+
+    impl Rig {
+        /// A client end and the server's guarded end of a new connection from `addr`.
+        async fn connect(&mut self, addr: SocketAddr) -> (DuplexStream, GuardedIo<DuplexStream>) {
+            let (client, server) = tokio::io::duplex(256);
+            self.tx.send((server, addr)).await.unwrap();
+            let (io, _) = self.listener.accept().await;
+            (client, io)
         }
     }
 
     #[tokio::test(start_paused = true)]
-    async fn connections_beyond_the_limit_are_closed_and_counted() {
-        let (tx, rx) = tokio::sync::mpsc::channel(8);
-        let counters = Arc::new(GuardCounters::default());
-        let mut l = GuardedListener::new(Pipes(rx), 2, PRE_UPGRADE_LIMIT, counters.clone());
-        let mut clients = Vec::new();
-        for _ in 0..3 {
-            let (a, b) = tokio::io::duplex(64);
-            tx.send(b).await.unwrap();
-            clients.push(a);
+    async fn a_new_connection_evicts_the_oldest_of_the_busiest_source() {
+        let mut rig = rig(3, 3);
+        let (_c1, mut flood1) = rig.connect(from(1)).await;
+        let (_c2, _flood2) = rig.connect(from(1)).await;
+        let (_c3, mut quiet) = rig.connect(from(2)).await;
+        let (_c4, mut fresh) = rig.connect(from(3)).await;
+        assert_eq!(rig.counters.evicted.load(Ordering::Relaxed), 1);
+        assert_eq!(lock(&rig.pool).len(), 3);
+        // The evicted connection's reads fail at once; the others are untouched.
+        let mut buf = [0u8; 8];
+        assert!(flood1.read(&mut buf).await.is_err());
+        for io in [&mut quiet, &mut fresh] {
+            let read = tokio::time::timeout(Duration::from_millis(10), io.read(&mut buf)).await;
+            assert!(read.is_err(), "still waiting for bytes");
         }
-        let (first, _) = l.accept().await;
-        let (_second, _) = l.accept().await;
-        // The third is closed at once: its client reads EOF.
-        let pending = tokio::spawn(async move { l.accept().await.0 });
-        let mut buf = [0u8; 1];
-        assert_eq!(clients[2].read(&mut buf).await.unwrap(), 0);
-        assert_eq!(counters.refused.load(Ordering::Relaxed), 1);
-        // Closing one frees its slot.
-        drop(first);
-        let (a, b) = tokio::io::duplex(64);
-        tx.send(b).await.unwrap();
-        let _fourth = pending.await.unwrap();
-        drop(a);
-        assert_eq!(counters.refused.load(Ordering::Relaxed), 1);
     }
 
     #[tokio::test(start_paused = true)]
-    async fn plain_http_ends_at_the_deadline_but_a_websocket_stays() {
-        let (tx, rx) = tokio::sync::mpsc::channel(8);
-        let counters = Arc::new(GuardCounters::default());
-        let limit = Duration::from_secs(10);
-        let mut l = GuardedListener::new(Pipes(rx), 8, limit, counters.clone());
-        let (_slow_client, b) = tokio::io::duplex(64);
-        tx.send(b).await.unwrap();
-        let (mut slow, _) = l.accept().await;
-        let (mut ws_client, b) = tokio::io::duplex(64);
-        tx.send(b).await.unwrap();
-        let (mut ws, _) = l.accept().await;
+    async fn plain_http_ends_at_the_deadline_but_a_websocket_stays_and_leaves_the_pool() {
+        let mut rig = rig(8, 8);
+        let (_slow_client, mut slow) = rig.connect(from(1)).await;
+        let (mut ws_client, mut ws) = rig.connect(from(1)).await;
         ws.write_all(b"HTTP/1.1 101 Switching Protocols\r\n\r\n")
             .await
             .unwrap();
+        assert_eq!(
+            lock(&rig.pool).len(),
+            1,
+            "the websocket is no longer pending"
+        );
         let mut buf = [0u8; 64];
         let t0 = tokio::time::Instant::now();
         let err = slow.read(&mut buf).await.unwrap_err();
         assert_eq!(err.kind(), io::ErrorKind::TimedOut);
-        assert_eq!(t0.elapsed(), limit);
-        assert_eq!(counters.timed_out.load(Ordering::Relaxed), 1);
+        assert_eq!(t0.elapsed(), PRE_UPGRADE_LIMIT);
+        assert_eq!(rig.counters.timed_out.load(Ordering::Relaxed), 1);
+        assert_eq!(lock(&rig.pool).len(), 0);
         // The websocket is read long after the deadline.
         tokio::time::sleep(Duration::from_secs(60)).await;
         ws_client.write_all(b"late").await.unwrap();
         assert_eq!(ws.read(&mut buf).await.unwrap(), 4);
-        assert_eq!(counters.timed_out.load(Ordering::Relaxed), 1);
+        assert_eq!(rig.counters.timed_out.load(Ordering::Relaxed), 1);
+        // Websockets never count against the pool: many more pending connections fit.
+        let mut held = Vec::new();
+        for i in 0..8 {
+            held.push(rig.connect(from(10 + i)).await);
+        }
+        assert_eq!(rig.counters.evicted.load(Ordering::Relaxed), 0);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_source_bursting_past_its_share_has_its_newest_refused_until_the_grace_passes() {
+        let mut rig = rig(8, 2);
+        let (_a, mut first) = rig.connect(from(1)).await;
+        let (_b, _second) = rig.connect(from(1)).await;
+        // The third from the same address is closed at once; the listener hands out the next one.
+        let (mut third, server_end) = tokio::io::duplex(256);
+        rig.tx.send((server_end, from(1))).await.unwrap();
+        let (_d, _other) = rig.connect(from(2)).await;
+        let mut buf = [0u8; 8];
+        assert_eq!(third.read(&mut buf).await.unwrap(), 0);
+        assert_eq!(rig.counters.refused.load(Ordering::Relaxed), 1);
+        assert_eq!(rig.counters.evicted.load(Ordering::Relaxed), 0);
+        // Once the oldest has had its grace, a newcomer takes its place.
+        tokio::time::sleep(crate::dashboard::pending::GRACE).await;
+        let (_e, _fourth) = rig.connect(from(1)).await;
+        assert_eq!(rig.counters.evicted.load(Ordering::Relaxed), 1);
+        assert!(first.read(&mut buf).await.is_err());
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_closed_connection_frees_its_place() {
+        let mut rig = rig(2, 2);
+        let (_a, first) = rig.connect(from(1)).await;
+        let (_b, _second) = rig.connect(from(1)).await;
+        drop(first);
+        assert_eq!(lock(&rig.pool).len(), 1);
+        let (_c, _third) = rig.connect(from(1)).await;
+        assert_eq!(rig.counters.evicted.load(Ordering::Relaxed), 0);
     }
 }

@@ -1,17 +1,18 @@
 //! The HTTP side of the dashboard endpoint: the page and its assets, `/healthz`, `/metrics`, and the `/ws`
-//! handshake (origin, token and client-count checks before the upgrade).
+//! handshake: the origin, then the wrong-token throttle (429), the token (401), then a seat as operator
+//! or watcher (503), all before the upgrade.
 //!
 //! The page, its script and its style sheet are compiled into the binary. uPlot is not: it is an npm
 //! dependency, served from `<web dir>/node_modules/uplot/dist/` at run time; when it is missing the
 //! server answers 503 with the command that installs it, and the page says the same.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
 
 use axum::Router;
 use axum::extract::ws::WebSocketUpgrade;
-use axum::extract::{Query, State};
+use axum::extract::{ConnectInfo, Query, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
@@ -20,12 +21,16 @@ use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 
 use super::DashboardStats;
-use super::auth::{AccessPolicy, presented_token};
+use super::admission::Admission;
+use super::auth::{Access, AccessPolicy, Denied, presented_token};
+use super::guard::{Peer, SharedPool};
 use super::hub::{HubCounters, HubHandle};
 use super::messages::{Hello, Limits, Signals};
 use super::protocol::SUBPROTOCOL;
 use super::rate::RateLimit;
 use super::session::{Session, SessionCounters};
+use super::source::Source;
+use super::token_throttle::{FAILURE_REFILL, TokenThrottle};
 use crate::command::ControlRequest;
 use crate::telemetry::Health;
 use crate::telemetry::prometheus::MetricsSnapshot;
@@ -56,14 +61,20 @@ pub(crate) struct AppState {
     pub(crate) tick_period_ms: u64,
     /// Announced signals.
     pub(crate) signals: Signals,
-    /// The configuration in force, token redacted.
-    pub(crate) config: serde_json::Value,
+    /// The configuration an operator's `hello` carries (all of it, token redacted).
+    pub(crate) operator_config: serde_json::Value,
+    /// The configuration a watcher's `hello` carries (what the page draws).
+    pub(crate) watcher_config: serde_json::Value,
     /// Message size cap, bytes.
     pub(crate) max_message_bytes: usize,
     /// Per-client telemetry queue.
     pub(crate) client_queue: usize,
-    /// Most clients at once.
-    pub(crate) max_clients: usize,
+    /// The operator and watcher seats.
+    pub(crate) admission: Arc<Admission>,
+    /// Each source's wrong-token allowance.
+    pub(crate) throttle: Mutex<TokenThrottle>,
+    /// The connections that are not (yet) websockets.
+    pub(crate) pending: SharedPool,
     /// Each connection's message rate limit.
     pub(crate) rate: RateLimit,
     /// The server's health figures (for `/metrics`).
@@ -78,8 +89,12 @@ pub(crate) struct AppState {
     pub(crate) guard_counters: Arc<super::guard::GuardCounters>,
     /// Handshakes accepted.
     pub(crate) connections: AtomicU64,
-    /// Handshakes refused (origin, token, too many clients).
+    /// Handshakes refused (origin, token, throttled, no seat).
     pub(crate) rejected: AtomicU64,
+    /// Handshakes that presented a wrong token.
+    pub(crate) token_failures: AtomicU64,
+    /// Handshakes answered 429 because their source had no wrong-token allowance left.
+    pub(crate) token_throttled: AtomicU64,
     /// Fires on shut-down.
     pub(crate) cancel: CancellationToken,
 }
@@ -89,8 +104,16 @@ impl AppState {
     pub(crate) fn stats(&self) -> DashboardStats {
         let c = &self.session_counters;
         let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        let (_, watchers) = self.admission.held();
+        let pending = self
+            .pending
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .len();
         DashboardStats {
             clients: self.hub_counters.clients.load(Ordering::Relaxed),
+            watchers,
+            pending,
             connections: load(&self.connections),
             rejected: load(&self.rejected),
             telemetry_dropped: load(&c.telemetry_dropped),
@@ -101,8 +124,13 @@ impl AppState {
             closed_unread: load(&c.closed_unread),
             closed_write_stall: load(&c.closed_write_stall),
             records_missed: load(&self.hub_counters.records_missed),
+            closed_protocol: load(&c.closed_protocol),
+            closed_invalid_utf8: load(&c.closed_invalid_utf8),
             tcp_refused: load(&self.guard_counters.refused),
+            closed_evicted: load(&self.guard_counters.evicted),
             closed_no_upgrade: load(&self.guard_counters.timed_out),
+            token_failures: load(&self.token_failures),
+            token_throttled: load(&self.token_throttled),
         }
     }
 
@@ -228,25 +256,66 @@ pub(crate) struct WsQuery {
     pub(crate) token: Option<String>,
 }
 
-/// Frees a client slot when the connection ends (or never starts).
-struct ClientSlot(Arc<AppState>);
-
-impl Drop for ClientSlot {
-    fn drop(&mut self) {
-        self.0.hub_counters.clients.fetch_sub(1, Ordering::Relaxed);
-    }
-}
-
 fn refuse(state: &AppState, status: StatusCode, why: String) -> Response {
     let n = state.rejected.fetch_add(1, Ordering::Relaxed) + 1;
     if super::session::worth_logging(n) {
         tracing::info!(%status, total = n, "websocket handshake refused: {why}");
     }
-    (status, format!("{why}\n")).into_response()
+    let mut r = (status, format!("{why}\n")).into_response();
+    if status == StatusCode::TOO_MANY_REQUESTS {
+        r.headers_mut().insert(
+            header::RETRY_AFTER,
+            HeaderValue::from(FAILURE_REFILL.as_secs().max(1)),
+        );
+    }
+    r
+}
+
+/// Checks the token presented by a client from `source`: 429 without looking at it when the source has
+/// used up its wrong-token allowance, 401 (and one allowance less) when it is wrong. The error is the
+/// refusal's status and reason.
+fn check_token(
+    state: &AppState,
+    presented: Option<&str>,
+    source: Source,
+) -> Result<Access, (StatusCode, String)> {
+    let now = std::time::Instant::now();
+    let guessing = presented.is_some() && state.policy.token_required();
+    if guessing
+        && !state
+            .throttle
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .allows(source, now)
+    {
+        state.token_throttled.fetch_add(1, Ordering::Relaxed);
+        return Err((
+            StatusCode::TOO_MANY_REQUESTS,
+            format!(
+                "too many wrong tokens from {source}: one more try is allowed every {} s",
+                FAILURE_REFILL.as_secs().max(1)
+            ),
+        ));
+    }
+    match state.policy.check_token(presented) {
+        Ok(access) => Ok(access),
+        Err(denied) => {
+            if denied == Denied::WrongToken {
+                state.token_failures.fetch_add(1, Ordering::Relaxed);
+                state
+                    .throttle
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .failed(source, now);
+            }
+            Err((StatusCode::UNAUTHORIZED, denied.to_string()))
+        }
+    }
 }
 
 async fn ws_handler(
     State(state): State<Arc<AppState>>,
+    ConnectInfo(Peer(peer)): ConnectInfo<Peer>,
     headers: HeaderMap,
     Query(query): Query<WsQuery>,
     ws: WebSocketUpgrade,
@@ -266,44 +335,39 @@ async fn ws_handler(
     if let Err(denied) = state.policy.check_origin(origin, host) {
         return refuse(&state, StatusCode::FORBIDDEN, denied.to_string());
     }
+    let source = Source::of(peer.ip());
     let query_token = query.token.as_deref();
     let access = {
         let protocols: Vec<&str> = ws
             .requested_protocols()
             .filter_map(|v| v.to_str().ok())
             .collect();
-        state
-            .policy
-            .check_token(presented_token(query_token, protocols))
+        check_token(&state, presented_token(query_token, protocols), source)
     };
     let access = match access {
         Ok(a) => a,
-        Err(denied) => return refuse(&state, StatusCode::UNAUTHORIZED, denied.to_string()),
+        Err((status, why)) => return refuse(&state, status, why),
     };
-    let before = state.hub_counters.clients.fetch_add(1, Ordering::Relaxed);
-    let slot = ClientSlot(state.clone());
-    if before >= state.max_clients {
-        drop(slot);
-        return refuse(
-            &state,
-            StatusCode::SERVICE_UNAVAILABLE,
-            format!(
-                "too many websocket clients (the limit is {})",
-                state.max_clients
-            ),
-        );
-    }
+    let seat = match state.admission.seat(access, source) {
+        Ok(seat) => seat,
+        Err(full) => return refuse(&state, StatusCode::SERVICE_UNAVAILABLE, full.to_string()),
+    };
     state.connections.fetch_add(1, Ordering::Relaxed);
+    let can_command = access == Access::Command;
     let hello = Hello::new(
         state.tick_period_ms,
-        access == super::auth::Access::Command,
+        can_command,
         state.signals.clone(),
         Limits {
             max_message_bytes: state.max_message_bytes,
             client_queue: state.client_queue,
             rate: state.rate,
         },
-        state.config.clone(),
+        if can_command {
+            state.operator_config.clone()
+        } else {
+            state.watcher_config.clone()
+        },
     )
     .to_json();
     let session = Session {
@@ -321,7 +385,7 @@ async fn ws_handler(
         .max_message_size(state.max_message_bytes)
         .max_frame_size(state.max_message_bytes)
         .on_upgrade(move |socket| async move {
-            let _slot = slot;
+            let _seat = seat;
             session.run(socket).await;
         })
 }

@@ -45,8 +45,8 @@ pub(crate) enum Outgoing {
 /// Counters the hub shares with the endpoint.
 #[derive(Debug, Default)]
 pub(crate) struct HubCounters {
-    /// Websocket clients connected now.
-    pub(crate) clients: AtomicUsize,
+    /// Websocket clients connected now (kept by [`super::admission::Admission`]).
+    pub(crate) clients: Arc<AtomicUsize>,
     /// Tick records the hub itself missed (it lagged behind the feed).
     pub(crate) records_missed: AtomicU64,
 }

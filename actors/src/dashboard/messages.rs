@@ -275,7 +275,8 @@ pub(crate) struct Hello {
     pub(crate) commands: Vec<&'static str>,
     /// Message size limit and per-client queue, as configured.
     pub(crate) limits: Limits,
-    /// The configuration in force (the token redacted).
+    /// What of the configuration this connection may see ([`super::hello_config`]): all of it with the
+    /// token redacted for an operator, what the page draws for a watcher.
     pub(crate) config: Value,
 }
 

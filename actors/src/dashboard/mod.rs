@@ -10,8 +10,13 @@
 //! - [`rate`]: the per-connection message rate limit;
 //! - [`metrics`]: the `/metrics` text (written with [`exposition`]), and [`metrics_check`], a strict reader
 //!   of it for tests;
-//! - [`auth`]: the handshake's Origin and token checks;
-//! - [`guard`]: the TCP connection limit and the deadline to become a websocket;
+//! - [`auth`]: the handshake's Origin and token checks, and [`token_throttle`], the per-address limit on
+//!   wrong tokens;
+//! - [`admission`]: operator and watcher seats, counted apart (and watchers per address);
+//! - [`guard`]: the pool of connections that are not yet websockets ([`pending`], bounded in total and per
+//!   [`source`] address, evicting the oldest of the busiest address) and their deadline to become one;
+//! - [`strict_json`]: client messages parsed with duplicate keys refused;
+//! - [`hello_config`]: what of the configuration operators and watchers see;
 //! - [`http`]: routes, static files and the handshake;
 //! - [`load`]: the websocket load behind `pavlov bench --ws-clients`, and [`abuse`], its abusive clients.
 //!
@@ -19,20 +24,28 @@
 //! hub's lossy broadcast into its own bounded queue, and only the client's own writer waits on its socket.
 //! All of it runs on a separate single-worker runtime, so it never occupies the control actors' workers.
 
+pub(crate) mod admission;
 pub(crate) mod auth;
 pub mod guard;
+pub(crate) mod hello_config;
 pub(crate) mod http;
 pub(crate) mod hub;
 pub(crate) mod messages;
 pub(crate) mod out_queue;
+pub(crate) mod pending;
 pub(crate) mod protocol;
 pub mod rate;
 pub mod session;
+pub(crate) mod source;
+pub(crate) mod strict_json;
+pub mod token_throttle;
+
+pub use auth::generate_token;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::AtomicU64;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use axum::serve::ListenerExt;
@@ -100,14 +113,6 @@ impl Drop for Dashboard {
             rt.shutdown_background();
         }
     }
-}
-
-fn redacted_config(config: &pavlov::config::Config) -> serde_json::Value {
-    let mut config = config.clone();
-    if config.dashboard.token.is_some() {
-        config.dashboard.token = Some("<redacted>".into());
-    }
-    serde_json::to_value(&config).unwrap_or(serde_json::Value::Null)
 }
 
 /// The dashboard's listening socket, bound before anything else starts (so a busy port stops the start-up
@@ -194,6 +199,10 @@ impl Dashboard {
         let (hub, hub_handle) = Hub::new(period_ms as f64, gesture_commands);
         let hub_counters = Arc::new(HubCounters::default());
         let guard_counters = Arc::new(guard::GuardCounters::default());
+        let pending = Arc::new(Mutex::new(pending::PendingPool::new(
+            cfg.max_pending,
+            cfg.max_pending_per_address,
+        )));
         let state = Arc::new(http::AppState {
             policy: AccessPolicy::new(cfg, addr),
             hub: hub_handle,
@@ -210,10 +219,13 @@ impl Dashboard {
                 gate_prediction: server.config.control.gate_prediction.clone(),
                 bounds: LearningBounds::for_config(&server.config),
             },
-            config: redacted_config(&server.config),
+            operator_config: hello_config::for_operator(&server.config),
+            watcher_config: hello_config::for_watcher(&server.config),
             max_message_bytes: cfg.max_message_bytes,
             client_queue: cfg.client_queue,
-            max_clients: cfg.max_clients,
+            admission: Arc::new(admission::Admission::new(cfg, hub_counters.clients.clone())),
+            throttle: Mutex::new(token_throttle::TokenThrottle::default()),
+            pending: pending.clone(),
             rate: rate::DEFAULT_RATE_LIMIT,
             health: server.health(),
             web_dir,
@@ -222,6 +234,8 @@ impl Dashboard {
             guard_counters: guard_counters.clone(),
             connections: AtomicU64::new(0),
             rejected: AtomicU64::new(0),
+            token_failures: AtomicU64::new(0),
+            token_throttled: AtomicU64::new(0),
             cancel: cancel.clone(),
         });
         let hub = runtime.spawn(hub::run(
@@ -237,11 +251,11 @@ impl Dashboard {
         });
         let listener = guard::GuardedListener::new(
             listener,
-            cfg.max_clients.saturating_add(guard::EXTRA_CONNECTIONS),
+            pending,
             guard::PRE_UPGRADE_LIMIT,
             guard_counters,
         );
-        let app = http::router(state.clone());
+        let app = http::router(state.clone()).into_make_service_with_connect_info::<guard::Peer>();
         let shutdown = cancel.clone();
         let http = runtime.spawn(async move {
             let serve =

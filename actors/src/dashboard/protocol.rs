@@ -10,6 +10,7 @@
 use serde::Serialize;
 use serde_json::{Map, Value};
 
+use super::strict_json::StrictJsonError;
 use crate::command::ControlCommand;
 
 /// Version of this protocol, announced in `hello`.
@@ -85,6 +86,9 @@ pub(crate) enum ProtocolError {
     /// A binary frame.
     #[error("binary frames are not supported; send JSON text frames")]
     Binary,
+    /// An object has the same key twice (`{"cmd":"ping","cmd":"estop"}`): refused rather than guessed.
+    #[error("{0}; every key may appear once per object")]
+    DuplicateKey(String),
 }
 
 impl ProtocolError {
@@ -98,6 +102,7 @@ impl ProtocolError {
             ProtocolError::UnknownCommand(_) => "unknown_command",
             ProtocolError::BadArguments { .. } => "bad_arguments",
             ProtocolError::Binary => "binary_unsupported",
+            ProtocolError::DuplicateKey(_) => "duplicate_key",
         }
     }
 }
@@ -132,8 +137,17 @@ fn json_kind(v: &Value) -> &'static str {
 /// Parses one text frame from a client.
 pub(crate) fn parse_request(text: &str) -> Result<ClientRequest, Rejection> {
     let reject = |id: Option<Value>, error| Rejection { id, error };
-    let value: Value = serde_json::from_str(text)
-        .map_err(|e| reject(None, ProtocolError::BadJson(e.to_string())))?;
+    let value = match super::strict_json::parse(text) {
+        Ok(v) => v,
+        Err(e @ StrictJsonError::DuplicateKey { .. }) => {
+            // The id is kept when it is given once (a duplicate `id` is not an id).
+            return Err(reject(
+                peek_id(text),
+                ProtocolError::DuplicateKey(e.to_string()),
+            ));
+        }
+        Err(StrictJsonError::Syntax(e)) => return Err(reject(None, ProtocolError::BadJson(e))),
+    };
     let Value::Object(mut fields) = value else {
         return Err(reject(None, ProtocolError::NotAnObject(json_kind(&value))));
     };
@@ -357,6 +371,19 @@ mod tests {
         ] {
             assert_eq!(rejected(bad).error.code(), "bad_arguments", "{bad}");
         }
+    }
+
+    #[test]
+    fn a_key_given_twice_is_refused_not_guessed() {
+        let r = rejected(r#"{"cmd":"ping","cmd":"estop","id":4}"#);
+        assert_eq!(r.error.code(), "duplicate_key");
+        assert_eq!(r.id, Some(json!(4)));
+        assert!(r.error.to_string().contains(r#""cmd""#), "{}", r.error);
+        let r = rejected(r#"{"cmd":"set_params","alpha":0.1,"alpha":0.9}"#);
+        assert_eq!(r.error.code(), "duplicate_key");
+        // A duplicated id is no id.
+        let r = rejected(r#"{"cmd":"ping","id":1,"id":2}"#);
+        assert_eq!((r.id, r.error.code()), (None, "duplicate_key"));
     }
 
     #[test]

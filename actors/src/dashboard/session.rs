@@ -3,8 +3,9 @@
 //!
 //! The forwarder never waits on the socket: when the client falls behind, its queue drops the oldest
 //! telemetry. The writer gives up on a client whose socket accepts nothing for [`WRITE_STALL`]. Bad
-//! messages get an error reply and the connection stays open; only an over-size message (which the
-//! websocket layer cannot resynchronise after) closes it, with code 1009. Every message draws on the
+//! messages get an error reply and the connection stays open; only what the websocket layer cannot
+//! resynchronise after closes it, with the code RFC 6455 gives: 1009 for an over-size message, 1007 for a
+//! text message that is not UTF-8, 1002 for any other protocol violation. Every message draws on the
 //! connection's [`TokenBucket`]: one over the limit is answered `rate_limited` and not processed, and a
 //! connection over its limit is read at most [`OVER_LIMIT_READS_PER_SECOND`] messages a second. When
 //! [`super::out_queue::CONTROL_CAPACITY`] replies are waiting, the reader stops reading (so a fast client is
@@ -69,6 +70,10 @@ pub(crate) struct SessionCounters {
     pub(crate) closed_unread: AtomicU64,
     /// Connections dropped because their socket accepted nothing for [`WRITE_STALL`].
     pub(crate) closed_write_stall: AtomicU64,
+    /// Connections closed with 1002 for violating the websocket protocol.
+    pub(crate) closed_protocol: AtomicU64,
+    /// Connections closed with 1007 for a text message that is not UTF-8.
+    pub(crate) closed_invalid_utf8: AtomicU64,
 }
 
 /// Everything a session needs.
@@ -157,22 +162,7 @@ impl Session {
                 Ok(Message::Ping(_) | Message::Pong(_)) => continue,
                 Ok(Message::Close(_)) => return,
                 Err(e) => {
-                    if is_capacity_error(&e) {
-                        let n = self
-                            .counters
-                            .closed_oversize
-                            .fetch_add(1, Ordering::Relaxed)
-                            + 1;
-                        if worth_logging(n) {
-                            tracing::info!(
-                                total = n,
-                                "websocket client sent an over-size message: {e}"
-                            );
-                        }
-                        let _ = queue.push_control(Out::Close(close_code::SIZE, "message too big"));
-                    } else {
-                        tracing::debug!("websocket read error: {e}");
-                    }
+                    self.close_after_read_error(&e, queue);
                     return;
                 }
             };
@@ -194,6 +184,38 @@ impl Session {
                 pace.over_limit().await;
             }
         }
+    }
+
+    /// Ends the connection after the websocket layer refused what the client sent: an over-size message
+    /// closes with 1009, text that is not UTF-8 with 1007, any other protocol violation with 1002 (RFC 6455,
+    /// 7.4.1); a connection that simply went away gets nothing.
+    fn close_after_read_error(&self, e: &axum::Error, queue: &OutQueue<Out>) {
+        let (counter, code, reason) = match classify_read_error(e) {
+            ReadError::Oversize => (
+                &self.counters.closed_oversize,
+                close_code::SIZE,
+                "message too big",
+            ),
+            ReadError::InvalidUtf8 => (
+                &self.counters.closed_invalid_utf8,
+                close_code::INVALID,
+                "text frames must be UTF-8",
+            ),
+            ReadError::Protocol => (
+                &self.counters.closed_protocol,
+                close_code::PROTOCOL,
+                "websocket protocol violation",
+            ),
+            ReadError::Gone => {
+                tracing::debug!("websocket read error: {e}");
+                return;
+            }
+        };
+        let n = counter.fetch_add(1, Ordering::Relaxed) + 1;
+        if worth_logging(n) {
+            tracing::info!(total = n, code, "closing a websocket client: {e}");
+        }
+        let _ = queue.push_control(Out::Close(code, reason));
     }
 
     fn rate_limited(&self, id: Option<Value>) -> String {
@@ -284,19 +306,43 @@ impl Pacer {
     }
 }
 
-fn is_capacity_error(e: &axum::Error) -> bool {
+/// What went wrong reading a connection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ReadError {
+    /// A message or frame over the size limit.
+    Oversize,
+    /// A text message that is not UTF-8.
+    InvalidUtf8,
+    /// Any other violation of RFC 6455 (reserved bits, an unmasked frame, a bad opcode, …).
+    Protocol,
+    /// The connection ended (reset, closed without a closing handshake, I/O error).
+    Gone,
+}
+
+/// Classifies a read error by the websocket library's messages (axum wraps its error type, whose version
+/// differs from the one this crate's clients use, so the text is what is stable to match on).
+fn classify_read_error(e: &axum::Error) -> ReadError {
+    const GONE: [&str; 3] = [
+        "Connection reset without closing handshake",
+        "Remote sent after having closed",
+        "Sending after closing",
+    ];
     let mut source: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    let mut texts = Vec::new();
     while let Some(s) = source {
-        let text = s.to_string();
-        if text.contains("Space limit exceeded")
-            || text.contains("too long")
-            || text.contains("too big")
-        {
-            return true;
-        }
+        texts.push(s.to_string());
         source = s.source();
     }
-    false
+    let any = |needle: &str| texts.iter().any(|t| t.contains(needle));
+    if any("Space limit exceeded") || any("too long") || any("too big") {
+        ReadError::Oversize
+    } else if any("UTF-8 encoding error") {
+        ReadError::InvalidUtf8
+    } else if any("WebSocket protocol error") && !GONE.iter().any(|g| any(g)) {
+        ReadError::Protocol
+    } else {
+        ReadError::Gone
+    }
 }
 
 async fn forward(

@@ -94,11 +94,15 @@ impl RecorderGauge {
 /// Counters of the endpoint, for tests, benchmarks and logs.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct DashboardStats {
-    /// Clients connected now.
+    /// Websocket clients connected now (operators and watchers).
     pub clients: usize,
+    /// Watch-only websocket clients connected now.
+    pub watchers: usize,
+    /// TCP connections that are not (yet) websockets, now.
+    pub pending: usize,
     /// Websocket connections accepted so far.
     pub(crate) connections: u64,
-    /// Handshakes refused (origin, token, too many clients).
+    /// Handshakes refused (origin, token, throttled, no seat).
     pub rejected: u64,
     /// Telemetry messages dropped for slow clients (all clients).
     pub telemetry_dropped: u64,
@@ -110,14 +114,25 @@ pub struct DashboardStats {
     pub rate_limited: u64,
     /// Connections closed with 1009 for an over-size message.
     pub closed_oversize: u64,
+    /// Connections closed with 1002 for a websocket protocol violation.
+    pub closed_protocol: u64,
+    /// Connections closed with 1007 for a text message that is not UTF-8.
+    pub closed_invalid_utf8: u64,
     /// Connections dropped because their replies piled up unread.
     pub closed_unread: u64,
     /// Connections dropped because their socket accepted nothing for `dashboard::session::WRITE_STALL`.
     pub(crate) closed_write_stall: u64,
     /// Tick records the hub missed.
     pub records_missed: u64,
-    /// TCP connections closed at once because `dashboard::guard::EXTRA_CONNECTIONS` + `max_clients` were open.
+    /// TCP connections closed on arrival: their address was opening connections faster than they were
+    /// served (past `max_pending_per_address`, all younger than `dashboard::pending::GRACE`).
     pub tcp_refused: u64,
+    /// Pending (not yet websocket) connections closed to make room for a newer one.
+    pub closed_evicted: u64,
     /// Connections closed because they stayed plain HTTP longer than `dashboard::guard::PRE_UPGRADE_LIMIT`.
     pub closed_no_upgrade: u64,
+    /// Handshakes that presented a wrong token.
+    pub token_failures: u64,
+    /// Handshakes answered 429 because their address had no wrong-token allowance left.
+    pub token_throttled: u64,
 }

@@ -172,10 +172,20 @@ fn link_metrics(e: &mut Exposition, link: &LinkStatus) {
 fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
     e.gauge(
         "pavlov_ws_clients",
-        "Websocket clients connected now.",
+        "Websocket clients connected now (operators and watchers).",
         ws.clients as f64,
     );
-    let counters: [(&str, &str, u64); 8] = [
+    e.gauge(
+        "pavlov_ws_watchers",
+        "Watch-only websocket clients connected now.",
+        ws.watchers as f64,
+    );
+    e.gauge(
+        "pavlov_ws_pending_connections",
+        "TCP connections to the dashboard port that are not (yet) websockets, now.",
+        ws.pending as f64,
+    );
+    let counters: [(&str, &str, u64); 10] = [
         (
             "pavlov_ws_connections_total",
             "Websocket connections accepted.",
@@ -183,7 +193,7 @@ fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
         ),
         (
             "pavlov_ws_handshakes_rejected_total",
-            "Websocket handshakes refused (origin, token, too many clients).",
+            "Websocket handshakes refused (origin, token, wrong-token throttle, no operator or watcher seat).",
             ws.rejected,
         ),
         (
@@ -208,8 +218,18 @@ fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
         ),
         (
             "pavlov_ws_tcp_refused_total",
-            "TCP connections to the dashboard port closed at once because too many were open.",
+            "TCP connections closed on arrival because their address opened them faster than they were served.",
             ws.tcp_refused,
+        ),
+        (
+            "pavlov_ws_token_failures_total",
+            "Websocket handshakes that presented a wrong token.",
+            ws.token_failures,
+        ),
+        (
+            "pavlov_ws_token_throttled_total",
+            "Websocket handshakes answered 429 because their address had used up its wrong-token allowance.",
+            ws.token_throttled,
         ),
         (
             "pavlov_ws_hub_records_missed_total",
@@ -223,13 +243,16 @@ fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
     e.family(
         "pavlov_ws_closed_total",
         "counter",
-        "Connections the server closed for misbehaving: oversize (1009), unread_replies, write_stall, no_upgrade (plain HTTP too long).",
+        "Connections the server closed: oversize (1009), protocol (1002), invalid_utf8 (1007), unread_replies, write_stall, no_upgrade (plain HTTP too long), evicted (a pending connection closed to make room).",
     );
     for (reason, value) in [
         ("oversize", ws.closed_oversize),
+        ("protocol", ws.closed_protocol),
+        ("invalid_utf8", ws.closed_invalid_utf8),
         ("unread_replies", ws.closed_unread),
         ("write_stall", ws.closed_write_stall),
         ("no_upgrade", ws.closed_no_upgrade),
+        ("evicted", ws.closed_evicted),
     ] {
         e.sample(
             "pavlov_ws_closed_total",
@@ -361,8 +384,15 @@ mod tests {
                 clients: 2,
                 connections: 9,
                 rejected: 7,
+                watchers: 1,
+                pending: 5,
                 rate_limited: 11,
                 closed_oversize: 1,
+                tcp_refused: 6,
+                closed_evicted: 4,
+                closed_invalid_utf8: 2,
+                token_failures: 8,
+                token_throttled: 3,
                 ..DashboardStats::default()
             },
             recorder: Some(RecorderFigures {
@@ -417,6 +447,19 @@ mod tests {
             1.0
         );
         assert_eq!(value("pavlov_ws_handshakes_rejected_total", &[]), 7.0);
+        assert_eq!(
+            value("pavlov_ws_closed_total", &[("reason", "evicted")]),
+            4.0
+        );
+        assert_eq!(
+            value("pavlov_ws_closed_total", &[("reason", "invalid_utf8")]),
+            2.0
+        );
+        assert_eq!(value("pavlov_ws_token_failures_total", &[]), 8.0);
+        assert_eq!(value("pavlov_ws_token_throttled_total", &[]), 3.0);
+        assert_eq!(value("pavlov_ws_watchers", &[]), 1.0);
+        assert_eq!(value("pavlov_ws_pending_connections", &[]), 5.0);
+        assert_eq!(value("pavlov_ws_tcp_refused_total", &[]), 6.0);
         assert_eq!(value("pavlov_recorder_backlog", &[]), 12.0);
         assert_eq!(value("pavlov_actuation_pipeline_stalls_total", &[]), 6.0);
         assert_eq!(value("pavlov_serial_write_errors_total", &[]), 1.0);

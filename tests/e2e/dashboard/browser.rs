@@ -5,7 +5,9 @@
 //! checks from the server's side, with its own websocket client, that the e-stop is latched and the
 //! wheels are commanded to zero. The screenshot goes to `target/dashboard.png`. A second scenario
 //! (`web/tests/trip.e2e.mjs`, simulator with trips injected) checks the trip banner, its cause, that nothing
-//! re-arms by itself, and the Re-arm button (`target/dashboard-trip.png`).
+//! re-arms by itself, and the Re-arm button (`target/dashboard-trip.png`). A third (`web/tests/watcher.e2e.mjs`,
+//! a server with a token, the page opened without it) checks that a watcher's page draws from the
+//! watcher's `hello` and that its E-STOP click is refused (`target/dashboard-watcher.png`).
 //!
 //! Needs Node, `npm ci --prefix web` and `apt-get install chromium` (the test command installs them; see
 //! `web/tests/run-browser-test.sh`). It fails, never skips, when any of them is missing.
@@ -145,6 +147,16 @@ async fn a_robot_trip_shows_its_cause_and_the_re_arm_button_resumes_control() {
     let screenshot = target_dir().join("dashboard-trip.png");
     let summary = run_browser_script("trip.e2e.mjs", &url, &screenshot).await;
     assert_eq!(summary["rearmed"], true, "{summary}");
+    assert!(std::fs::metadata(&screenshot).is_ok_and(|m| m.len() > 20_000));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_watcher_without_the_token_sees_the_live_page_and_cannot_latch_the_estop() {
+    preflight();
+    let (_serve, url) = start_server_with(&["--token", "watcher-test-token-0123456789"]);
+    let screenshot = target_dir().join("dashboard-watcher.png");
+    let summary = run_browser_script("watcher.e2e.mjs", &url, &screenshot).await;
+    assert_eq!(summary["estop_refused"], true, "{summary}");
     assert!(std::fs::metadata(&screenshot).is_ok_and(|m| m.len() > 20_000));
 }
 

@@ -208,8 +208,13 @@ async fn learning_stays_finite_for_thousands_of_ticks_after_refused_step_sizes()
         "no stall: nothing was learned"
     );
     drop(rx);
+    let run_dir = server
+        .checkpoints
+        .run_dir
+        .clone()
+        .expect("autosave has a run folder");
     server.shutdown().await;
-    let files = list(&dir).unwrap();
+    let files = list(&run_dir).unwrap();
     let (_, last) = files.last().expect("a shut-down checkpoint");
     let cp: Checkpoint = serde_json::from_slice(&std::fs::read(last).unwrap()).unwrap();
     let weights = &cp.state.predictions[0].weights;

@@ -20,7 +20,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
 
 /// Every family `/metrics` serves once the first tick is out (the README lists the same).
-const FAMILIES: [(&str, &str); 33] = [
+const FAMILIES: [(&str, &str); 37] = [
     ("pavlov_tick_lateness_seconds", "histogram"),
     ("pavlov_ticks_fired_total", "counter"),
     ("pavlov_tick_age_seconds", "gauge"),
@@ -38,6 +38,8 @@ const FAMILIES: [(&str, &str); 33] = [
     ("pavlov_link_reconnects_total", "counter"),
     ("pavlov_link_stale_events_total", "counter"),
     ("pavlov_ws_clients", "gauge"),
+    ("pavlov_ws_watchers", "gauge"),
+    ("pavlov_ws_pending_connections", "gauge"),
     ("pavlov_ws_connections_total", "counter"),
     ("pavlov_ws_handshakes_rejected_total", "counter"),
     ("pavlov_ws_telemetry_dropped_total", "counter"),
@@ -45,6 +47,8 @@ const FAMILIES: [(&str, &str); 33] = [
     ("pavlov_ws_error_replies_total", "counter"),
     ("pavlov_ws_rate_limited_total", "counter"),
     ("pavlov_ws_tcp_refused_total", "counter"),
+    ("pavlov_ws_token_failures_total", "counter"),
+    ("pavlov_ws_token_throttled_total", "counter"),
     ("pavlov_ws_hub_records_missed_total", "counter"),
     ("pavlov_ws_closed_total", "counter"),
     ("pavlov_recorder_backlog", "gauge"),

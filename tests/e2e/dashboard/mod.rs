@@ -1,8 +1,12 @@
-//! The dashboard endpoint: the websocket protocol, the browser page, abuse, and `/metrics`.
+//! The dashboard endpoint: the websocket protocol, the browser page, abuse, who gets in when it is abused
+//! (`operator`), what it refuses to guess and keeps to itself (`strictness`), and `/metrics`.
 
 mod abuse;
 mod abusers;
 mod browser;
 mod learning_bounds;
 mod metrics;
+mod operator;
 mod protocol;
+mod rig;
+mod strictness;

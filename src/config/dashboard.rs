@@ -1,0 +1,222 @@
+//! `[dashboard]`: the HTTP/websocket endpoint that serves the dashboard and takes commands: where it
+//! listens, the token that separates operators (who may command) from watchers (who may only watch), and
+//! the limits that keep an operator's way in open however many others connect.
+
+use serde::{Deserialize, Serialize};
+
+use super::{ConfigError, invalid};
+
+/// Shortest token accepted on a non-loopback bind, in characters. A 16-character token of letters and
+/// digits has about 95 bits; `pavlov serve` generates 32 hex digits (128 bits) when none is given.
+pub const MIN_PUBLIC_TOKEN_CHARS: usize = 16;
+/// The longest per-client outgoing queue, messages: 200 s of ticks at 50 Hz, about 10 MB. A client that
+/// reads nothing is disconnected after 10 s anyway; a longer queue only holds memory and delay.
+pub const MAX_CLIENT_QUEUE: usize = 10_000;
+
+/// `[dashboard]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DashboardConfig {
+    /// Address to listen on. Binding anything but loopback requires `token` (at least
+    /// [`MIN_PUBLIC_TOKEN_CHARS`] characters).
+    pub bind: String,
+    /// Shared secret a client presents in the websocket handshake before any command is accepted.
+    pub token: Option<String>,
+    /// Whether a client without the token may watch (receive ticks) without sending commands.
+    pub watch_without_token: bool,
+    /// Extra allowed `Origin` values (the server's own origin and loopback origins are always allowed).
+    pub allowed_origins: Vec<String>,
+    /// Largest websocket message accepted, bytes.
+    pub max_message_bytes: usize,
+    /// Per-client queue of outgoing messages; when full, the oldest ticks are dropped.
+    pub client_queue: usize,
+    /// Most operators (websocket clients that may command: they presented the token, or none is
+    /// configured) at once. Watchers never take an operator's place. Formerly `max_clients`.
+    #[serde(alias = "max_clients")]
+    pub max_operators: usize,
+    /// Most watch-only websocket clients at once (all addresses together).
+    pub max_watchers: usize,
+    /// Most watch-only websocket clients from one source address (an IPv6 address counts by its /64).
+    pub max_watchers_per_address: usize,
+    /// Most TCP connections that are not (yet) websockets, all addresses together; beyond it, a new
+    /// connection evicts the oldest one of the address holding the most.
+    pub max_pending: usize,
+    /// Most TCP connections that are not (yet) websockets from one source address; beyond it, a new
+    /// connection from that address evicts its oldest.
+    pub max_pending_per_address: usize,
+}
+
+impl Default for DashboardConfig {
+    fn default() -> Self {
+        DashboardConfig {
+            bind: "127.0.0.1:8080".into(),
+            token: None,
+            watch_without_token: true,
+            allowed_origins: Vec::new(),
+            max_message_bytes: 64 * 1024,
+            client_queue: 256,
+            max_operators: 32,
+            max_watchers: 64,
+            max_watchers_per_address: 16,
+            max_pending: 128,
+            max_pending_per_address: 16,
+        }
+    }
+}
+
+fn within(key: &str, value: usize, lo: usize, hi: usize) -> Result<(), ConfigError> {
+    if (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(invalid(
+            format!("dashboard.{key}"),
+            format!("must be between {lo} and {hi}, got {value}"),
+        ))
+    }
+}
+
+impl DashboardConfig {
+    /// The bound address, parsed.
+    pub fn bind_addr(&self) -> Result<std::net::SocketAddr, ConfigError> {
+        self.bind.parse().map_err(|_| {
+            invalid(
+                "dashboard.bind",
+                format!("`{}` is not an address like 127.0.0.1:8080", self.bind),
+            )
+        })
+    }
+
+    /// Whether `bind` is an address other machines can reach (anything but loopback).
+    pub fn is_public(&self) -> bool {
+        self.bind_addr().is_ok_and(|a| !a.ip().is_loopback())
+    }
+
+    /// The token, if one is set and not empty.
+    pub fn token(&self) -> Option<&str> {
+        self.token.as_deref().filter(|t| !t.is_empty())
+    }
+
+    /// Checks every value; errors name the key and the bound.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bind = self.bind_addr()?;
+        if !bind.ip().is_loopback() {
+            match self.token() {
+                None => {
+                    return Err(invalid(
+                        "dashboard.token",
+                        format!(
+                            "binding {} (not loopback) requires a token (`pavlov serve` generates one when none is given)",
+                            self.bind
+                        ),
+                    ));
+                }
+                Some(t) if t.chars().count() < MIN_PUBLIC_TOKEN_CHARS => {
+                    return Err(invalid(
+                        "dashboard.token",
+                        format!(
+                            "binding {} (not loopback) needs a token of at least {MIN_PUBLIC_TOKEN_CHARS} characters, got {}",
+                            self.bind,
+                            t.chars().count()
+                        ),
+                    ));
+                }
+                Some(_) => {}
+            }
+        }
+        within(
+            "max_message_bytes",
+            self.max_message_bytes,
+            1024,
+            16 * 1024 * 1024,
+        )?;
+        within("client_queue", self.client_queue, 1, MAX_CLIENT_QUEUE)?;
+        within("max_operators", self.max_operators, 1, 1024)?;
+        within("max_watchers", self.max_watchers, 0, 4096)?;
+        within(
+            "max_watchers_per_address",
+            self.max_watchers_per_address,
+            1,
+            4096,
+        )?;
+        within("max_pending", self.max_pending, 1, 4096)?;
+        within(
+            "max_pending_per_address",
+            self.max_pending_per_address,
+            1,
+            self.max_pending,
+        )?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with(edit: impl FnOnce(&mut DashboardConfig)) -> Result<(), ConfigError> {
+        let mut d = DashboardConfig::default();
+        edit(&mut d);
+        d.validate()
+    }
+
+    fn key_of(r: Result<(), ConfigError>) -> String {
+        match r {
+            Err(ConfigError::Invalid { key, .. }) => key,
+            other => panic!("expected an invalid key, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn the_defaults_are_valid() {
+        assert_eq!(DashboardConfig::default().validate(), Ok(()));
+    }
+
+    #[test]
+    fn a_public_bind_needs_a_long_enough_token() {
+        let public = |token: Option<&str>| {
+            with(|d| {
+                d.bind = "0.0.0.0:8080".into();
+                d.token = token.map(String::from);
+            })
+        };
+        assert_eq!(key_of(public(None)), "dashboard.token");
+        assert_eq!(key_of(public(Some(""))), "dashboard.token");
+        let e = public(Some("a")).unwrap_err().to_string();
+        assert!(e.starts_with("dashboard.token:") && e.contains("16"), "{e}");
+        assert_eq!(key_of(public(Some("fifteen-chars!!"))), "dashboard.token");
+        assert_eq!(public(Some("sixteen-chars!!!")), Ok(()));
+        // Loopback needs none, and takes a short one.
+        assert_eq!(with(|d| d.token = Some("a".into())), Ok(()));
+        assert_eq!(with(|d| d.bind = "[::1]:0".into()), Ok(()));
+    }
+
+    #[test]
+    fn limits_name_their_key_and_bounds() {
+        type Edit = fn(&mut DashboardConfig);
+        let cases: [(&str, Edit); 7] = [
+            ("dashboard.max_operators", |d| d.max_operators = 0),
+            ("dashboard.max_watchers", |d| d.max_watchers = 5000),
+            ("dashboard.max_watchers_per_address", |d| {
+                d.max_watchers_per_address = 0
+            }),
+            ("dashboard.max_pending", |d| d.max_pending = 0),
+            ("dashboard.max_pending_per_address", |d| {
+                d.max_pending_per_address = d.max_pending + 1
+            }),
+            ("dashboard.client_queue", |d| d.client_queue = 0),
+            ("dashboard.max_message_bytes", |d| d.max_message_bytes = 10),
+        ];
+        for (key, edit) in cases {
+            let e = with(edit).unwrap_err();
+            assert!(e.to_string().contains("must be between"), "{e}");
+            assert_eq!(key_of(Err(e)), key);
+        }
+        assert_eq!(with(|d| d.max_watchers = 0), Ok(()));
+    }
+
+    #[test]
+    fn max_clients_is_read_as_max_operators() {
+        let d: DashboardConfig = toml::from_str("max_clients = 7").unwrap();
+        assert_eq!(d.max_operators, 7);
+    }
+}
