@@ -89,6 +89,17 @@ pub enum LearnError {
     /// `learn` was called without a `predict` for this tick (nothing to learn from).
     #[error("learn called without a predict for this tick")]
     LearnWithoutPredict,
+    /// A group with a logistic σ must have one prediction: its trace holds σ′(wᵀx), each prediction's own.
+    #[error(
+        "a trace group with a logistic σ has one prediction, not {0} (σ′ makes each trace its own)"
+    )]
+    SharedLogisticTrace(usize),
+    /// The cumulant or δ slice given to a group's `learn` has the wrong length.
+    #[error("learn: expected {expected} cumulants, got {got}")]
+    CumulantCountMismatch { expected: usize, got: usize },
+    /// A group state that does not fit the group it is restored into.
+    #[error("prediction `{name}`: the learner state {what}")]
+    BadGroupState { name: String, what: String },
     /// The stimulus slice given to `learn` has the wrong length.
     #[error("learn: expected {expected} stimulus values, got {got}")]
     StimulusCountMismatch { expected: usize, got: usize },

@@ -4,7 +4,9 @@
 //! - [`bounds`]: [`ParamBounds`], every parameter's and size's bound (α·‖x‖² ≤ 1, tiles, features), one
 //!   check for the configuration, `set_params` and checkpoints.
 //! - [`sigma`]: [`Sigma`], the output nonlinearity (identity or logistic) and its derivative.
-//! - [`td`]: [`TdLambda`], the paper's TD(λ) update over active-index feature lists.
+//! - [`td`]: [`TdLambda`], the paper's TD(λ) update over active-index feature lists, dense: the reference.
+//! - [`group`]: [`TraceGroup`], the same update for predictions sharing a trace, deferred so that a tick
+//!   costs the active features only: what runs.
 //! - [`spec`]: [`PredictionSpec`], one prediction as configuration (TOML).
 //! - [`inputs`]: [`SignalNames`] and [`FeatureInputs`], the named signals predictions read.
 //! - [`set`]: [`PredictionSet`], many predictions learned side by side, act first then learn.
@@ -16,6 +18,7 @@
 pub mod bounds;
 pub mod checkpoint;
 pub mod error;
+pub mod group;
 pub mod inputs;
 pub mod set;
 pub mod sigma;
@@ -26,6 +29,7 @@ pub mod tiles;
 
 pub use bounds::ParamBounds;
 pub use error::LearnError;
+pub use group::{Column, GroupState, TraceGroup};
 pub use inputs::{FeatureInputs, SignalNames};
 pub use set::{PredictionOut, PredictionSet};
 pub use sigma::Sigma;

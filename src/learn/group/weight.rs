@@ -1,0 +1,102 @@
+//! [`Weight`]: the element type of a [`super::TraceGroup`]'s weight rows (`f32` for a Horde of thousands
+//! of predictions, `f64` where a prediction must match the reference learner), and the three row kernels
+//! the group's tick is made of. Each kernel is a plain loop over two slices of equal length that the
+//! compiler vectorises; a row holds one weight per prediction of the group (feature-major layout), so a
+//! kernel streams one contiguous row per active feature.
+
+use std::fmt::Debug;
+use std::ops::{Add, Mul};
+
+/// A floating-point weight.
+pub trait Weight:
+    Copy + Debug + Default + PartialEq + Send + Sync + 'static + Add<Output = Self> + Mul<Output = Self>
+{
+    /// `"f32"` or `"f64"`, for messages and checkpoints.
+    const NAME: &'static str;
+    /// The smallest product of trace decays an epoch runs down to before a new one starts (see
+    /// [`super::epochs`]). Within an epoch a row's deferred base holds `w − c·A`, where `c` grows to
+    /// about `1/FLOOR` times the trace; `1/FLOOR` is how many times larger than the weight the
+    /// cancelling terms can get, so the floor costs `log10(1/FLOOR)` decimal digits of the weight's
+    /// precision: 4 of f64's 16, 2 of f32's 7.
+    const EPOCH_FLOOR: f64;
+    /// The value nearest to `x`.
+    fn from_f64(x: f64) -> Self;
+    /// As an `f64` (exact).
+    fn to_f64(self) -> f64;
+    /// Whether the value is neither infinite nor NaN.
+    fn finite(self) -> bool;
+}
+
+impl Weight for f32 {
+    const NAME: &'static str = "f32";
+    const EPOCH_FLOOR: f64 = 1e-2;
+    #[inline]
+    fn from_f64(x: f64) -> Self {
+        x as f32
+    }
+    #[inline]
+    fn to_f64(self) -> f64 {
+        f64::from(self)
+    }
+    #[inline]
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+impl Weight for f64 {
+    const NAME: &'static str = "f64";
+    const EPOCH_FLOOR: f64 = 1e-4;
+    #[inline]
+    fn from_f64(x: f64) -> Self {
+        x
+    }
+    #[inline]
+    fn to_f64(self) -> f64 {
+        self
+    }
+    #[inline]
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+/// `row[i] += k · v[i]` for every `i` (the slices have the same length).
+#[inline]
+pub(crate) fn add_scaled<W: Weight>(row: &mut [W], k: W, v: &[W]) {
+    for (r, &x) in row.iter_mut().zip(v) {
+        *r = *r + k * x;
+    }
+}
+
+/// `acc[i] += row[i]` for every `i`.
+#[inline]
+pub(crate) fn accumulate<W: Weight>(acc: &mut [W], row: &[W]) {
+    for (a, &r) in acc.iter_mut().zip(row) {
+        *a = *a + r;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kernels_compute_what_they_say() {
+        let mut row = [1.0f32, 2.0, 3.0];
+        add_scaled(&mut row, 0.5, &[2.0, -4.0, 0.0]);
+        assert_eq!(row, [2.0, 0.0, 3.0]);
+        let mut acc = [0.0f64; 3];
+        accumulate(&mut acc, &[1.0, 2.0, 3.0]);
+        accumulate(&mut acc, &[0.5, 0.5, 0.5]);
+        assert_eq!(acc, [1.5, 2.5, 3.5]);
+    }
+
+    #[test]
+    fn conversions_round_to_nearest() {
+        assert_eq!(f32::from_f64(0.1), 0.1f32);
+        assert_eq!(0.1f32.to_f64(), f64::from(0.1f32));
+        assert!(!f32::from_f64(1e300).finite());
+        assert!(f64::from_f64(1e300).finite());
+    }
+}
