@@ -2,17 +2,18 @@
 //! - stall: 44 observation dimensions × 10 tiles = 440 features, 44 active, identity σ, λ = 0.5;
 //! - command: 5 pair tilings × 100 tiles = 500 features, 5 active, logistic σ, λ = 0.8.
 //!
-//! Each is measured twice: through [`PredictionSet`] (gather inputs, tile, predict, learn, and the
-//! per-tick output vector, i.e. what the learning actor pays per tick) and on the bare kernel
-//! ([`TileCoder::active`] + [`TdLambda::update`], no allocation). Inputs cycle through 1024 random
-//! ticks drawn beforehand from a seeded generator.
+//! Each is measured three ways: through [`PredictionSet`] (gather inputs, tile, predict, learn, and the
+//! per-tick output vector, i.e. what the learning actor pays per tick); on the bare step that runs
+//! (`step/`: [`TileCoder::active`] + [`TraceGroup`] predict and learn, no allocation); and on the same
+//! step with the dense reference learner (`reference/`: [`TdLambda`], which walks every feature).
+//! Inputs cycle through 1024 random ticks drawn beforehand from a seeded generator.
 
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use pavlov::learn::{
-    Cumulant, FeatureInputs, FeatureSpec, PairSpec, PredictionSet, PredictionSpec, Sigma,
-    SignalNames, TdLambda, TdParams, Threshold, TileCoder,
+    Column, Cumulant, FeatureInputs, FeatureSpec, PairSpec, PredictionSet, PredictionSpec, Sigma,
+    SignalNames, TdLambda, TdParams, Threshold, TileCoder, TraceGroup,
 };
 use pavlov::obs::ObsLayout;
 use pavlov::oi::Model;
@@ -75,8 +76,16 @@ fn command_spec() -> PredictionSpec {
 /// `TICKS` random input vectors of length `len` and stimuli with probability `p`.
 fn stream(len: usize, p: f64, seed: u64) -> (Vec<Vec<f64>>, Vec<bool>) {
     let mut rng = Rng::new(seed);
+    let mut x: Vec<f64> = (0..len).map(|_| rng.next_f64()).collect();
     let inputs = (0..TICKS)
-        .map(|_| (0..len).map(|_| rng.next_f64()).collect())
+        .map(|_| {
+            for v in &mut x {
+                if rng.chance(0.05) {
+                    *v = rng.next_f64();
+                }
+            }
+            x.clone()
+        })
         .collect();
     let stimuli = (0..TICKS).map(|_| rng.chance(p)).collect();
     (inputs, stimuli)
@@ -109,7 +118,45 @@ fn bench_set(c: &mut Criterion, label: &str, spec: PredictionSpec, obs_len: usiz
     });
 }
 
-fn bench_kernel(c: &mut Criterion, label: &str, coder: TileCoder, params: TdParams, len: usize) {
+fn bench_step(c: &mut Criterion, label: &str, coder: &TileCoder, params: TdParams, len: usize) {
+    let column = Column {
+        alpha: params.alpha,
+        initial_weight: params.initial_weight,
+    };
+    let mut group: TraceGroup<f64> = TraceGroup::new(
+        coder.num_features(),
+        params.lambda,
+        params.sigma,
+        vec![column],
+    )
+    .expect("valid params");
+    let (inputs, stimuli) = stream(len, 0.05, 2);
+    let gamma = |e: bool| if e { 0.0 } else { 0.96 };
+    let mut x = Vec::with_capacity(coder.num_tilings());
+    let mut delta = [0.0];
+    let mut t = 1;
+    c.bench_function(label, |b| {
+        b.iter(|| {
+            coder.active(black_box(&inputs[t % TICKS]), &mut x);
+            let y = group.predict(&x)[0];
+            let v = params.sigma.value(y);
+            let e = stimuli[t % TICKS];
+            let stopped = group
+                .learn(gamma(e), &[f64::from(u8::from(e))], &mut delta)
+                .expect("one cumulant");
+            t += 1;
+            black_box((v, delta[0], stopped))
+        })
+    });
+}
+
+fn bench_reference(
+    c: &mut Criterion,
+    label: &str,
+    coder: &TileCoder,
+    params: TdParams,
+    len: usize,
+) {
     let mut td = TdLambda::new(coder.num_features(), params).expect("valid params");
     let (inputs, stimuli) = stream(len, 0.05, 2);
     let gamma = |e: bool| if e { 0.0 } else { 0.96 };
@@ -138,6 +185,19 @@ fn bench_kernel(c: &mut Criterion, label: &str, coder: TileCoder, params: TdPara
     });
 }
 
+fn bench_tiles(c: &mut Criterion, label: &str, coder: &TileCoder, len: usize) {
+    let (inputs, _) = stream(len, 0.05, 2);
+    let mut x = Vec::with_capacity(coder.num_tilings());
+    let mut t = 1;
+    c.bench_function(label, |b| {
+        b.iter(|| {
+            coder.active(black_box(&inputs[t % TICKS]), &mut x);
+            t += 1;
+            black_box(x.len())
+        })
+    });
+}
+
 fn learning_step(c: &mut Criterion) {
     bench_set(c, "set/stall_440_44_identity_l0.5", stall_spec(), 44, false);
     bench_set(
@@ -147,15 +207,9 @@ fn learning_step(c: &mut Criterion) {
         44,
         true,
     );
-    let stall = stall_spec();
-    bench_kernel(
-        c,
-        "kernel/stall_440_44_identity_l0.5",
-        TileCoder::one_dim(44, 10).expect("valid"),
-        stall.td_params(),
-        44,
-    );
-    let command = command_spec();
+    let stall = stall_spec().td_params();
+    let stall_coder = TileCoder::one_dim(44, 10).expect("valid");
+    let command = command_spec().td_params();
     let pairs = vec![
         (0, 1, 0.0),
         (0, 1, 0.5),
@@ -163,11 +217,35 @@ fn learning_step(c: &mut Criterion) {
         (2, 3, 0.5),
         (0, 2, 0.0),
     ];
-    bench_kernel(
+    let command_coder = TileCoder::pairs(pairs, 10).expect("valid");
+    bench_tiles(c, "tiles/stall_440_44", &stall_coder, 44);
+    bench_tiles(c, "tiles/command_500_5", &command_coder, 4);
+    bench_step(
         c,
-        "kernel/command_500_5_logistic_l0.8",
-        TileCoder::pairs(pairs, 10).expect("valid"),
-        command.td_params(),
+        "step/stall_440_44_identity_l0.5",
+        &stall_coder,
+        stall,
+        44,
+    );
+    bench_step(
+        c,
+        "step/command_500_5_logistic_l0.8",
+        &command_coder,
+        command,
+        4,
+    );
+    bench_reference(
+        c,
+        "reference/stall_440_44_identity_l0.5",
+        &stall_coder,
+        stall,
+        44,
+    );
+    bench_reference(
+        c,
+        "reference/command_500_5_logistic_l0.8",
+        &command_coder,
+        command,
         4,
     );
 }

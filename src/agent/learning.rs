@@ -504,6 +504,7 @@ mod tests {
         let mut snap = s.snapshot();
         let p = &mut snap.predictions[0];
         p.weights = vec![-0.9e308, 0.9e308];
+        p.state = None; // edited by hand: restore from the dense form
         p.traces = vec![0.0, 1.0];
         p.previous = Some(crate::learn::PreviousStep {
             active: vec![0],

@@ -16,12 +16,16 @@
 //! acted on, `σ(wᵀx_t)`, is exactly the bootstrap term of the δ computed in step 2 of the same tick:
 //! acting never waits for learning, and nothing is computed with stale features.
 //!
+//! Each prediction is a [`TraceGroup`] of one in `f64`: the deferred learner, which matches the dense
+//! reference [`super::TdLambda`] to rounding (about 1e-12 over a stall run) at a cost per tick in
+//! proportion to the active features.
+//!
 //! # Divergence
 //!
 //! The bounds of [`super::bounds`] keep a prediction's step size where TD(λ) does not diverge. Should a
 //! prediction's weights still be about to become non-finite (an extreme weight restored from a
-//! checkpoint, an overflowing sum), [`TdLambda::try_update`] refuses the step, the prediction **stops
-//! learning and keeps its last finite weights**, and it is counted ([`PredictionSet::divergences`]) and
+//! checkpoint, an overflowing sum), its learner refuses a step whose δ or deferred sum is not finite,
+//! the prediction **stops learning and keeps its last finite weights**, and it is counted ([`PredictionSet::divergences`]) and
 //! named ([`PredictionSet::diverged`]) so that the caller reports it. A stopped prediction is not valid
 //! for the gate ([`PredictionOut::valid_value`] is `None`), so the gate falls back to the stimulus alone,
 //! exactly as for an invalid input: its value neither engages nor holds off the response. It learns
@@ -33,9 +37,9 @@
 
 use super::LearnError;
 use super::bounds::{ParamBounds, check_lambda, check_set_size, check_threshold};
+use super::group::{Column, TraceGroup};
 use super::inputs::{FeatureInputs, SignalNames, resolve};
 use super::spec::{Cumulant, PredictionSpec, Threshold};
-use super::td::TdLambda;
 use super::tiles::TileCoder;
 
 /// One prediction's output on one tick.
@@ -64,28 +68,18 @@ impl PredictionOut {
     }
 }
 
-/// The state that links one tick to the next: the previous features and discount.
-#[derive(Debug, Clone, PartialEq)]
-pub(crate) struct Chain {
-    pub x_prev: Vec<usize>,
-    pub gamma_prev: f64,
-    pub has_prev: bool,
-}
-
 /// One prediction and its learner.
 #[derive(Debug, Clone)]
 pub(crate) struct Learner {
     pub spec: PredictionSpec,
     pub gather: Vec<usize>,
     pub coder: TileCoder,
-    pub td: TdLambda,
+    /// The learner: a group of one prediction, in f64 (it matches the dense reference to rounding).
+    pub group: TraceGroup<f64>,
     pub stimulus: usize,
     pub threshold: f64,
-    pub chain: Chain,
     /// The limits of runtime changes (α·‖x‖² ≤ 1).
     pub bounds: ParamBounds,
-    /// Learning stopped: the weights were about to become non-finite (see the module documentation).
-    pub diverged: bool,
     scratch: Vec<f64>,
     x_now: Vec<usize>,
     fresh: bool,
@@ -102,26 +96,33 @@ impl Learner {
         let stimulus = match &spec.cumulant {
             Cumulant::Stimulus(s) => names.resolve_stimulus(&spec.name, s)?,
         };
-        let td = TdLambda::new(resolved.coder.num_features(), spec.td_params())?;
+        let group = TraceGroup::new(
+            resolved.coder.num_features(),
+            spec.lambda,
+            spec.sigma,
+            vec![Column {
+                alpha: spec.alpha,
+                initial_weight: spec.initial_weight,
+            }],
+        )?;
         let tilings = resolved.coder.num_tilings();
         Ok(Learner {
             threshold: spec.threshold_value(),
             scratch: Vec::with_capacity(resolved.gather.len()),
             x_now: Vec::with_capacity(tilings),
-            chain: Chain {
-                x_prev: Vec::with_capacity(tilings),
-                gamma_prev: 0.0,
-                has_prev: false,
-            },
             fresh: false,
             bounds,
-            diverged: false,
             gather: resolved.gather,
             coder: resolved.coder,
-            td,
+            group,
             stimulus,
             spec,
         })
+    }
+
+    /// Whether the prediction stopped learning (see the module documentation).
+    pub fn diverged(&self) -> bool {
+        self.group.diverged(0)
     }
 
     fn predict(&mut self, inputs: &FeatureInputs) -> PredictionOut {
@@ -132,14 +133,15 @@ impl Learner {
         self.scratch
             .extend(self.gather.iter().map(|&i| inputs.get(i)));
         self.coder.active(&self.scratch, &mut self.x_now);
+        let y = self.group.predict(&self.x_now)[0];
         self.fresh = true;
         PredictionOut {
             name: self.spec.name.clone(),
-            value: self.td.predict(&self.x_now),
+            value: self.spec.sigma.value(y),
             threshold: self.threshold,
             active_features: self.x_now.len(),
             tilings: self.coder.num_tilings(),
-            diverged: self.diverged,
+            diverged: self.diverged(),
         }
     }
 
@@ -148,40 +150,22 @@ impl Learner {
     fn learn(&mut self, stimulus: bool) -> Option<f64> {
         let reward = self.spec.reward(stimulus);
         let gamma = self.spec.gamma(stimulus);
-        let delta = if self.chain.has_prev && !self.diverged {
-            match self.td.try_update(
-                &self.chain.x_prev,
-                self.chain.gamma_prev,
-                reward,
-                gamma,
-                &self.x_now,
-            ) {
-                Ok(delta) => Some(delta),
-                // R is 0 or 1 and γ finite, so any refusal means the weights ran away.
-                Err(_) => {
-                    self.diverged = true;
-                    None
-                }
-            }
-        } else {
-            None
-        };
-        std::mem::swap(&mut self.chain.x_prev, &mut self.x_now);
-        self.chain.gamma_prev = gamma;
-        self.chain.has_prev = true;
+        let mut delta = [f64::NAN];
+        // `predict` ran (the set checks it) and one cumulant is given: this cannot fail.
+        let learned = self.group.learn(gamma, &[reward], &mut delta).is_ok();
         self.fresh = false;
-        delta
+        (learned && delta[0].is_finite()).then_some(delta[0])
     }
 
     /// Forgets a `predict` that has not been learned from.
     pub fn clear_pending(&mut self) {
         self.fresh = false;
+        self.group.clear_pending();
     }
 
     pub fn break_chain(&mut self) {
-        self.chain.has_prev = false;
         self.fresh = false;
-        self.td.clear_traces();
+        self.group.break_chain();
     }
 
     /// Checks α, λ and θ against their bounds, then applies them all (or nothing).
@@ -202,11 +186,11 @@ impl Learner {
             check_threshold(name, t)?;
         }
         if let Some(a) = alpha {
-            self.td.set_alpha(a)?;
+            self.group.set_alpha(0, a)?;
             self.spec.alpha = a;
         }
         if let Some(l) = lambda {
-            self.td.set_lambda(l)?;
+            self.group.set_lambda(l)?;
             self.spec.lambda = l;
         }
         if let Some(t) = threshold {
@@ -277,9 +261,9 @@ impl PredictionSet {
             .learners
             .iter_mut()
             .map(|l| {
-                let was = l.diverged;
+                let was = l.diverged();
                 let delta = l.learn(stimuli.get(l.stimulus).copied().unwrap_or(false));
-                stopped += u64::from(l.diverged && !was);
+                stopped += u64::from(l.diverged() && !was);
                 delta
             })
             .collect();
@@ -297,7 +281,7 @@ impl PredictionSet {
     pub fn diverged(&self) -> impl Iterator<Item = &str> + '_ {
         self.learners
             .iter()
-            .filter(|l| l.diverged)
+            .filter(|l| l.diverged())
             .map(|l| l.spec.name.as_str())
     }
 
@@ -318,9 +302,8 @@ impl PredictionSet {
     /// Back to the initial weights, zero traces and no previous tick; a diverged prediction learns again.
     pub fn reset(&mut self) {
         for l in &mut self.learners {
-            l.break_chain();
-            l.td.reset();
-            l.diverged = false;
+            l.fresh = false;
+            l.group.reset();
         }
     }
 
@@ -344,12 +327,12 @@ impl PredictionSet {
         self.learners.iter().map(|l| &l.spec)
     }
 
-    /// The learner of prediction `name` (weights, traces, parameters).
-    pub fn learner(&self, name: &str) -> Option<&TdLambda> {
+    /// The learner of prediction `name` (a group of one: its weights are `weights(0)`).
+    pub fn learner(&self, name: &str) -> Option<&TraceGroup<f64>> {
         self.learners
             .iter()
             .find(|l| l.spec.name == name)
-            .map(|l| &l.td)
+            .map(|l| &l.group)
     }
 
     /// The tile coder of prediction `name`.

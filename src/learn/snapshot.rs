@@ -2,13 +2,21 @@
 //! tick, as a plain serialisable struct. Restoring a snapshot into a set built from the same specs
 //! continues learning exactly where the snapshot was taken.
 //!
+//! Each prediction is written twice: densely (`weights`, `traces`, `previous`: what a reader of the file
+//! wants, and all that earlier versions wrote) and as its learner's exact state (`state`, a
+//! [`GroupState`]). Restoring uses `state` when it is there, so a resumed run or a replay continues bit
+//! for bit; it first checks that `state` and the dense form agree, so a file edited by hand in one place
+//! is refused rather than half-believed. A snapshot without `state` (an earlier version's) restores from
+//! the dense form, which continues the run to rounding.
+//!
 //! Take snapshots between ticks (after `learn`): a `predict` whose `learn` has not happened yet is not
 //! part of the snapshot, and restoring clears it.
 
 use serde::{Deserialize, Serialize};
 
 use super::LearnError;
-use super::set::{Chain, PredictionSet};
+use super::group::GroupState;
+use super::set::PredictionSet;
 use super::spec::Threshold;
 
 /// The learned state of one prediction.
@@ -23,6 +31,9 @@ pub struct PredictionSnapshot {
     pub traces: Vec<f64>,
     /// The previous tick's active features and discount, if there was one.
     pub previous: Option<PreviousStep>,
+    /// The learner's exact state (see the module documentation); absent in earlier versions' files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub state: Option<GroupState>,
 }
 
 /// The previous tick, which the next `learn` learns from.
@@ -52,12 +63,13 @@ impl PredictionSet {
                     alpha: l.spec.alpha,
                     lambda: l.spec.lambda,
                     threshold: l.spec.threshold,
-                    weights: l.td.weights().to_vec(),
-                    traces: l.td.traces().to_vec(),
-                    previous: l.chain.has_prev.then(|| PreviousStep {
-                        active: l.chain.x_prev.clone(),
-                        gamma: l.chain.gamma_prev,
+                    weights: l.group.weights(0),
+                    traces: l.group.traces(),
+                    previous: l.group.previous().map(|(active, gamma)| PreviousStep {
+                        active: active.to_vec(),
+                        gamma,
                     }),
+                    state: Some(l.group.state()),
                 })
                 .collect(),
         }
@@ -86,9 +98,22 @@ impl PredictionSet {
     }
 }
 
+/// How far the exact state's weights and traces may be from the dense ones written beside it: they are
+/// the same numbers, the dense ones computed from the state (a relative 1e-9 leaves room for the sum
+/// of the deferred parts, never for an edit).
+const AGREEMENT: f64 = 1e-9;
+
+fn agrees(dense: &[f64], exact: &[f64]) -> bool {
+    dense.len() == exact.len()
+        && dense
+            .iter()
+            .zip(exact)
+            .all(|(a, b)| (a - b).abs() <= AGREEMENT * a.abs().max(b.abs()).max(1.0))
+}
+
 fn apply(l: &mut super::set::Learner, s: &PredictionSnapshot) -> Result<(), LearnError> {
     let name = &s.name;
-    let features = l.td.num_features();
+    let features = l.group.features();
     for v in [&s.weights, &s.traces] {
         if v.len() != features {
             return Err(LearnError::FeatureCountMismatch {
@@ -98,36 +123,52 @@ fn apply(l: &mut super::set::Learner, s: &PredictionSnapshot) -> Result<(), Lear
             });
         }
     }
-    if let Some(prev) = &s.previous {
-        if let Some(&index) = prev.active.iter().find(|&&i| i >= features) {
-            return Err(LearnError::SnapshotIndexOutOfRange {
-                name: name.clone(),
-                index,
-                features,
-            });
+    let previous = match &s.previous {
+        Some(prev) => {
+            if let Some(&index) = prev.active.iter().find(|&&i| i >= features) {
+                return Err(LearnError::SnapshotIndexOutOfRange {
+                    name: name.clone(),
+                    index,
+                    features,
+                });
+            }
+            if !prev.gamma.is_finite() {
+                return Err(LearnError::NonFiniteSnapshot(name.clone()));
+            }
+            Some((&prev.active[..], prev.gamma))
         }
-        if !prev.gamma.is_finite() {
-            return Err(LearnError::NonFiniteSnapshot(name.clone()));
-        }
-    }
+        None => None,
+    };
     // The runtime parameters go through the same bounds as `set_params` (α·‖x‖² ≤ 1). Both calls
     // check before they write; `restore` runs this on a copy first, so the set never half-changes.
     l.set_params(Some(s.alpha), Some(s.lambda), Some(s.threshold))?;
-    l.td.set_state(&s.weights, &s.traces)
-        .map_err(|_| LearnError::NonFiniteSnapshot(name.clone()))?;
-    l.diverged = false;
-    l.chain = match &s.previous {
-        Some(prev) => Chain {
-            x_prev: prev.active.clone(),
-            gamma_prev: prev.gamma,
-            has_prev: true,
-        },
-        None => Chain {
-            x_prev: Vec::with_capacity(l.coder.num_tilings()),
-            gamma_prev: 0.0,
-            has_prev: false,
-        },
-    };
+    match &s.state {
+        Some(state) => {
+            let same_params = state.alphas == [s.alpha] && state.lambda == s.lambda;
+            let same_previous = state.x_prev.as_deref()
+                == s.previous.as_ref().map(|p| &p.active[..])
+                && s.previous
+                    .as_ref()
+                    .is_none_or(|p| p.gamma == state.gamma_prev);
+            l.group.restore_state(name, state)?;
+            let consistent = same_params
+                && same_previous
+                && agrees(&s.weights, &l.group.weights(0))
+                && agrees(&s.traces, &l.group.traces());
+            if !consistent {
+                return Err(LearnError::BadGroupState {
+                    name: name.clone(),
+                    what: "disagrees with the weights, traces, parameters or previous step written \
+                           beside it (after editing those by hand, remove `state` to restore from them)"
+                        .into(),
+                });
+            }
+        }
+        None => l
+            .group
+            .set_dense(0, &s.weights, &s.traces, previous)
+            .map_err(|_| LearnError::NonFiniteSnapshot(name.clone()))?,
+    }
     l.clear_pending();
     Ok(())
 }

@@ -50,6 +50,8 @@ pub(crate) struct ClosedEpoch<W> {
     pub carry: f64,
     /// `A` at its close, one per prediction.
     pub a_end: Vec<W>,
+    /// The largest `|A|` at its close.
+    pub a_end_max: f64,
     /// The rows that entered it with a non-zero trace (some may have moved on since).
     pub members: Vec<usize>,
 }
@@ -92,10 +94,12 @@ impl<W: Weight> Epochs<W> {
             .then(|| self.ring.pop_front())
             .flatten();
         let a_end = std::mem::replace(&mut self.a_w, vec![W::default(); cols]);
+        let a_end_max = self.a.iter().fold(0.0f64, |m, a| m.max(a.abs()));
         self.ring.push_back(ClosedEpoch {
             id: self.id,
             carry,
             a_end,
+            a_end_max,
             members: std::mem::take(&mut self.members),
         });
         self.id = self.id.wrapping_add(1);
@@ -111,6 +115,11 @@ impl<W: Weight> Epochs<W> {
             .front()
             .map_or(usize::MAX, |front| id.wrapping_sub(front.id) as usize);
         self.ring.iter().skip(start.min(self.ring.len()))
+    }
+
+    /// The sum of the closed epochs' largest `|A|`.
+    pub fn ring_a_max(&self) -> f64 {
+        self.ring.iter().map(|c| c.a_end_max).sum()
     }
 
     /// Back to a first epoch with `A = 0` and no closed epochs (the numbering continues).

@@ -64,6 +64,10 @@ struct Chain {
     step_prev: Vec<f64>,
     /// `eᵀx_t` after the last update: with `step_prev`, turns `y_prev` into its current value.
     z: f64,
+    /// The trace coefficients summed over this tick's features when they were read, and the epoch
+    /// they were read in: with the rows touched since, they give `z` without reading the rows again.
+    coef_sum_now: f64,
+    epoch_now: u32,
     gamma_prev: f64,
     has_prev: bool,
     fresh: bool,
@@ -100,6 +104,8 @@ impl<W: Weight> TraceGroup<W> {
                 y_now: vec![0.0; cols],
                 step_prev: vec![0.0; cols],
                 z: 0.0,
+                coef_sum_now: 0.0,
+                epoch_now: 0,
                 gamma_prev: 0.0,
                 has_prev: false,
                 fresh: false,
@@ -148,6 +154,8 @@ impl<W: Weight> TraceGroup<W> {
         for (i, y) in self.chain.y_now.iter_mut().enumerate() {
             *y = self.acc[i].to_f64() + coef_sum * self.rows.a(i);
         }
+        self.chain.coef_sum_now = coef_sum;
+        self.chain.epoch_now = self.rows.epoch();
         self.chain.x_now.clear();
         self.chain.x_now.extend_from_slice(active);
         self.chain.fresh = true;
@@ -213,7 +221,7 @@ impl<W: Weight> TraceGroup<W> {
                 *step = self.columns[i].alpha * delta;
             }
             self.rows.decay(self.chain.gamma_prev * self.lambda);
-            self.rows.touch(&self.chain.x_prev, grad);
+            let read_again = self.rows.touch(&self.chain.x_prev, grad);
             for (i, delta) in deltas.iter_mut().enumerate() {
                 let step = self.chain.step_prev[i];
                 if step != 0.0 && !self.rows.step(i, step) {
@@ -223,7 +231,11 @@ impl<W: Weight> TraceGroup<W> {
                     stopped += 1;
                 }
             }
-            self.chain.z = self.rows.trace_dot(&self.chain.x_now);
+            // eᵀx_t: this tick's rows as read, carried into the current epoch, plus g for each of
+            // them the touch just added to.
+            let carry = self.rows.carry_since(self.chain.epoch_now);
+            self.chain.z =
+                self.chain.coef_sum_now * carry * self.rows.p() + grad * read_again as f64;
         } else {
             self.chain.step_prev.fill(0.0);
             self.chain.z = 0.0;

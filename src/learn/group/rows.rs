@@ -18,6 +18,13 @@ pub(crate) struct DeferredRows<W> {
     pub row_epoch: Vec<u32>,
     /// The epochs.
     pub epochs: Epochs<W>,
+    /// At least the largest `|W0|` (raised by every write, exact after a rescan).
+    pub w0_bound: f64,
+    /// At least the largest `|coef|`.
+    pub coef_bound: f64,
+    /// The rows the last `gather` read carry its mark.
+    pub marks: Vec<u32>,
+    pub mark: u32,
 }
 
 impl<W: Weight> DeferredRows<W> {
@@ -35,7 +42,17 @@ impl<W: Weight> DeferredRows<W> {
             coef: vec![0.0; features],
             row_epoch: vec![0; features],
             epochs: Epochs::new(cols),
+            w0_bound: initial.iter().fold(0.0f64, |m, w| m.max(w.abs())),
+            coef_bound: 0.0,
+            marks: vec![0; features],
+            mark: 0,
         }
+    }
+
+    /// Recomputes the bounds on `|W0|` and `|coef|` exactly.
+    pub fn rescan_bounds(&mut self) {
+        self.w0_bound = self.w0.iter().fold(0.0f64, |m, w| m.max(w.to_f64().abs()));
+        self.coef_bound = self.coef.iter().fold(0.0f64, |m, c| m.max(c.abs()));
     }
 
     /// The number of feature rows.
@@ -51,10 +68,14 @@ impl<W: Weight> DeferredRows<W> {
     /// Brings row `f` into the current epoch: applies the closed epochs' updates it has not seen.
     #[inline]
     pub fn bring_forward(&mut self, f: usize) {
-        let from = self.row_epoch[f];
-        if from == self.epochs.id {
-            return;
+        if self.row_epoch[f] != self.epochs.id {
+            self.bring_forward_from_old_epoch(f);
         }
+    }
+
+    #[inline(never)]
+    fn bring_forward_from_old_epoch(&mut self, f: usize) {
+        let from = self.row_epoch[f];
         self.row_epoch[f] = self.epochs.id;
         let mut c = self.coef[f];
         if c == 0.0 {
@@ -64,14 +85,17 @@ impl<W: Weight> DeferredRows<W> {
         let (w0, epochs) = (&mut self.w0, &self.epochs);
         let row = &mut w0[f * cols..(f + 1) * cols];
         let mut seen = false;
+        let mut raise = 0.0;
         for closed in epochs.since(from) {
             seen = true;
             add_scaled(row, W::from_f64(c), &closed.a_end);
+            raise += c.abs() * closed.a_end_max;
             c *= closed.carry;
             if c == 0.0 {
                 break;
             }
         }
+        self.w0_bound += raise;
         // Not in the ring: it cannot be (rows leave with their epoch), but a trace that old is gone.
         debug_assert!(seen, "row {f} of epoch {from} outside the ring");
         self.coef[f] = if seen { c } else { 0.0 };
@@ -81,17 +105,24 @@ impl<W: Weight> DeferredRows<W> {
     }
 
     /// Adds rows `active` into `acc` (one sum per prediction) and returns the sum of their
-    /// coefficients, after bringing them forward: `wᵀx = acc + Σcoef · A`.
+    /// coefficients, after bringing them forward: `wᵀx = acc + Σcoef · A`. Marks the rows, so that
+    /// the next [`DeferredRows::touch`] can count how many of its rows are among them.
     pub fn gather(&mut self, active: &[usize], acc: &mut [W]) -> f64 {
         acc.fill(W::default());
+        self.mark = self.mark.wrapping_add(1);
         let mut coef_sum = 0.0;
+        let cols = self.cols;
         for &f in active {
             if f >= self.coef.len() {
                 continue;
             }
             self.bring_forward(f);
-            let c = self.cols;
-            accumulate(acc, &self.w0[f * c..(f + 1) * c]);
+            self.marks[f] = self.mark;
+            if cols == 1 {
+                acc[0] = acc[0] + self.w0[f];
+            } else {
+                accumulate(acc, &self.w0[f * cols..(f + 1) * cols]);
+            }
             coef_sum += self.coef[f];
         }
         coef_sum
@@ -136,15 +167,21 @@ impl<W: Weight> DeferredRows<W> {
                     break;
                 }
                 add_scaled(row, W::from_f64(c), &closed.a_end);
+                self.w0_bound += c.abs() * closed.a_end_max;
                 c *= closed.carry;
             }
         }
     }
 
-    /// Adds `g` to the trace of rows `active` (e ← e + g·x), keeping their weights.
-    pub fn touch(&mut self, active: &[usize], g: f64) {
+    /// Adds `g` to the trace of rows `active` (e ← e + g·x), keeping their weights. Returns how many of
+    /// them the last [`DeferredRows::gather`] read.
+    pub fn touch(&mut self, active: &[usize], g: f64) -> usize {
         let d = g / self.epochs.p;
         let minus_d = W::from_f64(-d);
+        let a_max = self.epochs.a.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+        let cols = self.cols;
+        let mut touched = false;
+        let mut read = 0;
         for &f in active {
             if f >= self.coef.len() {
                 continue;
@@ -154,23 +191,74 @@ impl<W: Weight> DeferredRows<W> {
                 self.epochs.members.push(f);
             }
             self.coef[f] += d;
-            let cols = self.cols;
-            let (w0, a_w) = (&mut self.w0, &self.epochs.a_w);
-            add_scaled(&mut w0[f * cols..(f + 1) * cols], minus_d, a_w);
+            self.coef_bound = self.coef_bound.max(self.coef[f].abs());
+            touched = true;
+            read += usize::from(self.marks[f] == self.mark);
+            if cols == 1 {
+                self.w0[f] = self.w0[f] + minus_d * self.epochs.a_w[0];
+            } else {
+                let (w0, a_w) = (&mut self.w0, &self.epochs.a_w);
+                add_scaled(&mut w0[f * cols..(f + 1) * cols], minus_d, a_w);
+            }
+        }
+        if touched {
+            // Each touched row moved by at most |d|·max|A|: so did the largest.
+            self.w0_bound += d.abs() * a_max;
+        }
+        read
+    }
+
+    /// The carry of the epoch closed since epoch `id`, or 1 when `id` is still the current one: what
+    /// turns a coefficient read in epoch `id` into the current epoch's units (at most one epoch closes
+    /// between a `gather` and the `touch` after it).
+    pub fn carry_since(&self, id: u32) -> f64 {
+        if id == self.epochs.id {
+            1.0
+        } else {
+            self.epochs.since(id).map(|c| c.carry).product()
         }
     }
 
+    /// The current epoch's number.
+    pub fn epoch(&self) -> u32 {
+        self.epochs.id
+    }
+
+    /// `P`, the trace's scale in the current epoch.
+    pub fn p(&self) -> f64 {
+        self.epochs.p
+    }
+
     /// Applies `w ← w + step · e` for prediction `col`. Refused (nothing changes, `false`) when it
-    /// would make the deferred sum non-finite.
+    /// would make a weight non-finite.
+    ///
+    /// Every weight is `W0 + coef·A` plus the closed epochs' `coef·A_end`, so it is at most
+    /// `max|W0| + max|coef| · (Σ max|A_end| + |A|)` in size: while that bound is below
+    /// [`Weight::SAFE`] the step is safe without looking at a row. Above it (a diverging learner, or
+    /// extreme weights restored), every row of the prediction is checked.
     pub fn step(&mut self, col: usize, step: f64) -> bool {
         let a = self.epochs.a[col] + step * self.epochs.p;
         let a_w = W::from_f64(a);
         if !a.is_finite() || !a_w.finite() {
             return false;
         }
+        let bound = self.w0_bound + self.coef_bound * (self.epochs.ring_a_max() + a.abs().max(1.0));
+        let surely_safe = bound < W::SAFE; // false for a NaN bound too
+        if !surely_safe && !self.step_stays_finite(col, step) {
+            return false;
+        }
         self.epochs.a[col] = a;
         self.epochs.a_w[col] = a_w;
         true
+    }
+
+    /// Whether every weight of prediction `col` stays finite, and below [`Weight::SAFE`], after `step`.
+    fn step_stays_finite(&self, col: usize, step: f64) -> bool {
+        let change = step * self.epochs.p;
+        (0..self.features()).all(|f| {
+            let w = self.weight(f, col) + self.coef_now(f) * change;
+            w.is_finite() && w.abs() < W::SAFE
+        })
     }
 
     /// `A` of prediction `col` in the current epoch.
@@ -192,16 +280,6 @@ impl<W: Weight> DeferredRows<W> {
             }
         }
         c
-    }
-
-    /// The trace summed over rows `active`: `eᵀx`.
-    pub fn trace_dot(&self, active: &[usize]) -> f64 {
-        let sum: f64 = active
-            .iter()
-            .filter(|&&f| f < self.coef.len())
-            .map(|&f| self.coef_now(f))
-            .sum();
-        sum * self.epochs.p
     }
 
     /// The trace of row `f`, e(f).
@@ -236,6 +314,7 @@ impl<W: Weight> DeferredRows<W> {
         self.coef.fill(0.0);
         self.epochs.restart();
         self.row_epoch.fill(self.epochs.id);
+        self.rescan_bounds();
     }
 
     /// Sets prediction `col`'s weights to `weights` and every row's trace to `traces` (one per row),
@@ -258,5 +337,6 @@ impl<W: Weight> DeferredRows<W> {
                 self.epochs.members.push(f);
             }
         }
+        self.rescan_bounds();
     }
 }

@@ -176,11 +176,17 @@ impl<W: Weight> TraceGroup<W> {
                         id: c.id,
                         carry: c.carry,
                         a_end: to_ws(&c.a_end),
+                        a_end_max: c.a_end.iter().fold(0.0f64, |m, a| m.max(a.abs())),
                         members: c.members.clone(),
                     })
                     .collect(),
             },
+            w0_bound: 0.0,
+            coef_bound: 0.0,
+            marks: vec![0; n],
+            mark: 0,
         };
+        self.rows.rescan_bounds();
         self.lambda = s.lambda;
         for (c, &a) in self.columns.iter_mut().zip(&s.alphas) {
             c.alpha = a;
@@ -193,6 +199,8 @@ impl<W: Weight> TraceGroup<W> {
             y_now: vec![0.0; cols],
             step_prev: s.step_prev.clone(),
             z: s.z,
+            coef_sum_now: 0.0,
+            epoch_now: s.epoch,
             gamma_prev: s.gamma_prev,
             has_prev: s.x_prev.is_some(),
             fresh: false,

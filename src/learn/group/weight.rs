@@ -19,6 +19,9 @@ pub trait Weight:
     /// cancelling terms can get, so the floor costs `log10(1/FLOOR)` decimal digits of the weight's
     /// precision: 4 of f64's 16, 2 of f32's 7.
     const EPOCH_FLOOR: f64;
+    /// Magnitudes below this are far from overflowing in every operation of a tick (a sum of two or a
+    /// product by a trace coefficient): the divergence guard of [`super::TraceGroup`] checks against it.
+    const SAFE: f64;
     /// The value nearest to `x`.
     fn from_f64(x: f64) -> Self;
     /// As an `f64` (exact).
@@ -30,6 +33,7 @@ pub trait Weight:
 impl Weight for f32 {
     const NAME: &'static str = "f32";
     const EPOCH_FLOOR: f64 = 1e-2;
+    const SAFE: f64 = 1e34;
     #[inline]
     fn from_f64(x: f64) -> Self {
         x as f32
@@ -47,6 +51,7 @@ impl Weight for f32 {
 impl Weight for f64 {
     const NAME: &'static str = "f64";
     const EPOCH_FLOOR: f64 = 1e-4;
+    const SAFE: f64 = 1e300;
     #[inline]
     fn from_f64(x: f64) -> Self {
         x
