@@ -84,6 +84,9 @@ fn resume_falls_back_past_a_torn_a_nan_and_a_foreign_checkpoint_naming_each() {
     // weights, a torn write.
     let mut valid = fresh_checkpoint(&cfg, 100);
     valid.state.predictions[0].alpha = 0.01;
+    if let Some(exact) = &mut valid.state.predictions[0].state {
+        exact.alphas = vec![0.01];
+    }
     let valid_path = write_atomic(&runs.join("20240101T000000Z-0001"), &valid).unwrap();
     let mut other: Config = cfg.clone();
     other.predictions[0].lambda = 0.25;
