@@ -27,6 +27,9 @@ use super::spec::{FeatureSpec, Threshold};
 
 /// Most tiles per input dimension (a 2-D pair tiling has this many squared).
 pub const MAX_TILES_PER_DIMENSION: usize = 1000;
+/// Most offset tilings per input dimension (tiles3 advises about four per input; nexting-style
+/// constructions use around ten).
+pub const MAX_TILINGS_PER_DIMENSION: usize = 64;
 /// Most features of all predictions together (and so of any one): 16 MB of weights and traces.
 pub const MAX_FEATURES: usize = 1_000_000;
 /// Most predictions learned side by side.
@@ -196,9 +199,22 @@ pub fn feature_bounds(
             all_obs,
             inputs,
             tiles,
+            tilings,
         } => {
+            if !(1..=MAX_TILINGS_PER_DIMENSION).contains(tilings) {
+                return Err(LearnError::OutOfBounds {
+                    name: name.to_string(),
+                    field: "features.tilings".into(),
+                    value: tilings.to_string(),
+                    bound: format!("is outside 1..={MAX_TILINGS_PER_DIMENSION} per dimension"),
+                });
+            }
             let dims = if *all_obs { obs_dims } else { 0 };
-            (*tiles, dims.saturating_add(inputs.len()), Some(*tiles))
+            (
+                *tiles,
+                dims.saturating_add(inputs.len()).saturating_mul(*tilings),
+                Some(*tiles),
+            )
         }
         FeatureSpec::Pairs { pairs, tiles } => {
             if let Some((k, p)) = pairs
@@ -318,6 +334,7 @@ mod tests {
             all_obs: true,
             inputs: vec!["left_elbow".into()],
             tiles,
+            tilings: 1,
         };
         assert_eq!(
             feature_bounds("stall", &one_dim(10), 44).unwrap(),

@@ -89,6 +89,19 @@ pub enum LearnError {
     /// `learn` was called without a `predict` for this tick (nothing to learn from).
     #[error("learn called without a predict for this tick")]
     LearnWithoutPredict,
+    /// A cumulant selector that names no signal.
+    #[error("family `{family}`: cumulant `{selector}` names no signal (known: {known})")]
+    UnknownSignal {
+        family: String,
+        selector: String,
+        known: String,
+    },
+    /// A family without a usable name (empty, or holding `/` or `@`, which its predictions' names use).
+    #[error("family name `{0}` must be non-empty and without `/` or `@`")]
+    BadFamilyName(String),
+    /// A family without cumulants or without timescales.
+    #[error("family `{0}` needs at least one cumulant and one timescale")]
+    EmptyFamily(String),
     /// A group with a logistic σ must have one prediction: its trace holds σ′(wᵀx), each prediction's own.
     #[error(
         "a trace group with a logistic σ has one prediction, not {0} (σ′ makes each trace its own)"

@@ -125,6 +125,7 @@ pub(crate) fn resolve(
             all_obs,
             inputs,
             tiles,
+            tilings,
         } => {
             let mut gather: Vec<usize> = if *all_obs {
                 (0..names.obs.len()).collect()
@@ -134,7 +135,7 @@ pub(crate) fn resolve(
             for name in inputs {
                 gather.push(names.resolve_input(prediction, name)?);
             }
-            let coder = TileCoder::one_dim(gather.len(), *tiles)?;
+            let coder = TileCoder::one_dim_offset(gather.len(), *tiles, *tilings)?;
             Ok(ResolvedFeatures { gather, coder })
         }
         FeatureSpec::Pairs { pairs, tiles } => {
@@ -247,6 +248,7 @@ mod tests {
             all_obs: true,
             inputs: vec!["right_elbow".into()],
             tiles: 10,
+            tilings: 1,
         };
         let r = resolve("p", &spec, &names()).unwrap();
         assert_eq!(r.gather.len(), 45);
@@ -256,6 +258,7 @@ mod tests {
             all_obs: false,
             inputs: vec![],
             tiles: 10,
+            tilings: 1,
         };
         assert_eq!(
             resolve("p", &empty, &names()).unwrap_err(),

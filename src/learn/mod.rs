@@ -5,6 +5,7 @@
 //!   check for the configuration, `set_params` and checkpoints.
 //! - [`sigma`]: [`Sigma`], the output nonlinearity (identity or logistic) and its derivative.
 //! - [`td`]: [`TdLambda`], the paper's TD(λ) update over active-index feature lists, dense: the reference.
+//! - [`horde`]: [`Horde`], thousands of general predictions (GVFs) in families, grouped by shared trace.
 //! - [`group`]: [`TraceGroup`], the same update for predictions sharing a trace, deferred so that a tick
 //!   costs the active features only: what runs.
 //! - [`spec`]: [`PredictionSpec`], one prediction as configuration (TOML).
@@ -19,6 +20,7 @@ pub mod bounds;
 pub mod checkpoint;
 pub mod error;
 pub mod group;
+pub mod horde;
 pub mod inputs;
 pub mod set;
 pub mod sigma;
@@ -30,6 +32,7 @@ pub mod tiles;
 pub use bounds::ParamBounds;
 pub use error::LearnError;
 pub use group::{Column, GroupState, TraceGroup};
+pub use horde::{FamilySpec, Horde, HordeState, TickSignals};
 pub use inputs::{FeatureInputs, SignalNames};
 pub use set::{PredictionOut, PredictionSet};
 pub use sigma::Sigma;

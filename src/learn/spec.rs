@@ -54,17 +54,27 @@ pub enum Cumulant {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum FeatureSpec {
-    /// One tiling of `tiles` tiles per input: every observation dimension (if `all_obs`), then the
-    /// named `inputs` (stall experiment: `all_obs = true, tiles = 10`).
+    /// `tilings` tilings (default 1) of `tiles` tiles per input, evenly offset: every observation
+    /// dimension (if `all_obs`), then the named `inputs` (stall experiment: `all_obs = true, tiles = 10`).
     OneDim {
         #[serde(default)]
         all_obs: bool,
         #[serde(default)]
         inputs: Vec<String>,
         tiles: usize,
+        #[serde(default = "one_tiling", skip_serializing_if = "is_one")]
+        tilings: usize,
     },
     /// One `tiles × tiles` tiling per pair of named inputs, each with its own offset.
     Pairs { pairs: Vec<PairSpec>, tiles: usize },
+}
+
+fn one_tiling() -> usize {
+    1
+}
+
+fn is_one(n: &usize) -> bool {
+    *n == 1
 }
 
 /// One 2-D tiling over inputs `x` and `y`, shifted by `offset` (a fraction of a tile, in `[0, 1)`).

@@ -5,8 +5,10 @@
 //! laid out tiling by tiling: tiling `k` owns the block `[k·B, (k+1)·B)` where B is its tile count.
 //!
 //! Two layouts, as in Modayil & Sutton:
-//! - [`TileSpec::OneDimTilings`]: one tiling of N tiles per input dimension (stall experiment:
-//!   44 dimensions × 10 tiles = 440 features, 44 active). Feature of dimension d: `d·N + bin(x_d)`.
+//! - [`TileSpec::OneDimTilings`]: T tilings of N tiles per input dimension, tiling k shifted by k/T of a
+//!   tile (stall experiment: T = 1, 44 dimensions × 10 tiles = 440 features, 44 active; a nexting-style
+//!   Horde uses several, e.g. 44 × 11 tilings × 12 tiles = 5,808 features, 484 active, as in [tiles3]'s
+//!   offsets for one dimension). Feature of dimension d, tiling k: `(d·T + k)·N + bin(x_d, k/T)`.
 //! - [`TileSpec::PairTilings`]: 2-D tilings of N × N tiles over pairs of inputs, each with its own
 //!   offset (interaction experiment: 5 tilings × 100 = 500 features, 5 active). Feature of pair k over
 //!   inputs (i, j): `k·N² + bin(x_i)·N + bin(x_j)`.
@@ -28,8 +30,13 @@ use super::LearnError;
 /// What a tile coder looks like, before validation.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum TileSpec {
-    /// One tiling of `tiles` tiles for each of the inputs `0..dims`.
-    OneDimTilings { dims: usize, tiles: usize },
+    /// `tilings` tilings of `tiles` tiles for each of the inputs `0..dims`, tiling k offset by
+    /// k/`tilings` of a tile.
+    OneDimTilings {
+        dims: usize,
+        tiles: usize,
+        tilings: usize,
+    },
     /// One 2-D tiling of `tiles × tiles` per pair `(input i, input j, offset as a fraction of a tile)`.
     PairTilings {
         pairs: Vec<(usize, usize, f64)>,
@@ -50,7 +57,11 @@ impl TileCoder {
     /// [`super::bounds::MAX_FEATURES`] features.
     pub fn new(spec: TileSpec) -> Result<Self, LearnError> {
         let (tilings, tiles_per_tiling, num_inputs) = match &spec {
-            TileSpec::OneDimTilings { dims, tiles } => (*dims, Some(*tiles), *dims),
+            TileSpec::OneDimTilings {
+                dims,
+                tiles,
+                tilings,
+            } => (dims.saturating_mul(*tilings), Some(*tiles), *dims),
             TileSpec::PairTilings { pairs, tiles } => {
                 let squared = tiles.checked_mul(*tiles);
                 let mut inputs = 0;
@@ -85,7 +96,16 @@ impl TileCoder {
 
     /// One tiling of `tiles` tiles per input dimension `0..dims`.
     pub fn one_dim(dims: usize, tiles: usize) -> Result<Self, LearnError> {
-        TileCoder::new(TileSpec::OneDimTilings { dims, tiles })
+        TileCoder::one_dim_offset(dims, tiles, 1)
+    }
+
+    /// `tilings` tilings of `tiles` tiles per input dimension `0..dims`, evenly offset.
+    pub fn one_dim_offset(dims: usize, tiles: usize, tilings: usize) -> Result<Self, LearnError> {
+        TileCoder::new(TileSpec::OneDimTilings {
+            dims,
+            tiles,
+            tilings,
+        })
     }
 
     /// One `tiles × tiles` tiling per `(i, j, offset)` pair.
@@ -106,7 +126,7 @@ impl TileCoder {
     /// The number of tilings, which is the number of active features for a fully valid input.
     pub fn num_tilings(&self) -> usize {
         match &self.spec {
-            TileSpec::OneDimTilings { dims, .. } => *dims,
+            TileSpec::OneDimTilings { dims, tilings, .. } => dims * tilings,
             TileSpec::PairTilings { pairs, .. } => pairs.len(),
         }
     }
@@ -121,10 +141,28 @@ impl TileCoder {
     pub fn active(&self, input: &[f64], out: &mut Vec<usize>) {
         out.clear();
         match &self.spec {
-            TileSpec::OneDimTilings { dims, tiles } => {
+            TileSpec::OneDimTilings {
+                dims,
+                tiles,
+                tilings: 1,
+            } => {
                 for (d, &x) in input.iter().take(*dims).enumerate() {
                     if let Some(b) = bin(x, *tiles, 0.0) {
                         out.push(d * tiles + b);
+                    }
+                }
+            }
+            TileSpec::OneDimTilings {
+                dims,
+                tiles,
+                tilings,
+            } => {
+                let step = 1.0 / *tilings as f64;
+                for (d, &x) in input.iter().take(*dims).enumerate() {
+                    for k in 0..*tilings {
+                        if let Some(b) = bin(x, *tiles, k as f64 * step) {
+                            out.push((d * tilings + k) * tiles + b);
+                        }
                     }
                 }
             }
@@ -185,6 +223,23 @@ mod tests {
         assert_eq!(bin(f64::NAN, 10, 0.0), None);
         assert_eq!(bin(f64::INFINITY, 10, 0.0), None);
         assert_eq!(bin(f64::NEG_INFINITY, 10, 0.0), None);
+    }
+
+    #[test]
+    fn offset_tilings_split_each_tile() {
+        // 2 dimensions, 3 tilings of 4 tiles: offsets 0, 1/3 and 2/3 of a tile.
+        let c = TileCoder::one_dim_offset(2, 4, 3).unwrap();
+        assert_eq!((c.num_features(), c.num_tilings()), (24, 6));
+        let mut out = Vec::new();
+        // x = 0.2: 0.8 + {0, 1/3, 2/3} → tiles 0, 1, 1; y = 0.9: 3.6 + … → 3, 3, 3 (clamped).
+        c.active(&[0.2, 0.9], &mut out);
+        assert_eq!(out, vec![0, 5, 9, 15, 19, 23]);
+        // A missing dimension drops all of its tilings.
+        c.active(&[f64::NAN, 0.0], &mut out);
+        assert_eq!(out, vec![12, 16, 20]);
+        // One tiling is exactly the paper's layout.
+        let one = TileCoder::one_dim_offset(44, 10, 1).unwrap();
+        assert_eq!(one, TileCoder::one_dim(44, 10).unwrap());
     }
 
     #[test]

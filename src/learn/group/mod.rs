@@ -162,9 +162,13 @@ impl<W: Weight> TraceGroup<W> {
         &self.chain.y_now
     }
 
-    /// `wᵀx_t` of the last `predict`.
+    /// `wᵀx_t` of the last `predict` (before or after its `learn`).
     pub fn values(&self) -> &[f64] {
-        &self.chain.y_now
+        if self.chain.fresh {
+            &self.chain.y_now
+        } else {
+            &self.chain.y_prev
+        }
     }
 
     /// Whether prediction `col` stopped learning because a step was not finite.

@@ -28,6 +28,7 @@ fn spec(tau: f64, lambda: f64, alpha: f64, sigma: Sigma, w0: f64, tiles: usize) 
             all_obs: false,
             inputs: vec!["u".into()],
             tiles,
+            tilings: 1,
         },
         cumulant: Cumulant::Stimulus("e".into()),
     }
@@ -220,6 +221,7 @@ fn construction_errors_are_precise() {
         all_obs: false,
         inputs: vec!["u".into()],
         tiles: 0,
+        tilings: 1,
     };
     assert!(matches!(
         PredictionSet::new(vec![bad], &n).unwrap_err(),
@@ -470,6 +472,7 @@ fn at_the_step_size_bound_the_weights_stay_bounded() {
             .map(String::from)
             .to_vec(),
         tiles: 4,
+        tilings: 1,
     };
     s.cumulant = Cumulant::Stimulus("s".into());
     let mut set = PredictionSet::new(vec![s], &n).unwrap();
