@@ -40,6 +40,7 @@ fn stall_spec() -> PredictionSpec {
             all_obs: true,
             inputs: vec![],
             tiles: 10,
+            tilings: 1,
         },
         cumulant: Cumulant::Stimulus("stall".into()),
     }
