@@ -3,9 +3,11 @@
 //! prints figures and asserts nothing about them.
 //!
 //! - [`load`]: websocket clients reading the dashboard stream during the run;
-//! - [`abuse`]: abusive clients (floods, storms, never-reading sockets) for `--ws-abuse`.
+//! - [`abuse`]: abusive clients (floods, storms, never-reading sockets) for `--ws-abuse`;
+//! - [`foxglove_load`]: Foxglove clients subscribed to every channel, for `--foxglove-clients`.
 
 pub mod abuse;
+pub mod foxglove_load;
 pub mod load;
 
 use std::fmt;
