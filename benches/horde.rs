@@ -86,7 +86,11 @@ fn horde_tick(c: &mut Criterion) {
     let mut group = c.benchmark_group("horde");
     group.sample_size(20);
     drop(group);
-    bench_horde::<f32>(c, "horde/1k_f32", families("[0.0]").into_iter().take(1).collect());
+    bench_horde::<f32>(
+        c,
+        "horde/1k_f32",
+        families("[0.0]").into_iter().take(1).collect(),
+    );
     bench_horde::<f32>(c, "horde/11748_f32", families("[10.0, 50.0]"));
     bench_horde::<f64>(c, "horde/11748_f64", families("[10.0, 50.0]"));
 }

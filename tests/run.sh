@@ -4,7 +4,8 @@
 # the 24-simulated-hour soak (tests/soak.rs) in release.
 #
 # It installs Debian's chromium (the dashboard's browser test drives it with playwright-core) when it is
-# missing, and the dashboard's npm packages from web/package-lock.json. Nothing downloads a browser of its own.
+# missing, the dashboard's npm packages from web/package-lock.json, and the Foxglove test client's from
+# tests/foxglove/package-lock.json. Nothing downloads a browser of its own.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -24,6 +25,11 @@ if [ -f web/package-lock.json ]; then
   step "dashboard JavaScript unit tests (node --test)"
   npm test --prefix web
 fi
+
+step "installing the Foxglove test client's npm packages (npm ci)"
+# tests/e2e/foxglove.rs connects with Foxglove's own client library (@foxglove/ws-protocol), pinned in
+# tests/foxglove/package-lock.json; the test fails, saying so, when they are missing.
+npm ci --prefix tests/foxglove --no-audit --no-fund --loglevel=error
 
 step "cargo fmt --check"
 cargo fmt --all -- --check

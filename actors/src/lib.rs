@@ -9,6 +9,7 @@
 //! - [`link`]: the serial link, its writer and its supervision;
 //! - [`simulated`]: the simulated Create and the simulated human;
 //! - [`dashboard`]: HTTP, the websocket and its protocol;
+//! - [`foxglove`]: the tick stream and events, live over the Foxglove WebSocket protocol (`--foxglove`);
 //! - [`telemetry`]: tick health, histograms, Prometheus;
 //! - [`storage`]: recordings, replay, checkpoint files;
 //! - [`experiment`]: the paper's experiments on the real runtime under virtual time;
@@ -18,6 +19,7 @@ pub mod bench;
 pub mod command;
 pub mod dashboard;
 pub mod experiment;
+pub mod foxglove;
 pub mod link;
 pub mod pipeline;
 pub mod server;

@@ -220,6 +220,7 @@ impl ServerBuilder {
             sim: sim_status,
             recorder: feed.recorder_gauge(),
             link: feed.latest_link(),
+            foxglove: Default::default(),
         };
         actors.push(tokio::spawn(crate::telemetry::health_log::run(
             health.clone(),

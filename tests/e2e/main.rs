@@ -5,6 +5,7 @@ mod cli;
 mod common;
 mod dashboard;
 mod experiment;
+mod foxglove;
 mod house;
 mod runtime;
 mod skeleton;

@@ -5,11 +5,13 @@
 //! - [`load`]: websocket clients reading the dashboard stream during the run;
 //! - [`abuse`]: abusive clients (floods, storms, never-reading sockets) for `--ws-abuse`, and [`floods`],
 //!   its watcher and idle-socket floods;
-//! - [`estop_probe`]: the operator's e-stop, timed from send to ack, during the run.
+//! - [`estop_probe`]: the operator's e-stop, timed from send to ack, during the run;
+//! - [`foxglove_load`]: Foxglove clients subscribed to every channel, for `--foxglove-clients`.
 
 pub mod abuse;
 pub mod estop_probe;
 pub(crate) mod floods;
+pub mod foxglove_load;
 pub mod load;
 
 use std::fmt;

@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use anyhow::Result;
-use pavlov_actors::bench::{self, abuse::Abuse, load};
+use pavlov_actors::bench::{self, abuse::Abuse, foxglove_load, load};
 
 use super::args::{ConfigArgs, load_config, repository_web_dir};
 
@@ -27,6 +27,10 @@ pub struct BenchArgs {
     /// reopened as soon as closed), and compare tick lateness and an operator's e-stop latency.
     #[arg(long)]
     ws_abuse: bool,
+    /// Also run with the Foxglove endpoint (`serve --foxglove`) and this many Foxglove clients subscribed
+    /// to every channel, and compare.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    foxglove_clients: usize,
 }
 
 /// Runs the benchmark and prints its report.
@@ -52,7 +56,8 @@ pub async fn run(args: BenchArgs) -> Result<()> {
             stalled: args.stalled_client,
         };
         let loaded =
-            load::run_realtime_with_clients(cfg, duration, repository_web_dir(), load).await?;
+            load::run_realtime_with_clients(cfg.clone(), duration, repository_web_dir(), load)
+                .await?;
         say!(
             "with {} websocket clients{}:",
             args.ws_clients,
@@ -68,6 +73,14 @@ pub async fn run(args: BenchArgs) -> Result<()> {
             report.lateness.p99_us,
             loaded.bench.lateness.p99_us
         );
+    }
+    if args.foxglove_clients > 0 {
+        let loaded =
+            foxglove_load::run_realtime_with_foxglove_clients(cfg, duration, args.foxglove_clients)
+                .await?;
+        say!("with {} Foxglove clients:", args.foxglove_clients);
+        say!("{loaded}");
+        say!("{}", foxglove_load::comparison(&report, &loaded));
     }
     Ok(())
 }

@@ -5,6 +5,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use pavlov_actors::dashboard::Dashboard;
+use pavlov_actors::foxglove::{self, Foxglove};
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::storage::{checkpoint_files, recorder, recording};
 
@@ -35,6 +36,17 @@ pub struct ServeArgs {
     /// (e.g. weights/saved/w.json). Refused if it cannot be used.
     #[arg(long, value_name = "FILE")]
     resume_from: Option<PathBuf>,
+    /// Also stream every tick, event and the configuration over the Foxglove WebSocket protocol on ADDR
+    /// (default 127.0.0.1:8765): in Foxglove, open a Foxglove WebSocket connection to ws://ADDR. Clients
+    /// only read; with --token and watch_without_token = false they must add ?token=TOKEN to the URL.
+    /// An address that is not loopback requires --token.
+    #[arg(
+        long,
+        value_name = "ADDR",
+        num_args = 0..=1,
+        default_missing_value = foxglove::DEFAULT_ADDR
+    )]
+    foxglove: Option<String>,
 }
 
 /// The folder dashboard-started recordings go into.
@@ -49,6 +61,7 @@ pub async fn run(args: ServeArgs) -> Result<()> {
         record,
         resume,
         resume_from,
+        foxglove: foxglove_addr,
     } = args;
     let (mut cfg, origin) = read_config(&config_args)?;
     let generated_token = dashboard.apply(&mut cfg)?;
@@ -87,6 +100,11 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     tracing::info!(?target, mode = ?cfg.control.mode, "starting pavlov");
     // Every listening socket is bound before the robot is touched: a busy port stops here.
     let bound = Dashboard::bind(&cfg.dashboard)?;
+    let foxglove_bound = foxglove_addr
+        .as_deref()
+        .map(|addr| Foxglove::bind(addr, &cfg.dashboard))
+        .transpose()
+        .context("cannot start the Foxglove endpoint (--foxglove)")?;
     let recorder = recorder::Recorder::spawn_new(
         recording::RecordingHeader::new(&cfg, "pavlov serve"),
         record.clone(),
@@ -112,6 +130,17 @@ pub async fn run(args: ServeArgs) -> Result<()> {
             return Err(e).context("cannot start the dashboard");
         }
     };
+    let fox = match foxglove_bound {
+        None => None,
+        Some(bound) => match Foxglove::serve(bound, &server).await {
+            Ok(f) => Some(f),
+            Err(e) => {
+                dash.shutdown().await;
+                server.shutdown().await;
+                return Err(e).context("cannot start the Foxglove endpoint (--foxglove)");
+            }
+        },
+    };
     if let Some(resumed) = &server.checkpoints.resumed {
         for line in resumed.report_lines() {
             say!("{line}");
@@ -134,6 +163,17 @@ pub async fn run(args: ServeArgs) -> Result<()> {
             dash.url()
         );
     }
+    if let Some(f) = &fox {
+        let query = if f.token_required() {
+            "/?token=<your token>"
+        } else {
+            ""
+        };
+        say!(
+            "foxglove: open Foxglove (app.foxglove.dev or the desktop app) and connect to {}{query}",
+            f.url()
+        );
+    }
     if let Some(sk) = &server.skeleton {
         say!(
             "skeleton: listening for {} on udp://{}",
@@ -143,6 +183,9 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     }
     shutdown_signal().await;
     tracing::info!("shutting down: stopping the robot");
+    if let Some(f) = fox {
+        f.shutdown().await;
+    }
     dash.shutdown().await;
     server.shutdown().await;
     // The recorder ends once the feed is gone; do not hang on it if something still holds the feed.

@@ -136,3 +136,58 @@ pub struct DashboardStats {
     /// Handshakes answered 429 because their address had no wrong-token allowance left.
     pub token_throttled: u64,
 }
+
+/// The Foxglove endpoint's counters (`serve --foxglove`), written by the endpoint and read by `/metrics`.
+/// Every server has one, so the figures read 0 when no Foxglove endpoint runs.
+#[derive(Debug, Default)]
+pub(crate) struct FoxgloveCounters {
+    /// Foxglove clients connected now (past the token check, handed to the SDK's server).
+    pub(crate) clients: AtomicU64,
+    /// Connections handed to the SDK's server so far.
+    pub(crate) connections: AtomicU64,
+    /// Handshakes refused for a missing or wrong token (HTTP 401).
+    pub(crate) refused_token: AtomicU64,
+    /// Connections refused because `foxglove::gate::MAX_CONNECTIONS` were open (HTTP 503).
+    pub(crate) refused_busy: AtomicU64,
+    /// Connections closed because their request was not a websocket request, too large, or too slow.
+    pub(crate) refused_bad_request: AtomicU64,
+    /// Tick records the publisher missed because it fell behind the tick feed.
+    pub(crate) ticks_missed: AtomicU64,
+    /// Events the publisher missed because it fell behind the event log.
+    pub(crate) events_missed: AtomicU64,
+}
+
+/// A copy of [`FoxgloveCounters`] at one moment.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct FoxgloveFigures {
+    /// Foxglove clients connected now.
+    pub clients: u64,
+    /// Connections handed to the SDK's server so far.
+    pub connections: u64,
+    /// Handshakes refused for a missing or wrong token.
+    pub refused_token: u64,
+    /// Connections refused because too many were open.
+    pub refused_busy: u64,
+    /// Connections closed for a bad, over-size or slow request.
+    pub refused_bad_request: u64,
+    /// Tick records the publisher missed.
+    pub ticks_missed: u64,
+    /// Events the publisher missed.
+    pub events_missed: u64,
+}
+
+impl FoxgloveCounters {
+    /// The figures now.
+    pub(crate) fn figures(&self) -> FoxgloveFigures {
+        let get = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        FoxgloveFigures {
+            clients: get(&self.clients),
+            connections: get(&self.connections),
+            refused_token: get(&self.refused_token),
+            refused_busy: get(&self.refused_busy),
+            refused_bad_request: get(&self.refused_bad_request),
+            ticks_missed: get(&self.ticks_missed),
+            events_missed: get(&self.events_missed),
+        }
+    }
+}

@@ -22,7 +22,9 @@ use pavlov::record::LinkStatus;
 use serde::Serialize;
 use tokio::sync::watch;
 
-use counters::{ActuationStats, RecorderGauge, SharedTickStats, SharedWriterStats};
+use counters::{
+    ActuationStats, FoxgloveCounters, RecorderGauge, SharedTickStats, SharedWriterStats,
+};
 use histogram::{LatencyHistogram, LatencyQuantiles};
 
 use crate::simulated::SimStatus;
@@ -37,6 +39,8 @@ pub struct Health {
     pub(crate) sim: Option<watch::Receiver<SimStatus>>,
     pub(crate) recorder: RecorderGauge,
     pub(crate) link: watch::Receiver<Option<LinkStatus>>,
+    /// The Foxglove endpoint's counters (all zero without `serve --foxglove`).
+    pub(crate) foxglove: std::sync::Arc<FoxgloveCounters>,
 }
 
 /// The recorder queue's figures.
@@ -186,6 +190,7 @@ mod tests {
             sim: None,
             recorder: RecorderGauge::new(None, Default::default()),
             link: watch::channel(link).1,
+            foxglove: Default::default(),
         }
     }
 

@@ -8,7 +8,7 @@
 use pavlov::record::LinkStatus;
 use pavlov::supervision::{LinkState, TripCause};
 
-use super::counters::{ActuationStats, DashboardStats};
+use super::counters::{ActuationStats, DashboardStats, FoxgloveFigures};
 use super::exposition::Exposition;
 pub(crate) use super::exposition::HistogramSample;
 use super::{Health, RecorderFigures};
@@ -48,6 +48,8 @@ pub(crate) struct MetricsSnapshot {
     pub(crate) healthy: bool,
     /// What the simulated robot's fault injector has done (`None` on a real robot).
     pub(crate) sim_faults: Option<pavlov::sim::faults::FaultCounters>,
+    /// The Foxglove endpoint's counters (zero without one).
+    pub(crate) foxglove: FoxgloveFigures,
 }
 
 impl MetricsSnapshot {
@@ -68,6 +70,7 @@ impl MetricsSnapshot {
             sim_faults: health.sim.as_ref().map(|s| s.borrow().faults.clone()),
             tick_age_seconds: health.tick_age().map(|d| d.as_secs_f64()),
             healthy: health.verdict() == super::Verdict::Ok,
+            foxglove: health.foxglove.figures(),
         }
     }
 }
@@ -262,6 +265,47 @@ fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
     }
 }
 
+fn foxglove_metrics(e: &mut Exposition, f: &FoxgloveFigures) {
+    e.gauge(
+        "pavlov_foxglove_clients",
+        "Foxglove clients connected now (serve --foxglove; 0 without it).",
+        f.clients as f64,
+    );
+    e.counter(
+        "pavlov_foxglove_connections_total",
+        "Foxglove connections accepted and handed to the Foxglove server.",
+        f.connections,
+    );
+    e.family(
+        "pavlov_foxglove_refused_total",
+        "counter",
+        "Foxglove connections refused: token (missing or wrong, 401), busy (too many open, 503), bad_request (not a websocket request, too large or too slow).",
+    );
+    for (reason, value) in [
+        ("token", f.refused_token),
+        ("busy", f.refused_busy),
+        ("bad_request", f.refused_bad_request),
+    ] {
+        e.sample(
+            "pavlov_foxglove_refused_total",
+            &[("reason", reason)],
+            value as f64,
+        );
+    }
+    e.family(
+        "pavlov_foxglove_missed_total",
+        "counter",
+        "Tick records and events the Foxglove publisher missed because it fell behind (never delays the tick).",
+    );
+    for (stream, value) in [("ticks", f.ticks_missed), ("events", f.events_missed)] {
+        e.sample(
+            "pavlov_foxglove_missed_total",
+            &[("stream", stream)],
+            value as f64,
+        );
+    }
+}
+
 /// The exposition text of `s`.
 pub(crate) fn render(s: &MetricsSnapshot) -> String {
     let mut e = Exposition::default();
@@ -302,6 +346,7 @@ pub(crate) fn render(s: &MetricsSnapshot) -> String {
         link_metrics(&mut e, link);
     }
     ws_metrics(&mut e, &s.ws);
+    foxglove_metrics(&mut e, &s.foxglove);
     if let Some(r) = s.recorder {
         e.gauge(
             "pavlov_recorder_backlog",
@@ -411,6 +456,12 @@ mod tests {
                 flipped_bytes: 8,
                 ..Default::default()
             }),
+            foxglove: FoxgloveFigures {
+                clients: 3,
+                refused_token: 2,
+                ticks_missed: 5,
+                ..FoxgloveFigures::default()
+            },
         }
     }
 
@@ -467,6 +518,19 @@ mod tests {
         assert_eq!(
             value("pavlov_sim_faults_total", &[("kind", "flipped_bytes")]),
             8.0
+        );
+        assert_eq!(value("pavlov_foxglove_clients", &[]), 3.0);
+        assert_eq!(
+            value("pavlov_foxglove_refused_total", &[("reason", "token")]),
+            2.0
+        );
+        assert_eq!(
+            value("pavlov_foxglove_missed_total", &[("stream", "ticks")]),
+            5.0
+        );
+        assert_eq!(
+            value("pavlov_foxglove_missed_total", &[("stream", "events")]),
+            0.0
         );
         let states = families["pavlov_link_state"].samples.len();
         assert_eq!(states, LinkState::ALL.len());

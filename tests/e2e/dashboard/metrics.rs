@@ -20,7 +20,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
 
 /// Every family `/metrics` serves once the first tick is out (the README lists the same).
-const FAMILIES: [(&str, &str); 37] = [
+const FAMILIES: [(&str, &str); 41] = [
     ("pavlov_tick_lateness_seconds", "histogram"),
     ("pavlov_ticks_fired_total", "counter"),
     ("pavlov_tick_age_seconds", "gauge"),
@@ -51,6 +51,10 @@ const FAMILIES: [(&str, &str); 37] = [
     ("pavlov_ws_token_throttled_total", "counter"),
     ("pavlov_ws_hub_records_missed_total", "counter"),
     ("pavlov_ws_closed_total", "counter"),
+    ("pavlov_foxglove_clients", "gauge"),
+    ("pavlov_foxglove_connections_total", "counter"),
+    ("pavlov_foxglove_refused_total", "counter"),
+    ("pavlov_foxglove_missed_total", "counter"),
     ("pavlov_recorder_backlog", "gauge"),
     ("pavlov_recorder_dropped_total", "counter"),
     ("pavlov_actuation_commands_total", "counter"),

@@ -1,0 +1,458 @@
+//! The JSON Schemas of the Foxglove channels, written in the subset the Foxglove app reads.
+//!
+//! Foxglove turns a channel's JSON Schema into the field list its panels offer (message paths in Plot,
+//! Raw Messages, …). It reads one `"type"` string per field (`boolean`, `string`, `number`, `integer`,
+//! `object` with `properties`, `array` with typed `items`) and rejects anything else — a `["number",
+//! "null"]` union, a missing type, an array of arrays — which would make the whole channel unusable. So a
+//! field that may be `null` (a missing sensor packet, no elbow angles yet) is declared with its non-null
+//! type, and the tests below check every schema against those rules and every field of real messages
+//! against the schema, so a field added to [`TickRecord`](pavlov::record::TickRecord) without a line here
+//! fails a test instead of silently disappearing from Foxglove's field lists.
+
+use serde_json::{Map, Value, json};
+
+/// A field of one JSON type.
+fn of(ty: &str) -> Value {
+    json!({ "type": ty })
+}
+
+fn number() -> Value {
+    of("number")
+}
+
+fn integer() -> Value {
+    of("integer")
+}
+
+fn boolean() -> Value {
+    of("boolean")
+}
+
+fn string() -> Value {
+    of("string")
+}
+
+/// A string that is one of `values`.
+fn one_of(values: &[&str]) -> Value {
+    json!({ "type": "string", "enum": values })
+}
+
+fn array(items: Value) -> Value {
+    json!({ "type": "array", "items": items })
+}
+
+/// An object with exactly these fields.
+fn object<'a>(fields: impl IntoIterator<Item = (&'a str, Value)>) -> Value {
+    let properties: Map<String, Value> = fields
+        .into_iter()
+        .map(|(name, schema)| (name.to_string(), schema))
+        .collect();
+    json!({ "type": "object", "properties": properties })
+}
+
+/// A titled top-level schema.
+fn titled(title: &str, description: &str, mut schema: Value) -> Value {
+    if let Some(map) = schema.as_object_mut() {
+        map.insert("title".into(), title.into());
+        map.insert("description".into(), description.into());
+    }
+    schema
+}
+
+fn action() -> Value {
+    object([("left_mm_s", integer()), ("right_mm_s", integer())])
+}
+
+fn link_state() -> Value {
+    one_of(&["up", "stale", "reconnecting", "tripped", "down"])
+}
+
+fn trip_cause() -> Value {
+    one_of(&["wheel_drop", "cliff", "charger", "unknown"])
+}
+
+fn mode() -> Value {
+    one_of(&["reactive", "pavlovian", "manual"])
+}
+
+/// `pavlov.TickRecord`: a [`pavlov::record::TickRecord`] as the recorder writes it.
+pub(crate) fn tick_record() -> Value {
+    let sensors = object([
+        ("overcurrent_left", boolean()),
+        ("overcurrent_right", boolean()),
+        ("bump_left", boolean()),
+        ("bump_right", boolean()),
+        ("battery_current_ma", integer()),
+        ("battery_voltage_mv", integer()),
+        ("battery_charge_mah", integer()),
+        ("distance_mm", integer()),
+        ("angle_deg", integer()),
+        ("oi_mode", integer()),
+    ]);
+    let elbow = object([
+        ("left", number()),
+        ("left_avg", number()),
+        ("right", number()),
+        ("right_avg", number()),
+    ]);
+    let prediction = object([
+        ("name", string()),
+        ("value", number()),
+        ("threshold", number()),
+    ]);
+    let link = object([
+        ("up", boolean()),
+        ("good_frames", integer()),
+        ("bad_frames", integer()),
+        ("skipped_bytes", integer()),
+        ("state", link_state()),
+        ("mode", integer()),
+        ("trip", trip_cause()),
+        ("reconnects", integer()),
+        ("stale_events", integer()),
+    ]);
+    let inputs = object([
+        (
+            "values",
+            object([("values", array(integer())), ("present", integer())]),
+        ),
+        ("forced_stimulus", boolean()),
+    ]);
+    titled(
+        "pavlov.TickRecord",
+        "Everything that happened on one 20 ms tick (the recorder's record). Fields that can be null: \
+         obs entries (a packet the snapshot lacks), obs_age_ticks, elbow, safety_stop, the battery and \
+         mode sensors, link.mode, link.trip, inputs.",
+        object([
+            ("seq", integer()),
+            ("t_ms", number()),
+            ("mode", mode()),
+            ("obs_age_ticks", integer()),
+            ("sensors", sensors),
+            ("obs", array(number())),
+            ("elbow", elbow),
+            ("stimulus", boolean()),
+            ("predictions", array(prediction)),
+            ("gate", boolean()),
+            ("default_action", action()),
+            ("command", action()),
+            (
+                "safety_stop",
+                one_of(&["e_stop", "stale_observation", "link_down", "robot_tripped"]),
+            ),
+            ("estop", boolean()),
+            ("lateness_us", integer()),
+            ("link", link),
+            ("inputs", inputs),
+        ]),
+    )
+}
+
+/// `pavlov.Signals`: the flat message of [`super::signals`], with the run's own observation and
+/// prediction names as fields.
+pub(crate) fn signals(obs_names: &[String], predictions: &[String]) -> Value {
+    let named = |names: &[String]| object(names.iter().map(|n| (n.as_str(), number())));
+    titled(
+        "pavlov.Signals",
+        "One tick as flat numbers: observations and predictions by name, flags as 0/1.",
+        object([
+            ("seq", integer()),
+            ("t_ms", number()),
+            ("mode", mode()),
+            ("obs", named(obs_names)),
+            ("predictions", named(predictions)),
+            ("thresholds", named(predictions)),
+            ("stimulus", integer()),
+            ("gate", integer()),
+            ("estop", integer()),
+            ("safety_stop", integer()),
+            ("command_left_mm_s", integer()),
+            ("command_right_mm_s", integer()),
+            ("default_left_mm_s", integer()),
+            ("default_right_mm_s", integer()),
+            ("overcurrent_left", integer()),
+            ("overcurrent_right", integer()),
+            ("bump_left", integer()),
+            ("bump_right", integer()),
+            ("battery_current_ma", number()),
+            ("battery_voltage_mv", number()),
+            ("battery_charge_mah", number()),
+            ("distance_mm", integer()),
+            ("angle_deg", integer()),
+            ("elbow_left", number()),
+            ("elbow_right", number()),
+            ("obs_age_ticks", number()),
+            ("lateness_us", integer()),
+            ("link_up", integer()),
+        ]),
+    )
+}
+
+/// `pavlov.Event`: a [`pavlov::event::Event`], flat, with the fields of every kind (each event carries
+/// only its own kind's).
+pub(crate) fn event() -> Value {
+    titled(
+        "pavlov.Event",
+        "A change made at run time (mode, e-stop, teleop, request, learning parameters, weights, \
+         recording, link), numbered, with the last tick before it took effect.",
+        object([
+            ("id", integer()),
+            ("after", integer()),
+            (
+                "kind",
+                one_of(&[
+                    "mode_set",
+                    "teleop",
+                    "e_stop",
+                    "rearm",
+                    "human_request",
+                    "params_set",
+                    "weights_reset",
+                    "weights_saved",
+                    "recording_started",
+                    "recording_stopped",
+                    "link",
+                    "pipeline_stall",
+                ]),
+            ),
+            // mode_set: a control mode; rearm: the OI mode sent (safe, full).
+            ("mode", string()),
+            ("action", action()),
+            ("latched", boolean()),
+            ("cause", trip_cause()),
+            ("until_tick", integer()),
+            ("prediction", string()),
+            ("alpha", number()),
+            ("lambda", number()),
+            ("threshold", number()),
+            ("path", string()),
+            ("state", link_state()),
+            ("trip", trip_cause()),
+            ("reconnects", integer()),
+            ("ticks", integer()),
+        ]),
+    )
+}
+
+/// `pavlov.Config`: the configuration in force (its fields vary with the experiment, so they are not
+/// listed; the Raw Messages panel shows them all) with the program and the observation names.
+pub(crate) fn config() -> Value {
+    titled(
+        "pavlov.Config",
+        "The configuration in force at start-up (token redacted), the program version and the names of \
+         the observation vector's dimensions (the order of /pavlov/ticks obs).",
+        object([
+            ("program", string()),
+            ("config", object([])),
+            ("obs_names", array(string())),
+        ]),
+    )
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use pavlov::control::{Action, Mode};
+    use pavlov::event::{Event, EventKind};
+    use pavlov::oi::SensorValues;
+    use pavlov::oi::mode::DriveMode;
+    use pavlov::record::{ElbowAngles, PredictionValue, SafetyStop, TickInputs, TickRecord};
+    use pavlov::supervision::{LinkState, TripCause};
+
+    /// Checks `schema` against what the Foxglove app's JSON Schema reader accepts; returns the first
+    /// problem.
+    pub(crate) fn foxglove_can_read(schema: &Value, path: &str) -> Result<(), String> {
+        if schema["type"] != "object" {
+            return Err(format!(
+                "{path}: an object schema needs \"type\": \"object\""
+            ));
+        }
+        let Some(properties) = schema["properties"].as_object() else {
+            return Err(format!("{path}: an object schema needs \"properties\""));
+        };
+        for (name, field) in properties {
+            let at = format!("{path}.{name}");
+            match field["type"].as_str() {
+                Some("boolean" | "string" | "number" | "integer") => {}
+                Some("object") => foxglove_can_read(field, &at)?,
+                Some("array") => match field["items"]["type"].as_str() {
+                    Some("boolean" | "string" | "number" | "integer") => {}
+                    Some("object") => foxglove_can_read(&field["items"], &at)?,
+                    other => return Err(format!("{at}: unsupported array item type {other:?}")),
+                },
+                _ => return Err(format!("{at}: unsupported type {}", field["type"])),
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks that every field of `value` is declared in `schema` with its JSON type (`null` fits any).
+    pub(crate) fn conforms(value: &Value, schema: &Value, path: &str) -> Result<(), String> {
+        let ty = schema["type"].as_str().unwrap_or_default();
+        match value {
+            Value::Null => Ok(()),
+            Value::Bool(_) if ty == "boolean" => Ok(()),
+            Value::Number(n) if ty == "number" || (ty == "integer" && !n.is_f64()) => Ok(()),
+            Value::String(s) => match schema["enum"].as_array() {
+                _ if ty != "string" => Err(format!("{path}: a string where {ty} is declared")),
+                Some(allowed) if !allowed.iter().any(|a| a == s) => {
+                    Err(format!("{path}: `{s}` is not among {allowed:?}"))
+                }
+                _ => Ok(()),
+            },
+            Value::Array(items) if ty == "array" => items
+                .iter()
+                .enumerate()
+                .try_for_each(|(i, v)| conforms(v, &schema["items"], &format!("{path}[{i}]"))),
+            Value::Object(fields) if ty == "object" => fields.iter().try_for_each(|(k, v)| {
+                let declared = &schema["properties"][k];
+                if declared.is_null() {
+                    Err(format!("{path}.{k} is not declared"))
+                } else {
+                    conforms(v, declared, &format!("{path}.{k}"))
+                }
+            }),
+            other => Err(format!("{path}: {other} does not fit {schema}")),
+        }
+    }
+
+    /// A record with every optional part present.
+    pub(crate) fn full_record() -> TickRecord {
+        let mut values = SensorValues::new();
+        values.set(23, -250);
+        TickRecord {
+            obs_age_ticks: Some(1),
+            obs: vec![0.25, f32::NAN, 1.0],
+            elbow: Some(ElbowAngles {
+                left: Some(91.5),
+                left_avg: None,
+                right: Some(170.0),
+                right_avg: Some(169.0),
+            }),
+            stimulus: true,
+            predictions: vec![PredictionValue {
+                name: "stall".into(),
+                value: 0.4,
+                threshold: 0.5,
+            }],
+            gate: true,
+            default_action: Action {
+                left_mm_s: 200,
+                right_mm_s: 200,
+            },
+            safety_stop: Some(SafetyStop::StaleObservation),
+            estop: true,
+            lateness_us: 1200,
+            link: pavlov::record::LinkStatus {
+                state: LinkState::Tripped,
+                mode: Some(1),
+                trip: Some(TripCause::WheelDrop),
+                ..Default::default()
+            },
+            inputs: Some(TickInputs {
+                values: Some(values),
+                forced_stimulus: true,
+            }),
+            sensors: pavlov::record::SensorReadings {
+                battery_current_ma: Some(-250),
+                oi_mode: Some(2),
+                ..Default::default()
+            },
+            ..TickRecord::at_rest(7, 140.0, Mode::Pavlovian)
+        }
+    }
+
+    /// One event of every kind. The match below has no wildcard, so a new kind does not compile until it
+    /// is listed here (and so checked against the schema).
+    fn all_event_kinds() -> Vec<EventKind> {
+        let listed = |k: &EventKind| match k {
+            EventKind::ModeSet { .. }
+            | EventKind::Teleop { .. }
+            | EventKind::EStop { .. }
+            | EventKind::Rearm { .. }
+            | EventKind::HumanRequest { .. }
+            | EventKind::ParamsSet { .. }
+            | EventKind::WeightsReset
+            | EventKind::WeightsSaved { .. }
+            | EventKind::RecordingStarted { .. }
+            | EventKind::RecordingStopped { .. }
+            | EventKind::Link { .. }
+            | EventKind::PipelineStall { .. } => k.name(),
+        };
+        let kinds = vec![
+            EventKind::ModeSet { mode: Mode::Manual },
+            EventKind::Teleop {
+                action: Action::STOP,
+            },
+            EventKind::EStop { latched: true },
+            EventKind::Rearm {
+                cause: TripCause::Cliff,
+                mode: DriveMode::Full,
+            },
+            EventKind::HumanRequest { until_tick: 90 },
+            EventKind::ParamsSet {
+                prediction: "stall".into(),
+                alpha: 0.1,
+                lambda: 0.5,
+                threshold: 0.6,
+            },
+            EventKind::WeightsReset,
+            EventKind::WeightsSaved { path: "w".into() },
+            EventKind::RecordingStarted { path: "r".into() },
+            EventKind::RecordingStopped { path: "r".into() },
+            EventKind::Link {
+                state: LinkState::Reconnecting,
+                trip: Some(TripCause::Charger),
+                reconnects: 3,
+            },
+            EventKind::PipelineStall { ticks: 4 },
+        ];
+        let names: std::collections::BTreeSet<_> = kinds.iter().map(listed).collect();
+        assert_eq!(names.len(), 12, "one event of every kind");
+        kinds
+    }
+
+    #[test]
+    fn foxglove_can_read_every_schema() {
+        let names = vec!["bump".to_string(), "wall".to_string()];
+        for schema in [tick_record(), signals(&names, &names), event(), config()] {
+            foxglove_can_read(&schema, "$").unwrap_or_else(|e| panic!("{e}\n{schema:#}"));
+        }
+    }
+
+    #[test]
+    fn every_field_of_a_tick_record_is_declared_with_its_type() {
+        let schema = tick_record();
+        for record in [full_record(), TickRecord::at_rest(0, 0.0, Mode::Reactive)] {
+            let value = serde_json::to_value(&record).unwrap();
+            conforms(&value, &schema, "$").unwrap();
+        }
+        // The check can fail: an undeclared field or a wrong type is caught.
+        let mut value = serde_json::to_value(full_record()).unwrap();
+        value["new_field"] = json!(1);
+        assert!(conforms(&value, &schema, "$").is_err());
+        let mut value = serde_json::to_value(full_record()).unwrap();
+        value["gate"] = json!("yes");
+        assert!(conforms(&value, &schema, "$").is_err());
+    }
+
+    #[test]
+    fn every_kind_of_event_is_declared_with_its_fields() {
+        let schema = event();
+        let kinds = all_event_kinds();
+        let declared = schema["properties"]["kind"]["enum"]
+            .as_array()
+            .unwrap()
+            .len();
+        assert_eq!(declared, kinds.len());
+        for (i, kind) in kinds.into_iter().enumerate() {
+            let e = Event {
+                id: i as u64 + 1,
+                after: (i % 2 == 0).then_some(i as u64),
+                kind,
+            };
+            let value = serde_json::to_value(&e).unwrap();
+            conforms(&value, &schema, "$").unwrap_or_else(|err| panic!("{err}: {value}"));
+        }
+    }
+}
