@@ -12,30 +12,12 @@
 
 use crate::config::{Config, StimulusSpec};
 use crate::control::StallDetector;
-use crate::learn::{
-    FeatureInputs, LearnError, ParamBounds, PredictionSet, SetSnapshot, SignalNames, Threshold,
-};
+use crate::learn::{FeatureInputs, LearnError, ParamBounds, PredictionSet, SetSnapshot, Threshold};
 use crate::obs::ObsLayout;
 use crate::oi::SensorValues;
 use crate::oi::packets::{bits, id};
 use crate::record::{ElbowAngles, PredictionValue};
 use crate::skeleton::ElbowFeatures;
-
-/// Names of the extra (non-observation) inputs, scaled to `[0, 1]` as angle / 180°.
-pub const ELBOW_INPUTS: [&str; 4] = [
-    "left_elbow",
-    "left_elbow_avg",
-    "right_elbow",
-    "right_elbow_avg",
-];
-
-/// The stimulus names a configuration can refer to.
-pub fn stimulus_name(spec: &StimulusSpec) -> &'static str {
-    match spec {
-        StimulusSpec::Stall { .. } => "stall",
-        StimulusSpec::LeftElbow { .. } => "left_elbow_command",
-    }
-}
 
 /// One tick's input.
 #[derive(Debug, Clone, Copy)]
@@ -146,8 +128,7 @@ impl LearningStage {
     /// Builds the predictions of `config` over the observation layout of its robot model.
     pub fn new(config: &Config) -> Result<Self, LearnError> {
         let layout = ObsLayout::for_model(config.robot.model);
-        let stimulus = stimulus_name(&config.control.stimulus);
-        let names = SignalNames::for_layout(&layout, &ELBOW_INPUTS, &[stimulus]);
+        let names = config.signal_names();
         let set = PredictionSet::new(config.predictions.clone(), &names)?;
         let gate_index = set
             .specs()

@@ -12,9 +12,11 @@ use crate::oi::Model;
 
 mod bounds;
 mod dashboard;
+mod horde;
 mod link;
 pub use bounds::MAX_SAFETY_TIMEOUT_MS;
 pub use dashboard::{DashboardConfig, MAX_CLIENT_QUEUE, MIN_PUBLIC_TOKEN_CHARS};
+pub use horde::{HordeConfig, Precision};
 pub use link::LinkConfig;
 
 /// A configuration error, naming the offending key.
@@ -126,6 +128,25 @@ pub enum StimulusSpec {
         below_deg: f64,
     },
 }
+
+impl StimulusSpec {
+    /// The stimulus's name, as predictions and the Horde refer to it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            StimulusSpec::Stall { .. } => "stall",
+            StimulusSpec::LeftElbow { .. } => "left_elbow_command",
+        }
+    }
+}
+
+/// Names of the extra (non-observation) inputs every learner may read, scaled to `[0, 1]` as
+/// angle / 180°: the elbow angles and their moving averages (NaN without a skeleton).
+pub const ELBOW_INPUTS: [&str; 4] = [
+    "left_elbow",
+    "left_elbow_avg",
+    "right_elbow",
+    "right_elbow_avg",
+];
 
 /// `[control]`: the gate.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -312,9 +333,22 @@ pub struct Config {
     /// `[skeleton]`.
     #[serde(default)]
     pub skeleton: SkeletonConfig,
+    /// `[horde]`.
+    #[serde(default, skip_serializing_if = "HordeConfig::is_off")]
+    pub horde: HordeConfig,
 }
 
 impl Config {
+    /// The signals predictions and the Horde may read: this robot model's observation dimensions,
+    /// [`ELBOW_INPUTS`], and the configured stimulus.
+    pub fn signal_names(&self) -> crate::learn::SignalNames {
+        crate::learn::SignalNames::for_layout(
+            &crate::obs::ObsLayout::for_model(self.robot.model),
+            &ELBOW_INPUTS,
+            &[self.control.stimulus.name()],
+        )
+    }
+
     /// Parses and validates a TOML document.
     pub fn from_toml(text: &str) -> Result<Config, ConfigError> {
         let cfg: Config = toml::from_str(text).map_err(|e| ConfigError::Parse(e.to_string()))?;
@@ -359,6 +393,7 @@ impl Config {
             }
         }
         self.skeleton.validate()?;
+        self.horde.validate(&self.signal_names())?;
         self.link.validate()?;
         self.sim.fault_spec()?;
         if self.checkpoint.dir.trim().is_empty() {

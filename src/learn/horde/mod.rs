@@ -15,6 +15,7 @@ pub mod family;
 pub mod signals;
 mod state;
 
+pub use build::check;
 pub use family::FamilySpec;
 pub use signals::{Source, TickSignals};
 pub use state::HordeState;

@@ -1,0 +1,121 @@
+//! `[horde]`: many general predictions learned beside the control predictions, off the control path.
+//!
+//! The Horde's predictions never drive the gate (`[control] gate_prediction` names one of
+//! `[[predictions]]`): they are learned on a thread of their own from the same ticks, and shown on the
+//! dashboard. Their families are documented in [`crate::learn::horde::family`].
+
+use serde::{Deserialize, Serialize};
+
+use super::{ConfigError, invalid};
+use crate::learn::{FamilySpec, SignalNames};
+
+/// The Horde's weights' type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    /// 4 bytes a weight: twice the predictions in the same memory and time; about 1e-5 from the f64
+    /// result over a run (measured in `learn::group`'s tests).
+    #[default]
+    F32,
+    /// 8 bytes a weight, the control predictions' type.
+    F64,
+}
+
+/// `[horde]`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HordeConfig {
+    /// The weights' type.
+    pub precision: Precision,
+    /// `[[horde.families]]`: empty means no Horde.
+    pub families: Vec<FamilySpec>,
+}
+
+impl HordeConfig {
+    /// Whether there is a Horde to run.
+    pub fn is_enabled(&self) -> bool {
+        !self.families.is_empty()
+    }
+
+    /// No Horde and the default precision: nothing to write into a configuration.
+    pub fn is_off(&self) -> bool {
+        *self == HordeConfig::default()
+    }
+
+    /// Checks every family and the Horde's size against its bounds over the signals `names`, without
+    /// allocating any weight.
+    pub(super) fn validate(&self, names: &SignalNames) -> Result<(), ConfigError> {
+        if !self.is_enabled() {
+            return Ok(());
+        }
+        crate::learn::horde::check(&self.families, names).map_err(|e| {
+            // Name the family in the key when the error does.
+            let key = self
+                .families
+                .iter()
+                .position(|f| e.to_string().contains(&format!("`{}`", f.name)))
+                .map_or_else(
+                    || "horde.families".to_string(),
+                    |i| format!("horde.families[{i}]"),
+                );
+            invalid(key, e.to_string())
+        })?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::Config;
+
+    const STALL: &str = include_str!("../../config/stall.toml");
+
+    fn with_horde(family: &str) -> String {
+        format!("{STALL}\n[horde]\nprecision = \"f32\"\n[[horde.families]]\n{family}")
+    }
+
+    const NEXTING: &str = r#"
+        name = "nexting"
+        cumulants = ["obs/*", "raw/battery_charge"]
+        taus = [2.0, 10.0]
+        lambda = 0.9
+        alpha = 0.0002
+        terminate_on = "stall"
+        features = { kind = "one_dim", all_obs = true, tiles = 12, tilings = 11 }
+    "#;
+
+    #[test]
+    fn a_horde_is_configured_in_a_few_lines() {
+        let cfg = Config::from_toml(&with_horde(NEXTING)).unwrap();
+        assert!(cfg.horde.is_enabled());
+        let shape = crate::learn::horde::check(&cfg.horde.families, &cfg.signal_names()).unwrap();
+        assert_eq!(shape.predictions, 90);
+        // No [horde] at all: nothing changes, and nothing is written back.
+        let plain = Config::from_toml(STALL).unwrap();
+        assert!(plain.horde.is_off());
+        assert!(!toml::to_string(&plain).unwrap().contains("horde"));
+    }
+
+    #[test]
+    fn a_bad_family_is_refused_with_its_key() {
+        for (edit, says) in [
+            (
+                NEXTING.replace("raw/battery_charge", "raw/nose"),
+                "raw/nose",
+            ),
+            (NEXTING.replace("0.0002", "0.01"), "exceeds 1/484"),
+            (NEXTING.replace("\"stall\"", "\"bump\""), "bump"),
+            (NEXTING.replace("tilings = 11", "tilings = 0"), "tilings"),
+        ] {
+            match Config::from_toml(&with_horde(&edit)) {
+                Err(super::ConfigError::Invalid { key, message }) => {
+                    assert_eq!(key, "horde.families[0]", "{message}");
+                    assert!(message.contains(says), "{message}");
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        let typo = with_horde(&NEXTING.replace("taus", "tau"));
+        assert!(Config::from_toml(&typo).is_err());
+    }
+}
