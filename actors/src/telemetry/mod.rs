@@ -18,6 +18,7 @@ pub(crate) mod prometheus;
 #[cfg(any(test, feature = "test-support"))]
 pub mod prometheus_check;
 
+use pavlov::config::TickTimer;
 use pavlov::record::LinkStatus;
 use serde::Serialize;
 use tokio::sync::watch;
@@ -32,6 +33,7 @@ use crate::simulated::SimStatus;
 #[derive(Clone)]
 pub struct Health {
     pub(crate) ticks: SharedTickStats,
+    pub(crate) timer: TickTimer,
     pub(crate) writer: SharedWriterStats,
     pub(crate) actuation: watch::Receiver<ActuationStats>,
     pub(crate) sim: Option<watch::Receiver<SimStatus>>,
@@ -94,6 +96,12 @@ impl Verdict {
 }
 
 impl Health {
+    /// The timer that drives the tick: the timer thread in real time (unless `[tick] timer = "tokio"`),
+    /// tokio's interval under a paused clock.
+    pub fn tick_timer(&self) -> TickTimer {
+        self.timer
+    }
+
     /// Time since the newest tick fired (`None` before the first).
     pub fn tick_age(&self) -> Option<std::time::Duration> {
         let last = self.ticks.lock().ok()?.last_fired?;
@@ -181,6 +189,7 @@ mod tests {
         }
         Health {
             ticks,
+            timer: TickTimer::Thread,
             writer: SharedWriterStats::default(),
             actuation: watch::channel(ActuationStats::default()).1,
             sim: None,
