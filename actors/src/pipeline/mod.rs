@@ -141,6 +141,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
                 ticks: tick_rx.clone(),
                 commands: link_cmd_rx,
                 out: obs_tx,
+                heartbeat: ticks.clone(),
             },
             cancel.clone(),
         )),

@@ -104,7 +104,7 @@ impl Health {
 
     /// Time since the newest tick fired (`None` before the first).
     pub fn tick_age(&self) -> Option<std::time::Duration> {
-        let last = self.ticks.lock().ok()?.last_fired?;
+        let last = self.ticks.lock().ok()?.last_taken?;
         Some(tokio::time::Instant::now().saturating_duration_since(last))
     }
 
@@ -182,10 +182,10 @@ mod tests {
     use pavlov::record::LinkStatus;
     use pavlov::supervision::{LinkState, TripCause};
 
-    fn health(last_fired_ago: Option<std::time::Duration>, link: Option<LinkStatus>) -> Health {
+    fn health(last_taken_ago: Option<std::time::Duration>, link: Option<LinkStatus>) -> Health {
         let ticks = SharedTickStats::default();
-        if let Some(ago) = last_fired_ago {
-            ticks.lock().unwrap().last_fired = Some(tokio::time::Instant::now() - ago);
+        if let Some(ago) = last_taken_ago {
+            ticks.lock().unwrap().last_taken = Some(tokio::time::Instant::now() - ago);
         }
         Health {
             ticks,

@@ -290,7 +290,7 @@ pub(crate) fn render(s: &MetricsSnapshot) -> String {
     if let Some(age) = s.tick_age_seconds {
         e.gauge(
             "pavlov_tick_age_seconds",
-            "Seconds since the newest tick fired (grows when the tick loop stalls).",
+            "Seconds since the tick loop last took a tick on the async runtime (grows when it stalls).",
             age,
         );
     }

@@ -127,7 +127,6 @@ fn publish(
     if let Ok(mut s) = stats.lock() {
         s.fired += 1;
         s.skipped += skipped;
-        s.last_fired = Some(tick.fired);
         s.lateness.record(tick.lateness());
     }
     if skipped > 0 {
