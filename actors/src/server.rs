@@ -215,6 +215,7 @@ impl ServerBuilder {
         drop(pose_tx);
         let health = Health {
             ticks: pipeline.ticks,
+            timer: pipeline.timer,
             writer: writer_stats,
             actuation: pipeline.actuation,
             sim: sim_status,

@@ -14,10 +14,12 @@ mod bounds;
 mod dashboard;
 mod horde;
 mod link;
+mod tick;
 pub use bounds::MAX_SAFETY_TIMEOUT_MS;
 pub use dashboard::{DashboardConfig, MAX_CLIENT_QUEUE, MIN_PUBLIC_TOKEN_CHARS};
 pub use horde::{HordeConfig, Precision};
 pub use link::LinkConfig;
+pub use tick::{MAX_SPIN_US, TickConfig, TickTimer};
 
 /// A configuration error, naming the offending key.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -74,20 +76,6 @@ impl RobotConfig {
         } else {
             self.stream.clone()
         }
-    }
-}
-
-/// `[tick]`: the control clock.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct TickConfig {
-    /// Tick period in milliseconds (the paper: 20).
-    pub period_ms: u64,
-}
-
-impl Default for TickConfig {
-    fn default() -> Self {
-        TickConfig { period_ms: 20 }
     }
 }
 
@@ -358,9 +346,7 @@ impl Config {
 
     /// Checks every value that types alone cannot.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if !(1..=1000).contains(&self.tick.period_ms) {
-            return Err(invalid("tick.period_ms", "must be between 1 and 1000"));
-        }
+        self.tick.validate()?;
         // Safety timeouts, policy speeds, every prediction's bounds, the client queue.
         bounds::check(self)?;
         let model = self.robot.model;

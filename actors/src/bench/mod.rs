@@ -6,13 +6,15 @@
 //! - [`abuse`]: abusive clients (floods, storms, never-reading sockets) for `--ws-abuse`, and [`floods`],
 //!   its watcher and idle-socket floods;
 //! - [`estop_probe`]: the operator's e-stop, timed from send to ack, during the run;
-//! - [`foxglove_load`]: Foxglove clients subscribed to every channel, for `--foxglove-clients`.
+//! - [`foxglove_load`]: Foxglove clients subscribed to every channel, for `--foxglove-clients`;
+//! - [`timers`]: the timer thread against tokio's interval, interleaved in one invocation.
 
 pub mod abuse;
 pub mod estop_probe;
 pub(crate) mod floods;
 pub mod foxglove_load;
 pub mod load;
+pub mod timers;
 
 use std::fmt;
 use std::time::Duration;

@@ -4,9 +4,9 @@
 use std::time::Duration;
 
 use anyhow::Result;
-use pavlov_actors::bench::{self, abuse::Abuse, foxglove_load, load};
+use pavlov_actors::bench::{self, abuse::Abuse, foxglove_load, load, timers};
 
-use super::args::{ConfigArgs, load_config, repository_web_dir};
+use super::args::{ConfigArgs, load_config, repository_web_dir, validate};
 
 /// `pavlov bench`'s arguments.
 #[derive(clap::Args)]
@@ -31,12 +31,28 @@ pub struct BenchArgs {
     /// to every channel, and compare.
     #[arg(long, default_value_t = 0, value_name = "N")]
     foxglove_clients: usize,
+    /// Compare the tick timers: the timer thread against tokio's interval, interleaved (thread, tokio,
+    /// tokio, thread; --seconds in all for each), with tick lateness and tick → command for both.
+    #[arg(long, conflicts_with_all = ["ws_clients", "stalled_client", "ws_abuse", "foxglove_clients"])]
+    compare_timers: bool,
+    /// Override [tick] spin_us: wake this many µs before each deadline and spin (the timer thread only).
+    #[arg(long, value_name = "US")]
+    spin_us: Option<u32>,
 }
 
 /// Runs the benchmark and prints its report.
 pub async fn run(args: BenchArgs) -> Result<()> {
-    let cfg = load_config(&args.config)?;
+    let mut cfg = load_config(&args.config)?;
+    if let Some(spin) = args.spin_us {
+        cfg.tick.spin_us = spin;
+        validate(&cfg, "--spin-us")?;
+    }
     let duration = Duration::from_secs(args.seconds);
+    if args.compare_timers {
+        let report = timers::run_timer_comparison(cfg, duration).await?;
+        say!("{report}");
+        return Ok(());
+    }
     if args.ws_abuse {
         let load = load::Load {
             clients: args.ws_clients.max(1),

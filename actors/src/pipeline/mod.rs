@@ -9,7 +9,7 @@
 //! router ──────────┴───────────────────────────┴───────┘────────────┘──────┴───────────┘      TickRecord ─► feed
 //! ```
 //!
-//! - [`ticker`]: the only clock that drives control.
+//! - [`ticker`]: the only clock that drives control (its own timer thread in real time).
 //! - [`sensor_ingest`]: robot bytes → the newest observation on every tick (hosts link supervision).
 //! - [`skeleton_ingest`]: OSC skeletons over UDP → the newest pose.
 //! - [`learning`], [`gating`], [`actuation`]: thin shells over the core's stages; actuation assembles
@@ -31,7 +31,7 @@ pub(crate) mod ticker;
 use std::time::Duration;
 
 use pavlov::agent::GatingStage;
-use pavlov::config::Config;
+use pavlov::config::{Config, TickTimer};
 use pavlov::skeleton::PoseTracker;
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio::task::JoinHandle;
@@ -82,6 +82,8 @@ pub(crate) struct Pipeline {
     pub(crate) pose: watch::Sender<PoseTracker>,
     /// The ticker's figures.
     pub(crate) ticks: SharedTickStats,
+    /// The timer that drives the tick.
+    pub(crate) timer: TickTimer,
     /// Actuation's counters.
     pub(crate) actuation: watch::Receiver<ActuationStats>,
     /// The actor tasks, in start order.
@@ -123,14 +125,15 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
     let ticks = SharedTickStats::default();
     let (snapshots_tx, snapshots_rx) = mpsc::channel(2);
 
+    let ticker = ticker::spawn(
+        &config.tick,
+        started,
+        tick_tx,
+        ticks.clone(),
+        cancel.clone(),
+    );
     let tasks = vec![
-        tokio::spawn(ticker::run(
-            started,
-            period,
-            tick_tx,
-            ticks.clone(),
-            cancel.clone(),
-        )),
+        ticker.task,
         tokio::spawn(sensor_ingest::run(
             ingest,
             period,
@@ -138,6 +141,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
                 ticks: tick_rx.clone(),
                 commands: link_cmd_rx,
                 out: obs_tx,
+                heartbeat: ticks.clone(),
             },
             cancel.clone(),
         )),
@@ -195,6 +199,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
         commands: command_tx,
         pose: pose_tx,
         ticks,
+        timer: ticker.timer,
         actuation: stats_rx,
         tasks,
         snapshots: snapshots_tx,

@@ -5,7 +5,8 @@
 //! backlog) but sums the odometry packets (distance 19, angle 20) over every frame, because the robot resets
 //! them each time it reports them. On each tick it sends learning an [`Observation`] with the frame's age
 //! and the link's state. It hosts link supervision ([`Supervisor`]): every frame and tick goes to it, and
-//! a reopened port's reader replaces the old one here.
+//! a reopened port's reader replaces the old one here. Taking a tick is the tick loop's heartbeat, which
+//! `/healthz` judges: the timer thread fires on its own, so only the runtime's side shows a stuck loop.
 
 use std::time::Duration;
 
@@ -22,6 +23,7 @@ use super::ticker::Tick;
 use crate::command::{Inbox, LinkCommand};
 use crate::link::LinkReader;
 use crate::link::supervisor::Supervisor;
+use crate::telemetry::counters::SharedTickStats;
 
 /// The robot's state as seen at one tick.
 #[derive(Debug, Clone)]
@@ -58,6 +60,8 @@ pub(crate) struct IngestChannels {
     pub(crate) commands: Inbox<LinkCommand>,
     /// Where observations go (to learning).
     pub(crate) out: mpsc::Sender<Observation>,
+    /// Where the tick loop's heartbeat goes: the time each tick is taken here, on the async runtime.
+    pub(crate) heartbeat: SharedTickStats,
 }
 
 /// Runs until `cancel` fires or the tick channel closes.
@@ -76,6 +80,7 @@ pub(crate) async fn run(
         mut ticks,
         mut commands,
         out,
+        heartbeat,
     } = channels;
     let mut reader = Some(reader);
     let mut buf = vec![0u8; 4096];
@@ -91,6 +96,9 @@ pub(crate) async fn run(
                     break;
                 }
                 let Some(tick) = *ticks.borrow_and_update() else { continue };
+                if let Ok(mut stats) = heartbeat.lock() {
+                    stats.last_taken = Some(Instant::now());
+                }
                 supervisor.on_tick(tick.seq);
                 if supervisor.reopening() {
                     // The old port is being closed and reopened; its reader goes with it.

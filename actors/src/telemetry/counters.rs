@@ -18,8 +18,10 @@ pub(crate) struct TickStats {
     pub(crate) fired: u64,
     /// Ticks skipped because the ticker was woken too late.
     pub(crate) skipped: u64,
-    /// When the newest tick fired.
-    pub(crate) last_fired: Option<tokio::time::Instant>,
+    /// When sensor ingest, on the async runtime, last took a tick: the tick loop's heartbeat. Not when
+    /// the ticker fired: the timer thread keeps firing while the runtime is stuck, and then nothing of the
+    /// tick loop runs.
+    pub(crate) last_taken: Option<tokio::time::Instant>,
 }
 
 /// Shared handle on the tick statistics.

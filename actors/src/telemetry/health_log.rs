@@ -20,7 +20,7 @@ pub(crate) async fn run(health: Health, cancel: CancellationToken) {
                 let f = health.figures();
                 let (lat, cmd) = (f.lateness, f.tick_to_command);
                 tracing::info!(
-                    fired = f.ticks_fired, skipped = f.ticks_skipped,
+                    timer = health.timer.name(), fired = f.ticks_fired, skipped = f.ticks_skipped,
                     lateness_p50_us = lat.p50_us, lateness_p99_us = lat.p99_us, lateness_max_us = lat.max_us,
                     tick_to_command_p50_us = cmd.p50_us, tick_to_command_p99_us = cmd.p99_us, tick_to_command_max_us = cmd.max_us,
                     "tick health"

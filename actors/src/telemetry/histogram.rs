@@ -130,6 +130,16 @@ impl LatencyHistogram {
             .collect()
     }
 
+    /// Adds every sample of `other` (two runs measured apart, reported as one).
+    pub(crate) fn merge(&mut self, other: &LatencyHistogram) {
+        for (mine, theirs) in self.counts.iter_mut().zip(other.counts.iter()) {
+            *mine += theirs;
+        }
+        self.total += other.total;
+        self.max_us = self.max_us.max(other.max_us);
+        self.sum_us += other.sum_us;
+    }
+
     /// Sum of all samples, µs.
     pub(crate) fn sum_us(&self) -> u128 {
         self.sum_us
@@ -169,6 +179,30 @@ mod tests {
         assert_eq!(s.max_us, 1000);
         assert!((s.mean_us - 500.5).abs() < 1e-9);
         assert_eq!(h.cumulative_at(&[63, 2000]), vec![63, 1000]);
+    }
+
+    #[test]
+    fn a_merge_is_the_histogram_of_both_sample_sets() {
+        let (mut a, mut b, mut both) = (
+            LatencyHistogram::new(),
+            LatencyHistogram::new(),
+            LatencyHistogram::new(),
+        );
+        for us in 1..=500u64 {
+            a.record(Duration::from_micros(us));
+            both.record(Duration::from_micros(us));
+        }
+        for us in [2000u64, 3000, 90_000] {
+            b.record(Duration::from_micros(us));
+            both.record(Duration::from_micros(us));
+        }
+        a.merge(&b);
+        assert_eq!(a.quantiles(), both.quantiles());
+        assert_eq!(a.quantiles().max_us, 90_000);
+        assert_eq!(
+            a.cumulative_at(&[100, 2500]),
+            both.cumulative_at(&[100, 2500])
+        );
     }
 
     #[test]

@@ -18,6 +18,7 @@ pub(crate) mod prometheus;
 #[cfg(any(test, feature = "test-support"))]
 pub mod prometheus_check;
 
+use pavlov::config::TickTimer;
 use pavlov::record::LinkStatus;
 use serde::Serialize;
 use tokio::sync::watch;
@@ -34,6 +35,7 @@ use crate::simulated::SimStatus;
 #[derive(Clone)]
 pub struct Health {
     pub(crate) ticks: SharedTickStats,
+    pub(crate) timer: TickTimer,
     pub(crate) writer: SharedWriterStats,
     pub(crate) actuation: watch::Receiver<ActuationStats>,
     pub(crate) sim: Option<watch::Receiver<SimStatus>>,
@@ -98,9 +100,15 @@ impl Verdict {
 }
 
 impl Health {
+    /// The timer that drives the tick: the timer thread in real time (unless `[tick] timer = "tokio"`),
+    /// tokio's interval under a paused clock.
+    pub fn tick_timer(&self) -> TickTimer {
+        self.timer
+    }
+
     /// Time since the newest tick fired (`None` before the first).
     pub fn tick_age(&self) -> Option<std::time::Duration> {
-        let last = self.ticks.lock().ok()?.last_fired?;
+        let last = self.ticks.lock().ok()?.last_taken?;
         Some(tokio::time::Instant::now().saturating_duration_since(last))
     }
 
@@ -178,13 +186,14 @@ mod tests {
     use pavlov::record::LinkStatus;
     use pavlov::supervision::{LinkState, TripCause};
 
-    fn health(last_fired_ago: Option<std::time::Duration>, link: Option<LinkStatus>) -> Health {
+    fn health(last_taken_ago: Option<std::time::Duration>, link: Option<LinkStatus>) -> Health {
         let ticks = SharedTickStats::default();
-        if let Some(ago) = last_fired_ago {
-            ticks.lock().unwrap().last_fired = Some(tokio::time::Instant::now() - ago);
+        if let Some(ago) = last_taken_ago {
+            ticks.lock().unwrap().last_taken = Some(tokio::time::Instant::now() - ago);
         }
         Health {
             ticks,
+            timer: TickTimer::Thread,
             writer: SharedWriterStats::default(),
             actuation: watch::channel(ActuationStats::default()).1,
             sim: None,

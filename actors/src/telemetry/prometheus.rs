@@ -5,6 +5,7 @@
 //! so the format is tested without a server; [`crate::dashboard::http`] takes the snapshot and serves the text with
 //! [`CONTENT_TYPE`]. Every metric is listed in the README's "Metrics" section.
 
+use pavlov::config::TickTimer;
 use pavlov::record::LinkStatus;
 use pavlov::supervision::{LinkState, TripCause};
 
@@ -24,6 +25,8 @@ pub(crate) const TICK_BUCKETS_US: [u64; 13] = [
 /// Everything `/metrics` reports, read at one moment.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct MetricsSnapshot {
+    /// The timer that drives the tick.
+    pub(crate) timer: TickTimer,
     /// Ticks fired since start.
     pub(crate) ticks_fired: u64,
     /// Ticks skipped because the ticker woke too late.
@@ -58,6 +61,7 @@ impl MetricsSnapshot {
         let f = health.figures();
         let (lateness, to_command) = health.histograms();
         MetricsSnapshot {
+            timer: health.timer,
             ticks_fired: f.ticks_fired,
             ticks_skipped: f.ticks_skipped,
             tick_lateness: HistogramSample::from_histogram(&lateness, &TICK_BUCKETS_US),
@@ -315,10 +319,22 @@ pub(crate) fn render(s: &MetricsSnapshot) -> String {
         &s.tick_lateness,
     );
     e.counter("pavlov_ticks_fired_total", "Ticks fired.", s.ticks_fired);
+    e.family(
+        "pavlov_tick_timer",
+        "gauge",
+        "The timer that drives the tick: 1 for the one in use (thread: the timer thread; tokio: tokio's interval).",
+    );
+    for timer in [TickTimer::Thread, TickTimer::Tokio] {
+        e.sample(
+            "pavlov_tick_timer",
+            &[("timer", timer.name())],
+            f64::from(u8::from(timer == s.timer)),
+        );
+    }
     if let Some(age) = s.tick_age_seconds {
         e.gauge(
             "pavlov_tick_age_seconds",
-            "Seconds since the newest tick fired (grows when the tick loop stalls).",
+            "Seconds since the tick loop last took a tick on the async runtime (grows when it stalls).",
             age,
         );
     }
@@ -403,6 +419,7 @@ mod tests {
 
     fn snapshot() -> MetricsSnapshot {
         MetricsSnapshot {
+            timer: TickTimer::Tokio,
             ticks_fired: 1000,
             ticks_skipped: 3,
             tick_lateness: HistogramSample::from_histogram(
@@ -483,6 +500,8 @@ mod tests {
                 .unwrap_or_else(|| panic!("no {name} {labels:?} in\n{text}"))
         };
         assert_eq!(value("pavlov_ticks_fired_total", &[]), 1000.0);
+        assert_eq!(value("pavlov_tick_timer", &[("timer", "tokio")]), 1.0);
+        assert_eq!(value("pavlov_tick_timer", &[("timer", "thread")]), 0.0);
         assert_eq!(value("pavlov_ticks_skipped_total", &[]), 3.0);
         assert_eq!(value("pavlov_link_bad_frames_total", &[]), 2.0);
         assert_eq!(value("pavlov_link_skipped_bytes_total", &[]), 17.0);

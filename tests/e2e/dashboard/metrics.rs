@@ -20,9 +20,10 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
 
 /// Every family `/metrics` serves once the first tick is out (the README lists the same).
-const FAMILIES: [(&str, &str); 41] = [
+const FAMILIES: [(&str, &str); 42] = [
     ("pavlov_tick_lateness_seconds", "histogram"),
     ("pavlov_ticks_fired_total", "counter"),
+    ("pavlov_tick_timer", "gauge"),
     ("pavlov_tick_age_seconds", "gauge"),
     ("pavlov_healthy", "gauge"),
     ("pavlov_ticks_skipped_total", "counter"),
@@ -142,6 +143,13 @@ async fn metrics_are_served_complete_valid_and_consistent() {
     let fired = value(&first, "pavlov_ticks_fired_total");
     assert!(fired >= 50.0, "{fired}");
     assert_eq!(value(&first, "pavlov_tick_lateness_seconds_count"), fired);
+    // In real time the tick runs on its own timer thread.
+    let timers: Vec<(&str, f64)> = first["pavlov_tick_timer"]
+        .samples
+        .iter()
+        .map(|s| (s.labels["timer"].as_str(), s.value))
+        .collect();
+    assert_eq!(timers, vec![("thread", 1.0), ("tokio", 0.0)]);
     let states = &first["pavlov_link_state"].samples;
     assert_eq!(states.len(), LinkState::ALL.len());
     let on: Vec<&str> = states

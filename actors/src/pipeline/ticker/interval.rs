@@ -1,9 +1,7 @@
-//! The ticker actor: the only clock that drives control.
-//!
-//! It publishes a [`Tick`] every period (20 ms) on a `watch` channel, so a consumer always sees the newest
-//! tick and never a backlog. When the task is woken late by more than a period, the ticks it missed are
-//! skipped and counted, never fired in a burst (`MissedTickBehavior::Skip`). Every tick's lateness is kept in
-//! a histogram that the runtime logs once a minute and serves on `/metrics`.
+//! The tokio ticker: `tokio::time::interval` with `MissedTickBehavior::Skip`. It drives the tick under
+//! tokio's paused clock (tests and experiments, in virtual time) and, with `[tick] timer = "tokio"`, in
+//! real time too. Its timer wheel has millisecond granularity, so in real time a tick fires about 1 ms
+//! after its deadline.
 
 use std::time::Duration;
 
@@ -11,25 +9,8 @@ use tokio::sync::watch;
 use tokio::time::{Instant, MissedTickBehavior};
 use tokio_util::sync::CancellationToken;
 
+use super::{Tick, publish};
 use crate::telemetry::counters::SharedTickStats;
-
-/// One control tick.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct Tick {
-    /// Sequence number: `(deadline − start) / period`. Gaps mean skipped ticks.
-    pub(crate) seq: u64,
-    /// When the tick was due.
-    pub(crate) deadline: Instant,
-    /// When the ticker actually ran.
-    pub(crate) fired: Instant,
-}
-
-impl Tick {
-    /// How late the tick fired.
-    pub(crate) fn lateness(&self) -> Duration {
-        self.fired.saturating_duration_since(self.deadline)
-    }
-}
 
 /// Runs the ticker until `cancel` fires. The first tick is due at `start`.
 pub(crate) async fn run(
@@ -56,16 +37,7 @@ pub(crate) async fn run(
             deadline,
             fired,
         };
-        if let Ok(mut s) = stats.lock() {
-            s.fired += 1;
-            s.skipped += skipped;
-            s.last_fired = Some(fired);
-            s.lateness.record(tick.lateness());
-        }
-        if skipped > 0 {
-            tracing::debug!(seq, skipped, "ticker skipped ticks");
-        }
-        if tx.send(Some(tick)).is_err() {
+        if !publish(tick, skipped, &stats, &tx) {
             break; // nobody listens any more
         }
     }
