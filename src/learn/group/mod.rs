@@ -18,6 +18,7 @@
 //! The bookkeeping matches [`crate::learn::set`]: [`TraceGroup::predict`] with this tick's features,
 //! then [`TraceGroup::learn`] with this tick's cumulants and discount.
 
+mod copy;
 mod epochs;
 mod rows;
 mod state;
@@ -49,6 +50,8 @@ pub struct TraceGroup<W> {
     chain: Chain,
     /// Sums of the active rows (scratch).
     acc: Vec<W>,
+    /// The state of a snapshot whose weights are being copied ([`TraceGroup::begin_snapshot`]).
+    pending: Option<Box<GroupState>>,
 }
 
 /// What links one tick to the next.
@@ -111,6 +114,7 @@ impl<W: Weight> TraceGroup<W> {
                 fresh: false,
             },
             acc: vec![W::default(); cols],
+            pending: None,
         })
     }
 

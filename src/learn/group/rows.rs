@@ -2,6 +2,7 @@
 //! prediction for each feature), with its shared trace's updates deferred as described in
 //! [`super::epochs`]. Every operation costs the rows it names, times the number of predictions.
 
+use super::copy::RowCopy;
 use super::epochs::{ClosedEpoch, Epochs};
 use super::weight::{Weight, accumulate, add_scaled};
 
@@ -25,6 +26,8 @@ pub(crate) struct DeferredRows<W> {
     /// The rows the last `gather` read carry its mark.
     pub marks: Vec<u32>,
     pub mark: u32,
+    /// A copy of `W0` in progress: every write preserves the row first.
+    pub copy: Option<RowCopy<W>>,
 }
 
 impl<W: Weight> DeferredRows<W> {
@@ -46,6 +49,51 @@ impl<W: Weight> DeferredRows<W> {
             coef_bound: 0.0,
             marks: vec![0; features],
             mark: 0,
+            copy: None,
+        }
+    }
+
+    /// Starts a copy of `W0` as it is now (see [`RowCopy`]); false when one is in progress.
+    pub fn begin_copy(&mut self) -> bool {
+        if self.copy.is_some() {
+            return false;
+        }
+        self.copy = Some(RowCopy::new(self.features(), self.cols));
+        true
+    }
+
+    /// Copies up to `rows` more rows; returns whether the copy is complete (false without a copy).
+    pub fn copy_some(&mut self, rows: usize) -> bool {
+        match self.copy.as_mut() {
+            Some(c) => c.copy_some(&self.w0, rows),
+            None => false,
+        }
+    }
+
+    /// The copy's rows still to copy (0 without a copy).
+    pub fn copy_left(&self) -> usize {
+        self.copy.as_ref().map_or(0, RowCopy::left)
+    }
+
+    /// The completed copy, taken out; `None` while incomplete or without one.
+    pub fn take_copy(&mut self) -> Option<Vec<W>> {
+        if self.copy.as_ref().is_some_and(RowCopy::is_complete) {
+            self.copy.take().map(RowCopy::into_weights)
+        } else {
+            None
+        }
+    }
+
+    /// Completes a copy in progress at once (before `W0` is rewritten whole).
+    pub fn complete_copy(&mut self) {
+        let rows = self.features();
+        self.copy_some(rows);
+    }
+
+    #[inline]
+    fn preserve(&mut self, f: usize) {
+        if let Some(c) = self.copy.as_mut() {
+            c.preserve(f, &self.w0);
         }
     }
 
@@ -81,6 +129,7 @@ impl<W: Weight> DeferredRows<W> {
         if c == 0.0 {
             return;
         }
+        self.preserve(f);
         let cols = self.cols;
         let (w0, epochs) = (&mut self.w0, &self.epochs);
         let row = &mut w0[f * cols..(f + 1) * cols];
@@ -161,6 +210,9 @@ impl<W: Weight> DeferredRows<W> {
             self.row_epoch[f] = self.epochs.id;
             let mut c = self.coef[f];
             self.coef[f] = 0.0;
+            if let Some(copy) = self.copy.as_mut() {
+                copy.preserve(f, &self.w0);
+            }
             let row = &mut self.w0[f * cols..(f + 1) * cols];
             for closed in std::iter::once(old).chain(self.epochs.ring.iter()) {
                 if c == 0.0 {
@@ -194,6 +246,7 @@ impl<W: Weight> DeferredRows<W> {
             self.coef_bound = self.coef_bound.max(self.coef[f].abs());
             touched = true;
             read += usize::from(self.marks[f] == self.mark);
+            self.preserve(f);
             if cols == 1 {
                 self.w0[f] = self.w0[f] + minus_d * self.epochs.a_w[0];
             } else {
@@ -307,6 +360,7 @@ impl<W: Weight> DeferredRows<W> {
 
     /// Every row back to `initial[i]` for prediction `i`, with a zero trace.
     pub fn reset(&mut self, initial: &[f64]) {
+        self.complete_copy();
         let row: Vec<W> = initial.iter().map(|&w| W::from_f64(w)).collect();
         for f in 0..self.features() {
             self.row_mut(f).copy_from_slice(&row);
@@ -320,6 +374,7 @@ impl<W: Weight> DeferredRows<W> {
     /// Sets prediction `col`'s weights to `weights` and every row's trace to `traces` (one per row),
     /// in a fresh epoch.
     pub fn set_dense(&mut self, col: usize, weights: &[f64], traces: &[f64]) {
+        self.complete_copy();
         let cols = self.cols;
         // Bring every row into a fresh epoch with A = 0, so that W0 holds the weight itself.
         let materialized: Vec<Vec<f64>> = (0..cols)

@@ -62,11 +62,57 @@ fn to_ws<W: Weight>(v: &[f64]) -> Vec<W> {
 impl<W: Weight> TraceGroup<W> {
     /// The exact state, between two ticks.
     pub fn state(&self) -> GroupState {
+        let mut s = self.state_without_weights();
+        s.w0 = to_f64s(&self.rows.w0);
+        s
+    }
+
+    /// Starts a snapshot taken a few rows at a time ([`super::copy`]): the state as it is now, whose
+    /// weights [`TraceGroup::advance_snapshot`] copies between ticks while the group keeps learning.
+    /// False when one is in progress.
+    pub fn begin_snapshot(&mut self) -> bool {
+        if !self.rows.begin_copy() {
+            return false;
+        }
+        self.pending = Some(Box::new(self.state_without_weights()));
+        true
+    }
+
+    /// Copies up to `rows` more rows of the snapshot in progress; returns whether it is complete.
+    pub fn advance_snapshot(&mut self, rows: usize) -> bool {
+        self.rows.copy_some(rows)
+    }
+
+    /// Rows the snapshot in progress has still to copy.
+    pub fn snapshot_rows_left(&self) -> usize {
+        self.rows.copy_left()
+    }
+
+    /// The completed snapshot: the state without its weights (`w0` empty) and the weights as they were.
+    pub fn take_snapshot(&mut self) -> Option<(GroupState, Vec<W>)> {
+        let weights = self.rows.take_copy()?;
+        let state = self.pending.take()?;
+        Some((*state, weights))
+    }
+
+    /// Restores a snapshot of [`TraceGroup::take_snapshot`]'s form.
+    pub fn restore_snapshot(
+        &mut self,
+        name: &str,
+        state: &GroupState,
+        weights: &[W],
+    ) -> Result<(), LearnError> {
+        let mut full = state.clone();
+        full.w0 = to_f64s(weights);
+        self.restore_state(name, &full)
+    }
+
+    fn state_without_weights(&self) -> GroupState {
         let r = &self.rows;
         let e = &r.epochs;
         GroupState {
             precision: W::NAME.into(),
-            w0: to_f64s(&r.w0),
+            w0: Vec::new(),
             coef: r.coef.clone(),
             row_epoch: r.row_epoch.clone(),
             epoch: e.id,
@@ -158,6 +204,8 @@ impl<W: Weight> TraceGroup<W> {
         }
         super::super::bounds::check_lambda(name, s.lambda)?;
 
+        // A snapshot in progress is abandoned: its rows would be of the state replaced.
+        self.pending = None;
         self.rows = DeferredRows {
             cols,
             w0: to_ws(&s.w0),
@@ -185,6 +233,7 @@ impl<W: Weight> TraceGroup<W> {
             coef_bound: 0.0,
             marks: vec![0; n],
             mark: 0,
+            copy: None,
         };
         self.rows.rescan_bounds();
         self.lambda = s.lambda;

@@ -333,3 +333,51 @@ fn a_non_finite_cumulant_skips_the_update_without_stopping() {
     assert_eq!(d[0], 1.0);
     assert!(g.weights(0)[1] > 0.0);
 }
+
+#[test]
+fn a_snapshot_copied_while_learning_is_the_state_when_it_began() {
+    let coder = TileCoder::one_dim(8, 16).unwrap();
+    let s = stream(3000, 8, 0.05, 7);
+    let columns = vec![
+        Column {
+            alpha: 0.1 / 8.0,
+            initial_weight: 0.5,
+        };
+        4
+    ];
+    let mut g: TraceGroup<f32> =
+        TraceGroup::new(coder.num_features(), 0.9, Sigma::Identity, columns).unwrap();
+    let mut x = Vec::new();
+    let mut d = [0.0; 4];
+    let mut tick = |g: &mut TraceGroup<f32>, (input, e): &(Vec<f64>, bool)| {
+        coder.active(input, &mut x);
+        g.predict(&x);
+        let r = [f64::from(u8::from(*e)), input[0], input[1], 1.0];
+        g.learn(if *e { 0.0 } else { 0.98 }, &r, &mut d).unwrap();
+    };
+    for t in &s[..1500] {
+        tick(&mut g, t);
+    }
+    let expected = g.state();
+    assert!(g.begin_snapshot());
+    assert!(!g.begin_snapshot(), "one at a time");
+    // 128 rows, 5 a tick: the copy takes 26 ticks of learning, which writes many rows meanwhile.
+    let mut ticks = 0;
+    while !g.advance_snapshot(5) {
+        tick(&mut g, &s[1500 + ticks]);
+        ticks += 1;
+    }
+    assert!(ticks > 20);
+    assert_ne!(g.state(), expected, "it kept learning");
+    let (mut state, weights) = g.take_snapshot().unwrap();
+    state.w0 = weights.iter().map(|&w| f64::from(w)).collect();
+    assert_eq!(state, expected);
+    assert!(g.take_snapshot().is_none());
+    // A reset during a copy completes the copy first: the snapshot is still of the old weights.
+    assert!(g.begin_snapshot());
+    let before = g.state();
+    g.reset();
+    let (mut state, weights) = g.take_snapshot().unwrap();
+    state.w0 = weights.iter().map(|&w| f64::from(w)).collect();
+    assert_eq!(state, before);
+}

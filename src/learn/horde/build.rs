@@ -99,6 +99,7 @@ impl<W: Weight> Horde<W> {
             predictions,
             place,
             stopped: 0,
+            snapshot_stopped: None,
         })
     }
 }

@@ -18,7 +18,7 @@ mod state;
 pub use build::check;
 pub use family::FamilySpec;
 pub use signals::{Source, TickSignals};
-pub use state::HordeState;
+pub use state::{HordeSnapshot, HordeState};
 
 use super::group::{TraceGroup, Weight};
 use super::inputs::FeatureInputs;
@@ -84,6 +84,8 @@ pub struct Horde<W> {
     place: Vec<(usize, usize)>,
     /// Predictions that stopped learning because a step was not finite, since the Horde was built.
     stopped: u64,
+    /// While a snapshot is being copied: `stopped` when it began.
+    snapshot_stopped: Option<u64>,
 }
 
 /// How a Horde is laid out.

@@ -7,6 +7,19 @@ use super::super::group::{GroupState, Weight};
 use super::super::{FamilySpec, LearnError};
 use super::Horde;
 
+/// A Horde's state taken a few rows at a time while it learns ([`Horde::begin_snapshot`]): each
+/// group's state without its weights, and the weights in the group's own type (hundreds of megabytes
+/// at nexting scale, written as they are rather than as JSON numbers).
+#[derive(Debug, Clone, PartialEq)]
+pub struct HordeSnapshot<W> {
+    /// The families the state was learned with.
+    pub families: Vec<FamilySpec>,
+    /// One per trace group: the state with an empty `w0`, and the weights, feature-major.
+    pub groups: Vec<(GroupState, Vec<W>)>,
+    /// Predictions stopped since the Horde was built.
+    pub stopped: u64,
+}
+
 /// See the module documentation.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -39,6 +52,96 @@ impl<W: Weight> Horde<W> {
         self.slots.len()
     }
 
+    /// Starts a snapshot of every group as it is now; its weights are copied by
+    /// [`Horde::advance_snapshot`] between ticks, while the Horde keeps learning (a row about to be
+    /// written is copied first). False when one is in progress.
+    pub fn begin_snapshot(&mut self) -> bool {
+        if self.snapshot_stopped.is_some() {
+            return false;
+        }
+        for slot in &mut self.slots {
+            slot.group.begin_snapshot();
+        }
+        self.snapshot_stopped = Some(self.stopped);
+        true
+    }
+
+    /// Copies up to `rows` more rows (of all groups together); returns whether the snapshot is
+    /// complete (false without one).
+    pub fn advance_snapshot(&mut self, rows: usize) -> bool {
+        if self.snapshot_stopped.is_none() {
+            return false;
+        }
+        let mut budget = rows;
+        let mut complete = true;
+        for slot in &mut self.slots {
+            let left = slot.group.snapshot_rows_left();
+            let take = left.min(budget);
+            budget -= take;
+            complete &= slot.group.advance_snapshot(take) || left == 0;
+        }
+        complete
+    }
+
+    /// Rows the snapshot in progress has still to copy, all groups together.
+    pub fn snapshot_rows_left(&self) -> usize {
+        self.slots
+            .iter()
+            .map(|s| s.group.snapshot_rows_left())
+            .sum()
+    }
+
+    /// Whether a snapshot is being copied.
+    pub fn snapshot_in_progress(&self) -> bool {
+        self.snapshot_stopped.is_some()
+    }
+
+    /// The completed snapshot; `None` while it is being copied (or without one).
+    pub fn take_snapshot(&mut self) -> Option<HordeSnapshot<W>> {
+        if self.snapshot_rows_left() > 0 {
+            return None;
+        }
+        let stopped = self.snapshot_stopped.take()?;
+        let mut groups = Vec::with_capacity(self.slots.len());
+        for slot in &mut self.slots {
+            groups.push(slot.group.take_snapshot()?);
+        }
+        Some(HordeSnapshot {
+            families: self.families.clone(),
+            groups,
+            stopped,
+        })
+    }
+
+    /// Restores a snapshot; everything is checked before anything changes.
+    pub fn restore_snapshot(&mut self, snapshot: &HordeSnapshot<W>) -> Result<(), LearnError> {
+        if snapshot.families != self.families {
+            return Err(LearnError::BadGroupState {
+                name: "horde".into(),
+                what: "was learned with other families".into(),
+            });
+        }
+        if snapshot.groups.len() != self.slots.len() {
+            return Err(LearnError::SnapshotCountMismatch {
+                expected: self.slots.len(),
+                got: snapshot.groups.len(),
+            });
+        }
+        let mut restored = Vec::with_capacity(self.slots.len());
+        for (slot, (state, weights)) in self.slots.iter().zip(&snapshot.groups) {
+            let mut group = slot.group.clone();
+            let name = &self.predictions[slot.predictions[0]].name;
+            group.restore_snapshot(name, state, weights)?;
+            restored.push(group);
+        }
+        for (slot, group) in self.slots.iter_mut().zip(restored) {
+            slot.group = group;
+        }
+        self.stopped = snapshot.stopped;
+        self.snapshot_stopped = None;
+        Ok(())
+    }
+
     /// Restores `state`; everything is checked before anything changes.
     pub fn restore(&mut self, state: &HordeState) -> Result<(), LearnError> {
         if state.families != self.families {
@@ -64,6 +167,7 @@ impl<W: Weight> Horde<W> {
             slot.group = group;
         }
         self.stopped = state.stopped;
+        self.snapshot_stopped = None;
         Ok(())
     }
 }

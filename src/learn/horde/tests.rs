@@ -274,3 +274,42 @@ fn alpha_changes_are_bounded_per_family() {
     assert!(e.contains("exceeds 1/18"), "{e}");
     assert!(h.set_alpha("n/obs/nope@8", 0.01).is_err());
 }
+
+#[test]
+fn a_snapshot_copied_while_learning_restores_the_state_when_it_began() {
+    let f = family(NEXTING);
+    let mut a: Horde<f32> = Horde::new(vec![f.clone()], &names()).unwrap();
+    let s = stream(1500, 5);
+    let tick = |h: &mut Horde<f32>, (obs, raw, e, stall): &(Vec<f64>, Vec<f64>, f64, bool)| {
+        h.step(&TickSignals {
+            obs,
+            raw,
+            extra: &[*e],
+            stimuli: &[*stall],
+        });
+        let mut v = Vec::new();
+        h.values_into(&mut v);
+        v
+    };
+    for t in &s[..500] {
+        tick(&mut a, t);
+    }
+    let at_start = a.state();
+    let mut twin: Horde<f32> = Horde::new(vec![f.clone()], &names()).unwrap();
+    twin.restore(&at_start).unwrap();
+    assert!(a.begin_snapshot());
+    // 2 groups × 72 rows, 2 rows a tick (and the rows each tick writes).
+    let mut t = 500;
+    while !a.advance_snapshot(2) {
+        tick(&mut a, &s[t]);
+        t += 1;
+    }
+    assert!(t > 505, "{t}");
+    let snap = a.take_snapshot().unwrap();
+    let mut b: Horde<f32> = Horde::new(vec![f], &names()).unwrap();
+    b.restore_snapshot(&snap).unwrap();
+    assert_eq!(b.state(), at_start);
+    for tick_input in &s[500..] {
+        assert_eq!(tick(&mut b, tick_input), tick(&mut twin, tick_input));
+    }
+}
