@@ -326,6 +326,18 @@ impl ObsLayout {
         self.dims.iter().map(|d| d.name)
     }
 
+    /// Writes every dimension of `values` unscaled into `out` (cleared first): the packet's value in its
+    /// own units, the bit (0 or 1) for a bit dimension, NaN for an absent packet.
+    pub fn raw(&self, values: &SensorValues, out: &mut Vec<f64>) {
+        out.clear();
+        out.extend(self.dims.iter().map(|d| {
+            values.get(d.packet).map_or(f64::NAN, |v| match d.bit {
+                Some(b) => f64::from(v.checked_shr(u32::from(b)).unwrap_or(0) & 1),
+                None => f64::from(v),
+            })
+        }));
+    }
+
     /// Writes the scaled observation of `raw` into `out` (cleared first; `len()` values, each in
     /// `[0, 1]`, or `NaN` for a packet absent from `raw`). Does not allocate once `out` has capacity.
     pub fn scale(&self, raw: &SensorValues, out: &mut Vec<f64>) {

@@ -6,6 +6,7 @@
 //! - [`server`]: starts a server run (link, pipeline, recorder, skeleton) and stops it in a safe order;
 //! - [`command`]: the command vocabulary and its router;
 //! - [`pipeline`]: the tick graph (ticker, sensor and skeleton ingest, learning, gating, actuation, feed);
+//! - [`horde`]: `[horde]`'s predictions, learned on a thread of their own, off the control path;
 //! - [`link`]: the serial link, its writer and its supervision;
 //! - [`simulated`]: the simulated Create and the simulated human;
 //! - [`dashboard`]: HTTP, the websocket and its protocol;
@@ -20,6 +21,7 @@ pub mod command;
 pub mod dashboard;
 pub mod experiment;
 pub mod foxglove;
+pub mod horde;
 pub mod link;
 pub mod pipeline;
 pub mod server;

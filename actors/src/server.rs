@@ -28,6 +28,7 @@ use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
 use crate::command::ControlRequest;
+use crate::horde::{HordeError, HordeHandle, HordeView};
 use crate::link::opener::LinkOpener;
 use crate::link::serial::{SerialOpener, open_serial};
 use crate::link::supervisor::Supervisor;
@@ -40,6 +41,7 @@ use crate::pipeline::skeleton_ingest::{self, SkeletonIngest};
 use crate::pipeline::{self, PipelineParts};
 use crate::simulated::{SimStatus, robot};
 use crate::storage::checkpoint_files::{self, Resumed};
+use crate::storage::horde_file;
 use crate::storage::recorder::{RecorderInput, RecorderLink};
 use crate::telemetry::Health;
 use crate::telemetry::counters::SharedWriterStats;
@@ -164,6 +166,7 @@ impl ServerBuilder {
             writer_stats.clone(),
         ));
         let obs_names = learning.obs_names();
+        let horde = learning.horde_view();
         let (feed, events, recorder_commands) = match &recorder {
             Some(r) => {
                 let feed = TickFeed::new().with_recorder(r.input.clone());
@@ -222,6 +225,7 @@ impl ServerBuilder {
             recorder: feed.recorder_gauge(),
             link: feed.latest_link(),
             foxglove: Default::default(),
+            horde: horde.as_ref().map(|h| h.status.clone()),
         };
         actors.push(tokio::spawn(crate::telemetry::health_log::run(
             health.clone(),
@@ -237,6 +241,7 @@ impl ServerBuilder {
             checkpoints,
             obs_names,
             skeleton,
+            horde,
             health,
             _cancel_on_drop: cancel.clone().drop_guard(),
             cancel,
@@ -332,6 +337,8 @@ pub struct Server {
     pub skeleton: Option<SkeletonIngest>,
     /// Names of the observation vector's dimensions, in record order.
     pub obs_names: Vec<String>,
+    /// The Horde's figures and values, when `[horde]` has families.
+    pub horde: Option<HordeView>,
     health: Health,
     cancel: CancellationToken,
     actors: Vec<JoinHandle<()>>,
@@ -422,6 +429,22 @@ fn build_learning(config: &Config) -> Result<(Learning, CheckpointStart), Server
             );
         }
     }
+    let horde_resume = resumed
+        .as_ref()
+        .and_then(|r| r.path.parent())
+        .and_then(horde_file::newest_in);
+    let horde = match HordeHandle::spawn(config, horde_resume.as_deref(), learning.tick_offset()) {
+        Ok(h) => h,
+        // A Horde checkpoint of other families (edited since) or damaged: the Horde starts afresh;
+        // the control predictions, which were resumed, are what the robot depends on.
+        Err(e @ HordeError::Resume { .. }) => {
+            tracing::warn!("{e}; the Horde starts from its initial weights");
+            HordeHandle::spawn(config, None, learning.tick_offset())
+                .map_err(|e| ServerError::Learning(e.to_string()))?
+        }
+        Err(e) => return Err(ServerError::Learning(e.to_string())),
+    };
+    learning = learning.with_horde(horde);
     if c.autosave {
         learning = learning.with_autosave().map_err(|e| {
             ServerError::Learning(format!("cannot start the checkpoint writer: {e}"))

@@ -12,7 +12,9 @@
 
 use crate::config::{Config, StimulusSpec};
 use crate::control::StallDetector;
-use crate::learn::{FeatureInputs, LearnError, ParamBounds, PredictionSet, SetSnapshot, Threshold};
+use crate::learn::{
+    FeatureInputs, LearnError, ParamBounds, PredictionSet, SetSnapshot, Threshold, TickSignals,
+};
 use crate::obs::ObsLayout;
 use crate::oi::SensorValues;
 use crate::oi::packets::{bits, id};
@@ -114,7 +116,9 @@ pub struct LearningStage {
     stall: StallDetector,
     gate_index: usize,
     obs: Vec<f64>,
+    raw: Vec<f64>,
     extra: [f64; 4],
+    stimuli: [bool; 1],
     pending_stimulus: Option<bool>,
     /// Diverged predictions already reported by `learn`.
     reported: Vec<String>,
@@ -140,6 +144,8 @@ impl LearningStage {
         };
         Ok(LearningStage {
             obs: Vec::with_capacity(layout.len()),
+            raw: Vec::with_capacity(layout.len()),
+            stimuli: [false],
             layout,
             set,
             stimulus_spec: config.control.stimulus.clone(),
@@ -183,9 +189,16 @@ impl LearningStage {
     /// Step 1 of a tick: stimulus and predictions with the current weights.
     pub fn act(&mut self, input: LearnInput) -> LearnOutput {
         self.obs.clear();
+        self.raw.clear();
         match input.values {
-            Some(v) => self.layout.scale(v, &mut self.obs),
-            None => self.obs.resize(self.layout.len(), f64::NAN),
+            Some(v) => {
+                self.layout.scale(v, &mut self.obs);
+                self.layout.raw(v, &mut self.raw);
+            }
+            None => {
+                self.obs.resize(self.layout.len(), f64::NAN);
+                self.raw.resize(self.layout.len(), f64::NAN);
+            }
         }
         let elbow = input.elbow.map(|e| {
             self.extra = [
@@ -206,6 +219,7 @@ impl LearningStage {
         }
         let stimulus = self.stimulus(&input);
         self.pending_stimulus = Some(stimulus);
+        self.stimuli = [stimulus];
         let outs = self.set.predict(&FeatureInputs {
             obs: &self.obs,
             extra: &self.extra,
@@ -252,6 +266,17 @@ impl LearningStage {
             newly_diverged,
             divergences,
         })
+    }
+
+    /// The signals of the last [`LearningStage::act`], as a Horde reads them: the observation scaled and
+    /// unscaled, the extra inputs and the stimulus.
+    pub fn signals(&self) -> TickSignals<'_> {
+        TickSignals {
+            obs: &self.obs,
+            raw: &self.raw,
+            extra: &self.extra,
+            stimuli: &self.stimuli,
+        }
     }
 
     /// Forgets the previous tick (after a gap in the sensor stream): credit is not carried across it.

@@ -32,7 +32,7 @@ pub mod tiles;
 pub use bounds::ParamBounds;
 pub use error::LearnError;
 pub use group::{Column, GroupState, TraceGroup};
-pub use horde::{FamilySpec, Horde, HordeState, TickSignals};
+pub use horde::{FamilySpec, Horde, HordeSnapshot, HordeState, TickSignals};
 pub use inputs::{FeatureInputs, SignalNames};
 pub use set::{PredictionOut, PredictionSet};
 pub use sigma::Sigma;

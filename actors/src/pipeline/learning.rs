@@ -25,6 +25,7 @@ use tokio_util::sync::CancellationToken;
 use super::events::EventLog;
 use super::sensor_ingest::Observation;
 use crate::command::{Applied, CommandError, Envelope, Inbox, LearningCommand, Outcome, Reply};
+use crate::horde::{HordeHandle, HordeView};
 use crate::storage::checkpoint_files::layout::create_run_dir;
 use crate::storage::checkpoint_files::saves::{SaveQuota, check_save_name, saved_dir};
 use crate::storage::checkpoint_files::writer::{CheckpointWriter, SaveJob, WriterSettings};
@@ -67,6 +68,8 @@ pub(crate) struct Learning {
     after: Option<u64>,
     /// Where changes are announced.
     events: Option<EventLog>,
+    /// The Horde, learning `[horde]`'s predictions on its own thread from the ticks offered to it.
+    horde: Option<HordeHandle>,
 }
 
 /// Periodic and final checkpoints of the learned state, into this run's folder.
@@ -108,7 +111,28 @@ impl Learning {
             skipped_stale: 0,
             after: None,
             events: None,
+            horde: None,
         })
+    }
+
+    /// Offers every tick learned from to `horde` as well.
+    pub(crate) fn with_horde(mut self, horde: Option<HordeHandle>) -> Self {
+        self.horde = horde;
+        self
+    }
+
+    /// The Horde's figures, values and names, when there is a Horde.
+    pub(crate) fn horde_view(&self) -> Option<HordeView> {
+        self.horde.as_ref().map(|h| HordeView {
+            status: h.status(),
+            values: h.values(),
+            names: h.names(),
+        })
+    }
+
+    /// The lifelong tick this run's tick 0 continues (from a resumed checkpoint).
+    pub(crate) fn tick_offset(&self) -> u64 {
+        self.tick_offset
     }
 
     /// Checkpoints into a new run folder, `[checkpoint] dir/runs/<run id>/`, every `every_s` seconds of
@@ -167,10 +191,14 @@ impl Learning {
             return;
         }
         a.last_seq = seq;
+        let run_dir = a.run_dir.clone();
         if let Ok(c) = self.checkpoint(seq)
             && let Some(w) = &self.writer
         {
             w.submit(c);
+        }
+        if let Some(h) = &self.horde {
+            h.checkpoint(&run_dir, self.config.checkpoint.keep);
         }
     }
 
@@ -270,10 +298,22 @@ impl Learning {
                 "ticks not learned from: stale observation or link not up"
             );
         }
-        let last = match self.autosave.take() {
+        let autosave = self.autosave.take();
+        let last = match &autosave {
             Some(_) => self.checkpoint(seq).ok(),
             None => None,
         };
+        if let Some(horde) = self.horde.take() {
+            let target = autosave.map(|a| (a.run_dir, self.config.checkpoint.keep));
+            // The last Horde checkpoint is copied at once (nothing is learned any more) and written.
+            let finished = tokio::task::spawn_blocking(move || {
+                horde.finish(target.as_ref().map(|(dir, keep)| (dir.as_path(), *keep)));
+            })
+            .await;
+            if finished.is_err() {
+                tracing::error!("the Horde's last checkpoint panicked");
+            }
+        }
         if self.refused_non_finite > 0 {
             tracing::error!(
                 checkpoints = self.refused_non_finite,
@@ -335,6 +375,9 @@ impl Learning {
                 .map_err(|e| rejected(e.to_string())),
             LearningCommand::ResetWeights {} => {
                 self.stage.reset();
+                if let Some(h) = &self.horde {
+                    h.reset();
+                }
                 self.announce(EventKind::WeightsReset);
                 Ok(Applied::Reset { reset: true })
             }
@@ -413,6 +456,9 @@ pub(crate) async fn run(
                     tracing::debug!("gating is behind; a prediction was dropped");
                 }
                 if fresh {
+                    if let Some(h) = &learning.horde {
+                        h.offer(seq, &learning.stage.signals());
+                    }
                     match learning.stage.learn() {
                         Ok(report) => {
                             for name in &report.newly_diverged {

@@ -4,9 +4,11 @@
 //! - [`recorder`]: writes the tick feed on its own thread; [`recording`]: the format and its reader;
 //!   [`replay`]: runs a recording back through the core and checks it is reproduced exactly.
 //! - [`checkpoint_files`]: per-run automatic checkpoints, saves, pruning, and finding one to resume.
+//! - [`horde_file`]: the Horde's checkpoints, weights written as they are in memory.
 //! - `names`: the plain names clients give saves and recordings; `utc`: time stamps for names on disk.
 
 pub mod checkpoint_files;
+pub mod horde_file;
 pub(crate) mod names;
 pub mod recorder;
 pub mod recording;

@@ -43,6 +43,8 @@ pub struct Health {
     pub(crate) link: watch::Receiver<Option<LinkStatus>>,
     /// The Foxglove endpoint's counters (all zero without `serve --foxglove`).
     pub(crate) foxglove: std::sync::Arc<FoxgloveCounters>,
+    /// The Horde's figures, when there is a Horde.
+    pub(crate) horde: Option<watch::Receiver<crate::horde::status::HordeStatus>>,
 }
 
 /// The recorder queue's figures.
@@ -200,6 +202,7 @@ mod tests {
             recorder: RecorderGauge::new(None, Default::default()),
             link: watch::channel(link).1,
             foxglove: Default::default(),
+            horde: None,
         }
     }
 

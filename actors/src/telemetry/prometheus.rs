@@ -13,6 +13,7 @@ use super::counters::{ActuationStats, DashboardStats, FoxgloveFigures};
 use super::exposition::Exposition;
 pub(crate) use super::exposition::HistogramSample;
 use super::{Health, RecorderFigures};
+use crate::horde::status::HordeStatus;
 
 /// The Content-Type of the exposition.
 pub(crate) const CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
@@ -53,6 +54,8 @@ pub(crate) struct MetricsSnapshot {
     pub(crate) sim_faults: Option<pavlov::sim::faults::FaultCounters>,
     /// The Foxglove endpoint's counters (zero without one).
     pub(crate) foxglove: FoxgloveFigures,
+    /// The Horde's figures (`None` without `[horde]`).
+    pub(crate) horde: Option<HordeStatus>,
 }
 
 impl MetricsSnapshot {
@@ -75,6 +78,7 @@ impl MetricsSnapshot {
             tick_age_seconds: health.tick_age().map(|d| d.as_secs_f64()),
             healthy: health.verdict() == super::Verdict::Ok,
             foxglove: health.foxglove.figures(),
+            horde: health.horde.as_ref().map(|h| h.borrow().clone()),
         }
     }
 }
@@ -310,6 +314,50 @@ fn foxglove_metrics(e: &mut Exposition, f: &FoxgloveFigures) {
     }
 }
 
+fn horde_metrics(e: &mut Exposition, h: &HordeStatus) {
+    e.gauge(
+        "pavlov_horde_predictions",
+        "Predictions the Horde learns ([horde]).",
+        h.predictions as f64,
+    );
+    e.counter(
+        "pavlov_horde_ticks_learned_total",
+        "Ticks the Horde learned from.",
+        h.ticks_learned,
+    );
+    e.counter(
+        "pavlov_horde_skipped_total",
+        "Ticks the Horde did not learn from because it was still busy with earlier ones (never delays the tick).",
+        h.skipped_busy,
+    );
+    e.counter(
+        "pavlov_horde_chain_breaks_total",
+        "Times the Horde's chain of ticks broke (a skipped or stale tick) and its traces were cleared.",
+        h.chain_breaks,
+    );
+    for (suffix, us, what) in [
+        ("p50", h.step.p50_us, "median"),
+        ("p99", h.step.p99_us, "99th percentile"),
+        ("max", h.step.max_us, "longest"),
+    ] {
+        e.gauge(
+            &format!("pavlov_horde_step_{suffix}_seconds"),
+            &format!("The {what} time of one Horde step (every prediction, then every update)."),
+            us as f64 * 1e-6,
+        );
+    }
+    e.counter(
+        "pavlov_horde_checkpoints_written_total",
+        "Horde checkpoints written.",
+        h.checkpoints_written,
+    );
+    e.counter(
+        "pavlov_horde_checkpoint_errors_total",
+        "Horde checkpoints refused or failed.",
+        h.checkpoint_errors,
+    );
+}
+
 /// The exposition text of `s`.
 pub(crate) fn render(s: &MetricsSnapshot) -> String {
     let mut e = Exposition::default();
@@ -363,6 +411,9 @@ pub(crate) fn render(s: &MetricsSnapshot) -> String {
     }
     ws_metrics(&mut e, &s.ws);
     foxglove_metrics(&mut e, &s.foxglove);
+    if let Some(h) = &s.horde {
+        horde_metrics(&mut e, h);
+    }
     if let Some(r) = s.recorder {
         e.gauge(
             "pavlov_recorder_backlog",
@@ -479,6 +530,13 @@ mod tests {
                 ticks_missed: 5,
                 ..FoxgloveFigures::default()
             },
+            horde: Some(HordeStatus {
+                predictions: 11_748,
+                ticks_learned: 2900,
+                skipped_busy: 4,
+                chain_breaks: 5,
+                ..HordeStatus::default()
+            }),
         }
     }
 
@@ -539,6 +597,8 @@ mod tests {
             8.0
         );
         assert_eq!(value("pavlov_foxglove_clients", &[]), 3.0);
+        assert_eq!(value("pavlov_horde_predictions", &[]), 11_748.0);
+        assert_eq!(value("pavlov_horde_skipped_total", &[]), 4.0);
         assert_eq!(
             value("pavlov_foxglove_refused_total", &[("reason", "token")]),
             2.0

@@ -28,6 +28,12 @@ pub trait Weight:
     fn to_f64(self) -> f64;
     /// Whether the value is neither infinite nor NaN.
     fn finite(self) -> bool;
+    /// Bytes of one value.
+    const BYTES: usize;
+    /// Appends the value's little-endian bytes.
+    fn put_le(self, out: &mut Vec<u8>);
+    /// The value of `BYTES` little-endian bytes.
+    fn get_le(bytes: &[u8]) -> Self;
 }
 
 impl Weight for f32 {
@@ -46,6 +52,15 @@ impl Weight for f32 {
     fn finite(self) -> bool {
         self.is_finite()
     }
+    const BYTES: usize = 4;
+    fn put_le(self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.to_le_bytes());
+    }
+    fn get_le(bytes: &[u8]) -> Self {
+        let mut b = [0; 4];
+        b.copy_from_slice(&bytes[..4]);
+        f32::from_le_bytes(b)
+    }
 }
 
 impl Weight for f64 {
@@ -63,6 +78,15 @@ impl Weight for f64 {
     #[inline]
     fn finite(self) -> bool {
         self.is_finite()
+    }
+    const BYTES: usize = 8;
+    fn put_le(self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.to_le_bytes());
+    }
+    fn get_le(bytes: &[u8]) -> Self {
+        let mut b = [0; 8];
+        b.copy_from_slice(&bytes[..8]);
+        f64::from_le_bytes(b)
     }
 }
 

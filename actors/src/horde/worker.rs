@@ -1,0 +1,242 @@
+//! The Horde thread's loop: learn every tick handed over, copy a checkpoint in the time left over, and
+//! write it on yet another thread, so that neither a large step nor a checkpoint ever reaches the tick.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use pavlov::learn::group::Weight;
+use pavlov::learn::{Horde, HordeSnapshot, TickSignals};
+use tokio::sync::watch;
+
+use super::status::{HordeStatus, OfferCounters};
+use super::{HordeCommand, HordeTick, HordeValues};
+use crate::storage::horde_file;
+use crate::telemetry::histogram::LatencyHistogram;
+
+/// Rows copied between two checks of the time budget.
+const COPY_CHUNK: usize = 16;
+/// Status published every this many ticks (twice a second at 50 Hz).
+const STATUS_EVERY: u64 = 25;
+/// Values published every this many ticks (10 Hz).
+const VALUES_EVERY: u64 = 5;
+
+/// Where a checkpoint goes.
+#[derive(Debug, Clone)]
+pub(crate) struct Target {
+    pub(crate) dir: PathBuf,
+    pub(crate) keep: usize,
+}
+
+/// Everything the thread owns.
+pub(crate) struct Worker<W> {
+    pub(crate) horde: Horde<W>,
+    pub(crate) ticks: Receiver<HordeTick>,
+    pub(crate) commands: Receiver<HordeCommand>,
+    pub(crate) offers: Arc<OfferCounters>,
+    pub(crate) status: watch::Sender<HordeStatus>,
+    pub(crate) values: watch::Sender<Arc<HordeValues>>,
+    /// The tick period: a step and the copying after it stay within half of it.
+    pub(crate) period: Duration,
+    /// Lifelong tick of this run's tick 0 (checkpoints are named by lifelong ticks).
+    pub(crate) tick_offset: u64,
+}
+
+struct Progress {
+    last_seq: Option<u64>,
+    steps: LatencyHistogram,
+    learned: u64,
+    breaks: u64,
+    /// The checkpoint being copied: where it goes, and the tick it is of.
+    copying: Option<(Target, u64)>,
+    writer: Option<JoinHandle<Result<PathBuf, String>>>,
+    written: u64,
+    errors: u64,
+    last_file: Option<String>,
+}
+
+impl<W: Weight> Worker<W> {
+    /// Runs until learning stops handing ticks over, or a `Finish` arrives.
+    pub(crate) fn run(mut self) {
+        let mut p = Progress {
+            last_seq: None,
+            steps: LatencyHistogram::new(),
+            learned: 0,
+            breaks: 0,
+            copying: None,
+            writer: None,
+            written: 0,
+            errors: 0,
+            last_file: None,
+        };
+        let mut finish = None;
+        loop {
+            while let Ok(command) = self.commands.try_recv() {
+                match command {
+                    HordeCommand::Reset => self.horde.reset(),
+                    HordeCommand::Checkpoint { dir, keep } => {
+                        self.begin_checkpoint(&mut p, Target { dir, keep });
+                    }
+                    HordeCommand::Finish { checkpoint, done } => {
+                        finish = Some((checkpoint, done));
+                    }
+                }
+            }
+            if finish.is_some() {
+                break;
+            }
+            match self.ticks.recv_timeout(Duration::from_millis(100)) {
+                Ok(tick) => {
+                    let started = Instant::now();
+                    self.learn(&mut p, &tick);
+                    self.copy_for(&mut p, started + self.period / 2);
+                    if p.learned.is_multiple_of(VALUES_EVERY) {
+                        self.publish_values(tick.seq);
+                    }
+                    if p.learned.is_multiple_of(STATUS_EVERY) {
+                        self.publish_status(&p);
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {
+                    self.copy_for(&mut p, Instant::now() + self.period / 2);
+                }
+                Err(RecvTimeoutError::Disconnected) => break,
+            }
+        }
+        // Shutting down: the last checkpoint is completed at once (nothing is learned any more).
+        let (target, done) = finish.unzip();
+        if let Some(target) = target.flatten() {
+            if p.copying.is_none() {
+                self.begin_checkpoint(&mut p, target);
+            }
+            self.copy_for(&mut p, Instant::now() + Duration::from_secs(3600));
+        }
+        if let Some(writer) = p.writer.take() {
+            Self::collect(&mut p, writer);
+        }
+        self.publish_status(&p);
+        if let Some(done) = done {
+            let _ = done.send(());
+        }
+    }
+
+    fn learn(&mut self, p: &mut Progress, tick: &HordeTick) {
+        if p.last_seq.is_some_and(|s| tick.seq != s + 1) {
+            self.horde.break_chain();
+            p.breaks += 1;
+        }
+        let started = Instant::now();
+        self.horde.step(&TickSignals {
+            obs: &tick.obs,
+            raw: &tick.raw,
+            extra: &tick.extra,
+            stimuli: &tick.stimuli,
+        });
+        p.steps.record(started.elapsed());
+        p.last_seq = Some(tick.seq);
+        p.learned += 1;
+    }
+
+    fn begin_checkpoint(&mut self, p: &mut Progress, target: Target) {
+        if p.copying.is_some() || !self.horde.begin_snapshot() {
+            tracing::debug!("a Horde checkpoint is already being copied; this one is skipped");
+            return;
+        }
+        let tick = self.tick_offset + p.last_seq.map_or(0, |s| s + 1);
+        p.copying = Some((target, tick));
+    }
+
+    /// Copies checkpoint rows until `until`; hands a completed checkpoint to a writer thread.
+    fn copy_for(&mut self, p: &mut Progress, until: Instant) {
+        if p.copying.is_none() {
+            return;
+        }
+        let mut complete = false;
+        while Instant::now() < until {
+            complete = self.horde.advance_snapshot(COPY_CHUNK);
+            if complete {
+                break;
+            }
+        }
+        if !complete {
+            return;
+        }
+        let (Some(snapshot), Some((target, tick))) = (self.horde.take_snapshot(), p.copying.take())
+        else {
+            return;
+        };
+        if let Some(previous) = p.writer.take() {
+            // One write at a time: the previous one has had the whole copy's time to finish.
+            Self::collect(p, previous);
+        }
+        match spawn_write(target, tick, snapshot) {
+            Ok(writer) => p.writer = Some(writer),
+            Err(e) => {
+                p.errors += 1;
+                tracing::error!("Horde checkpoint not written: cannot start its writer: {e}");
+            }
+        }
+    }
+
+    fn collect(p: &mut Progress, writer: JoinHandle<Result<PathBuf, String>>) {
+        match writer.join() {
+            Ok(Ok(path)) => {
+                p.written += 1;
+                p.last_file = Some(path.display().to_string());
+            }
+            Ok(Err(e)) => {
+                p.errors += 1;
+                tracing::error!("Horde checkpoint not written: {e}");
+            }
+            Err(_) => {
+                p.errors += 1;
+                tracing::error!("the Horde checkpoint writer panicked");
+            }
+        }
+    }
+
+    fn publish_values(&self, seq: u64) {
+        let mut values = Vec::new();
+        self.horde.values_into(&mut values);
+        let _ = self.values.send(Arc::new(HordeValues { seq, values }));
+    }
+
+    fn publish_status(&self, p: &Progress) {
+        let shape = self.horde.shape();
+        let _ = self.status.send(HordeStatus {
+            predictions: shape.predictions,
+            groups: shape.groups,
+            weights: shape.weights,
+            precision: W::NAME,
+            ticks_learned: p.learned,
+            skipped_busy: self.offers.skipped(),
+            chain_breaks: p.breaks,
+            step: p.steps.quantiles(),
+            stopped: self.horde.stopped(),
+            snapshot_rows_left: self.horde.snapshot_rows_left(),
+            checkpoints_written: p.written,
+            checkpoint_errors: p.errors,
+            last_checkpoint: p.last_file.clone(),
+        });
+    }
+}
+
+/// Writes `snapshot` on a thread of its own (a large Horde takes a second or more to write).
+fn spawn_write<W: Weight>(
+    target: Target,
+    tick: u64,
+    snapshot: HordeSnapshot<W>,
+) -> std::io::Result<JoinHandle<Result<PathBuf, String>>> {
+    std::thread::Builder::new()
+        .name("pavlov-horde-write".into())
+        .spawn(move || {
+            let path = horde_file::write_atomic(&target.dir, tick, &snapshot)
+                .map_err(|e| format!("{}: {e}", target.dir.display()))?;
+            if let Err(e) = horde_file::prune(&target.dir, target.keep) {
+                tracing::warn!("could not prune old Horde checkpoints: {e}");
+            }
+            Ok(path)
+        })
+}
