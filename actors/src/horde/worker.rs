@@ -92,10 +92,10 @@ impl<W: Weight> Worker<W> {
                     let started = Instant::now();
                     self.learn(&mut p, &tick);
                     self.copy_for(&mut p, started + self.period / 2);
-                    if p.learned.is_multiple_of(VALUES_EVERY) {
+                    if p.learned % VALUES_EVERY == 0 {
                         self.publish_values(tick.seq);
                     }
-                    if p.learned.is_multiple_of(STATUS_EVERY) {
+                    if p.learned % STATUS_EVERY == 0 {
                         self.publish_status(&p);
                     }
                 }
