@@ -17,15 +17,10 @@ fn interaction_config() -> Config {
 }
 
 fn options(out: &std::path::Path, record: bool) -> InteractionOptions {
-    InteractionOptions {
-        runs_per_policy: 1,
-        minutes: 1.0,
-        aligned_commands: 40,
-        seed: 4,
-        record,
-        threads: 2,
-        out: out.to_path_buf(),
-    }
+    let mut o = InteractionOptions::new(4, 1, 1.0, out.to_path_buf());
+    o.record = record;
+    o.window_min = 0.5;
+    o
 }
 
 #[test]
@@ -76,6 +71,8 @@ fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
         "aligned.csv",
         "fig3_timing.svg",
         "fig4_aligned.svg",
+        "curve.csv",
+        "fig_curve.svg",
     ] {
         assert!(
             std::fs::metadata(out.join(f))
@@ -85,6 +82,19 @@ fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
         );
     }
     assert!(table(&a).contains("pavlovian"));
+    // Two 30-s windows of the time course, each with the commands of both policies.
+    assert_eq!(a.curve.len(), 2);
+    assert!(
+        a.curve
+            .iter()
+            .all(|p| p.commands_reactive > 0 && p.commands_pavlovian > 0)
+    );
+    let csv = std::fs::read_to_string(out.join("curve.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+    assert_eq!(
+        csv.lines().next().unwrap().split(',').count(),
+        csv.lines().nth(1).unwrap().split(',').count()
+    );
     let _ = std::fs::remove_dir_all(&out);
 }
 
@@ -94,15 +104,7 @@ fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
 #[test]
 fn after_an_hour_the_pavlovian_control_responds_earlier_with_few_false_starts() {
     let out = std::env::temp_dir().join(format!("pavlov-interaction-hour-{}", std::process::id()));
-    let opts = InteractionOptions {
-        runs_per_policy: 1,
-        minutes: 60.0,
-        aligned_commands: 40,
-        seed: 1,
-        record: false,
-        threads: 2,
-        out,
-    };
+    let opts = InteractionOptions::new(1, 1, 60.0, out);
     let s = run_study(&interaction_config(), &opts).expect("study runs");
     let of = |p: &str| {
         s.timing
