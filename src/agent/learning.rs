@@ -4,6 +4,10 @@
 //! wheels' over-current flags, or the left-elbow command), and outputs every prediction with the current
 //! weights; the caller acts on that at once. [`LearningStage::learn`] then runs the TD(λ) update for the
 //! transition into this tick (the paper's "act first, then learn"; see [`crate::learn::set`]).
+//!
+//! With the left-elbow stimulus, a tick whose elbow angles are missing or stale (either arm: the features
+//! tile both) is acted on but not learned from, and the learning chain breaks there, as it does for stale
+//! robot data: E is unknown on such a tick, not "no command", and half the tilings are inactive.
 
 use crate::config::{Config, StimulusSpec};
 use crate::control::StallDetector;
@@ -81,6 +85,10 @@ pub struct LearningStage {
     obs: Vec<f64>,
     extra: [f64; 4],
     pending_stimulus: Option<bool>,
+    /// Whether the pending tick's elbow angles are all there (always true without the elbow stimulus).
+    pending_complete: bool,
+    /// Ticks not learned from because an elbow angle was missing or stale.
+    skipped_missing_elbow: u64,
 }
 
 fn scaled_angle(a: Option<f64>) -> f64 {
@@ -111,6 +119,8 @@ impl LearningStage {
             gate_index,
             extra: [f64::NAN; 4],
             pending_stimulus: None,
+            pending_complete: true,
+            skipped_missing_elbow: 0,
         })
     }
 
@@ -169,6 +179,12 @@ impl LearningStage {
         }
         let stimulus = self.stimulus(&input);
         self.pending_stimulus = Some(stimulus);
+        self.pending_complete = match self.stimulus_spec {
+            StimulusSpec::Stall { .. } => true,
+            StimulusSpec::LeftElbow { .. } => input
+                .elbow
+                .is_some_and(|e| e.left.is_some() && e.right.is_some()),
+        };
         let outs = self.set.predict(&FeatureInputs {
             obs: &self.obs,
             extra: &self.extra,
@@ -193,12 +209,23 @@ impl LearningStage {
         }
     }
 
-    /// Step 2 of a tick: the TD(λ) update into this tick. Call once after each [`LearningStage::act`].
+    /// Step 2 of a tick: the TD(λ) update into this tick. Call once after each [`LearningStage::act`]. A tick
+    /// with a missing or stale elbow (elbow stimulus) is not learned from and breaks the chain.
     pub fn learn(&mut self) -> Result<(), LearnError> {
         let Some(stimulus) = self.pending_stimulus.take() else {
             return Err(LearnError::LearnWithoutPredict);
         };
+        if !self.pending_complete {
+            self.skipped_missing_elbow += 1;
+            self.set.break_chain();
+            return Ok(());
+        }
         self.set.learn(&[stimulus]).map(|_| ())
+    }
+
+    /// Ticks not learned from because an elbow angle was missing or stale.
+    pub fn skipped_missing_elbow(&self) -> u64 {
+        self.skipped_missing_elbow
     }
 
     /// Forgets the previous tick (after a gap in the sensor stream): credit is not carried across it.
@@ -339,6 +366,44 @@ mod tests {
         }
         let mean: f64 = before.iter().sum::<f64>() / before.len() as f64;
         assert!(mean > 0.5, "prediction two ticks before the stall: {mean}");
+    }
+
+    #[test]
+    fn a_missing_elbow_is_not_learned_from_and_breaks_the_chain() {
+        let cfg = Config::from_toml(include_str!("../../config/interaction.toml")).unwrap();
+        let elbow = |left: Option<f64>| ElbowFeatures {
+            left,
+            left_avg: Some(120.0),
+            right: Some(160.0),
+            right_avg: Some(160.0),
+            command: false,
+        };
+        let weights = |s: &LearningStage| s.snapshot().predictions[0].weights.clone();
+        let tick = |s: &mut LearningStage, left: Option<f64>| {
+            s.act(LearnInput {
+                values: None,
+                elbow: Some(elbow(left)),
+                forced_stimulus: false,
+            });
+            s.learn().unwrap();
+        };
+        // A bent arm (E on) after a straight one: the update raises the prediction.
+        let mut s = LearningStage::new(&cfg).unwrap();
+        tick(&mut s, Some(150.0));
+        let before = weights(&s);
+        tick(&mut s, Some(60.0));
+        assert_ne!(weights(&s), before, "a complete transition is learned");
+        // The same with a tick whose left elbow is missing in between: neither transition is learned (E is
+        // unknown there, not "no command"), and the chain restarts after it.
+        let mut s = LearningStage::new(&cfg).unwrap();
+        tick(&mut s, Some(150.0));
+        let before = weights(&s);
+        tick(&mut s, None);
+        tick(&mut s, Some(60.0));
+        assert_eq!(weights(&s), before, "no update across the missing tick");
+        assert_eq!(s.skipped_missing_elbow(), 1);
+        tick(&mut s, Some(60.0));
+        assert_ne!(weights(&s), before, "learning resumes after it");
     }
 
     #[test]
