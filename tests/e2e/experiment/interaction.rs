@@ -44,6 +44,8 @@ fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
         a.runs.iter().map(|r| r.mode).collect::<Vec<_>>(),
         vec![Mode::Reactive, Mode::Pavlovian]
     );
+    // Both policies of the pair answered the same operator: the same ground-truth commands.
+    assert_eq!(a.runs[0].commands, a.runs[1].commands);
     for r in &a.runs {
         assert_eq!(r.records.len(), 3000);
         assert!(!r.commands.is_empty(), "the operator commanded in a minute");

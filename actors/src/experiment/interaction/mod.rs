@@ -1,7 +1,7 @@
 //! The paper's interaction experiment ("Reducing Lag By Predicting the Next Command") on the simulated
 //! Create: a simulated operator commands a left spin with the left elbow; runs alternate reactive /
 //! Pavlovian (config/interaction.toml: π = stay still, ϱ = spin left, E = left elbow below 90°), each
-//! learning from scratch through the one [`super::runner`]. Run `i` draws its robot and operator seeds
+//! learning from scratch through the one [`super::runner`]. Run `i` draws its robot seed and its pair's operator seed
 //! from [`super::run_rng`]. Per policy: when the response started relative to each ground-truth command
 //! onset ([`pavlov::analysis::interaction`]), and the battery current and rotation averaged over the last
 //! N observed command onsets of each run (`--commands`, the paper: 40; the paper's Figure 4); the shifts of
@@ -163,7 +163,8 @@ pub fn run_study_with_progress(
     Ok(InteractionStudy {
         options: o.clone(),
         seed_derivation: "run i (even = reactive, odd = Pavlovian): robot seed \
-                          Rng::new(seed).fork(i).next_u64(), operator seed Rng::new(seed).fork(i).fork(1).next_u64()"
+                          Rng::new(seed).fork(i).next_u64(), operator seed of the pair Rng::new(seed).fork(i - i % 2).fork(1).next_u64() \
+                          (both runs of a pair see the same operator)"
             .into(),
         timing: vec![timing(&runs, Mode::Reactive), timing(&runs, Mode::Pavlovian)],
         latency_welch: latency_test(&runs),

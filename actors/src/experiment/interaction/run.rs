@@ -3,7 +3,9 @@
 //!
 //! Runs alternate reactive / Pavlovian (config/interaction.toml: π = stay still, ϱ = spin left, E = left
 //! elbow below 90°), each learning from scratch under tokio's paused clock. Run `i` uses robot seed
-//! `Rng::new(seed).fork(i).next_u64()` and operator seed `Rng::new(seed).fork(i).fork(1).next_u64()`.
+//! `Rng::new(seed).fork(i).next_u64()`; both runs of a pair (2k reactive, 2k + 1 Pavlovian) see the same
+//! operator, seed `Rng::new(seed).fork(2k).fork(1).next_u64()`: the learner does not depend on the robot, so
+//! the policies are compared on the same commands.
 //! Per policy: when the response started relative to each ground-truth command onset
 //! ([`pavlov::analysis::interaction`]), and the battery current and rotation averaged over the last
 //! N observed command onsets of each run (`--commands`, the paper: 40; the paper's Figure 4).
@@ -74,10 +76,11 @@ pub struct InteractionRun {
     pub records: Vec<Arc<TickRecord>>,
 }
 
-/// The seeds of run `index`: (robot, operator).
+/// The seeds of run `index`: (robot, operator). The operator is the pair's: runs 2k and 2k + 1 share it.
 pub(crate) fn run_seeds(seed: u64, index: usize) -> (u64, u64) {
-    let run = run_rng(seed, index);
-    (run.clone().next_u64(), run.fork(1).next_u64())
+    let robot = run_rng(seed, index).next_u64();
+    let operator = run_rng(seed, index - index % 2).fork(1).next_u64();
+    (robot, operator)
 }
 
 /// What an interaction run keeps: every record, and the simulated operator driving the pose channel.
@@ -297,12 +300,18 @@ mod tests {
     }
 
     #[test]
-    fn run_seeds_differ_between_runs_and_between_robot_and_operator() {
+    fn both_runs_of_a_pair_see_the_same_operator_and_pairs_differ() {
         let (r0, h0) = run_seeds(1, 0);
         let (r1, h1) = run_seeds(1, 1);
+        let (r2, h2) = run_seeds(1, 2);
         assert_ne!(r0, h0);
         assert_ne!(r0, r1);
-        assert_ne!(h0, h1);
+        assert_eq!(
+            h0, h1,
+            "reactive and Pavlovian runs of a pair share the operator"
+        );
+        assert_ne!(h0, h2, "each pair has its own operator");
+        assert_ne!(r1, r2);
         assert_eq!(run_seeds(1, 0), (r0, h0));
         assert_eq!(r0, crate::experiment::stall::run_seed(1, 0));
     }
