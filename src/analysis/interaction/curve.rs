@@ -5,9 +5,13 @@
 //! debounced gate onset, [`super::measure`]) and the physical latencies (battery current, motion,
 //! [`super::physical`]), and its false starts. [`curve`] bins the commands by their onset into windows of
 //! learning time, pooling the runs of each policy (several seeds), and gives per window:
-//! - the *current lead* and *motion lead*: the reactive runs' mean physical latency minus the Pavlovian
-//!   runs' (positive = the Pavlovian robot drew current / moved earlier), with a 95 % bootstrap interval
-//!   ([`crate::analysis::bootstrap`]);
+//! - the *decision lead*: the reactive runs' mean decision latency minus the Pavlovian runs' (positive = the
+//!   Pavlovian control responded earlier), with a 95 % bootstrap interval ([`crate::analysis::bootstrap`]).
+//!   It depends on the operator and the learner only, not on the robot;
+//! - the *current lead* and *motion lead*: the same for the physical onsets (positive = the Pavlovian robot
+//!   drew current / moved earlier). These also carry the robots' own differences: with lab variation each
+//!   run's robot has its own friction and charge, which shift its lags by tens of ms, a run-level effect the
+//!   interval over commands does not cover;
 //! - the *anticipated fraction* of each policy (decision onset before the true onset) and its difference,
 //!   Pavlovian minus reactive, with a bootstrap interval: the reactive policy "anticipates" some commands
 //!   too, because sensor noise can take the observed elbow past 90° before the true one, so only the
@@ -95,6 +99,8 @@ pub struct CurvePoint {
     pub commands_reactive: usize,
     /// The same over the Pavlovian runs.
     pub commands_pavlovian: usize,
+    /// Reactive minus Pavlovian mean decision latency, ms (positive = Pavlovian earlier).
+    pub decision_lead: Option<MeanDifference>,
     /// Reactive minus Pavlovian mean current latency, ms (positive = Pavlovian earlier).
     pub current_lead: Option<MeanDifference>,
     /// Reactive minus Pavlovian mean motion latency, ms.
@@ -176,6 +182,12 @@ pub fn curve(runs: &[RunTimeline], window_min: f64, seed: u64) -> Vec<CurvePoint
                 to_min: (w + 1) as f64 * window_min,
                 commands_reactive: rc.len(),
                 commands_pavlovian: pc.len(),
+                decision_lead: mean_difference(
+                    &pick(&rc, |c| c.decision_ms),
+                    &pick(&pc, |c| c.decision_ms),
+                    RESAMPLES,
+                    s ^ 3,
+                ),
                 current_lead: mean_difference(
                     &pick(&rc, |c| c.current_ms),
                     &pick(&pc, |c| c.current_ms),
@@ -198,9 +210,9 @@ pub fn curve(runs: &[RunTimeline], window_min: f64, seed: u64) -> Vec<CurvePoint
         .collect()
 }
 
-/// The first window from which the current lead's interval lies above 0 in that and every later window.
+/// The first window from which the decision lead's interval lies above 0 in that and every later window.
 pub fn holds_from(points: &[CurvePoint]) -> Option<usize> {
-    let holds = |p: &CurvePoint| p.current_lead.is_some_and(|d| d.above_zero());
+    let holds = |p: &CurvePoint| p.decision_lead.is_some_and(|d| d.above_zero());
     let last_failure = points.iter().rposition(|p| !holds(p));
     match last_failure {
         None if !points.is_empty() => Some(0),
@@ -274,6 +286,8 @@ mod tests {
         assert!(lead0.lo <= 0.0 && lead0.hi >= 0.0, "{lead0:?}");
         let lead4 = c[4].current_lead.unwrap();
         assert!((lead4.difference - 100.0).abs() < 1e-9 && lead4.above_zero());
+        assert!(c[0].decision_lead.unwrap().difference.abs() < 1e-9);
+        assert!((c[4].decision_lead.unwrap().difference - 100.0).abs() < 1e-9);
         assert_eq!(holds_from(&c), Some(2));
         // The reactive baseline anticipates a quarter of its commands; only the Pavlovian excess counts.
         assert!((c[0].anticipated_reactive - 0.25).abs() < 0.1, "{:?}", c[0]);
@@ -289,16 +303,18 @@ mod tests {
     #[test]
     fn anticipation_that_lapses_at_the_end_does_not_hold_and_no_runs_give_no_curve() {
         let runs = vec![
-            run(false, 6.0, |_| 20.0, |t| 150.0 + (t * 100.0).sin()),
+            run(false, 6.0, |t| 20.0 + (t * 100.0).sin(), |_| 150.0),
             run(
                 true,
                 6.0,
-                |_| -50.0,
-                |t| 150.0 + (t * 100.0).sin() - if t < 4.0 { 80.0 } else { 0.0 },
+                |t| 20.0 + (t * 100.0).sin() - if t < 4.0 { 80.0 } else { 0.0 },
+                |_| 100.0,
             ),
         ];
         let c = curve(&runs, 2.0, 1);
-        assert!(c[0].current_lead.unwrap().above_zero());
+        assert!(c[0].decision_lead.unwrap().above_zero());
+        // The physical lead alone does not make anticipation hold.
+        assert!(c[2].current_lead.unwrap().above_zero());
         assert_eq!(holds_from(&c), None);
         assert!(curve(&[], 2.0, 1).is_empty());
         assert_eq!(holds_from(&[]), None);

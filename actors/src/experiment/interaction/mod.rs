@@ -10,12 +10,14 @@
 //! anticipation first holds, or the end of the run.
 //!
 //! - [`run`]: one run; [`analysis`]: the statistics; [`report`]: files and the terminal table;
-//!   [`plots`]: the Figure 3 and Figure 4 analogues and the time course.
+//!   [`plots`]: the Figure 3 and Figure 4 analogues and the time course; [`sensitivity`]: the study over
+//!   operator and learner variants.
 
 pub(crate) mod analysis;
 pub(crate) mod plots;
 pub mod report;
 pub(crate) mod run;
+pub mod sensitivity;
 
 use std::path::PathBuf;
 
@@ -56,8 +58,8 @@ pub struct InteractionOptions {
 }
 
 impl InteractionOptions {
-    /// The paper's single pair of runs: `minutes` per run, 40 aligned commands, 2-minute windows, the
-    /// default operator, not recorded.
+    /// `runs_per_policy` pairs of `minutes` each, 40 aligned commands, 5-minute windows, the default
+    /// operator, not recorded.
     pub fn new(seed: u64, runs_per_policy: usize, minutes: f64, out: PathBuf) -> Self {
         InteractionOptions {
             runs_per_policy,
@@ -67,7 +69,7 @@ impl InteractionOptions {
             record: false,
             threads: 2,
             out,
-            window_min: 2.0,
+            window_min: 5.0,
             human: HumanParams::default(),
         }
     }
@@ -92,8 +94,8 @@ pub struct InteractionStudy {
     pub curve: Vec<CurvePoint>,
     /// The window from which anticipation holds (the current lead's interval above 0 from there on).
     pub holds_from_window: Option<usize>,
-    /// Where the Figure 3 analogue is drawn, minutes into the runs: when anticipation first holds, or the
-    /// end of the run.
+    /// Where the Figure 3 analogue is drawn, minutes into the runs: the middle of the first window from
+    /// which anticipation holds, or the end of the run.
     pub fig3_at_min: f64,
     /// Aligned averages around the observed command onsets.
     pub aligned: Vec<AlignedPoint>,
@@ -159,7 +161,7 @@ pub fn run_study_with_progress(
     let holds_from_window = holds_from(&curve);
     let fig3_at_min = holds_from_window
         .and_then(|w| curve.get(w))
-        .map_or(o.minutes, |p| p.from_min);
+        .map_or(o.minutes, |p| (p.from_min + p.to_min) / 2.0);
     Ok(InteractionStudy {
         options: o.clone(),
         seed_derivation: "run i (even = reactive, odd = Pavlovian): robot seed \

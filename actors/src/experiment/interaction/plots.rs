@@ -82,6 +82,7 @@ fn panel(
 const RED: RGBColor = RGBColor(200, 80, 40);
 const BLUE: RGBColor = RGBColor(40, 100, 200);
 const GREY: RGBColor = RGBColor(90, 90, 90);
+const BLACK_ISH: RGBColor = RGBColor(30, 30, 30);
 
 /// Ten seconds of a run centred on its first observed command onset at or after `at_min` minutes (the last
 /// one whose ten seconds fit, when none comes later).
@@ -113,7 +114,7 @@ pub(crate) fn fig3(path: &Path, s: &InteractionStudy) -> std::io::Result<()> {
         "Fig. 3 analogue: timing of signals at {:.1} min ({}; 10 s around a command)",
         s.fig3_at_min,
         if s.holds_from_window.is_some() {
-            "when anticipation first holds"
+            "middle of the first window from which anticipation holds"
         } else {
             "end of run: anticipation never held"
         }
@@ -315,15 +316,16 @@ pub(crate) fn fig_curve(path: &Path, s: &InteractionStudy) -> std::io::Result<()
             )
         };
     let zero: Series = ("0".into(), GREY, vec![(span.start, 0.0), (span.end, 0.0)]);
-    let (cur, cur_band) = diff_series("current onset", BLUE, |p| p.current_lead, 1.0);
-    let (mot, mot_band) = diff_series("motion onset", RED, |p| p.motion_lead, 1.0);
+    let (dec, dec_band) = diff_series("decision (gate)", BLACK_ISH, |p| p.decision_lead, 1.0);
+    let (cur, cur_band) = diff_series("battery current", BLUE, |p| p.current_lead, 1.0);
+    let (mot, mot_band) = diff_series("motion", RED, |p| p.motion_lead, 1.0);
     if let Some(a) = rows.first() {
         panel(
             a,
-            "anticipation lead, ms: reactive − Pavlovian physical onset (95 % bootstrap CI)",
+            "anticipation lead, ms: reactive − Pavlovian onset (95 % bootstrap CI)",
             span.clone(),
-            &[cur, mot, zero.clone()],
-            &[cur_band, mot_band],
+            &[dec, cur, mot, zero.clone()],
+            &[dec_band, cur_band, mot_band],
             "minutes of learning",
         )?;
     }

@@ -109,16 +109,17 @@ pub fn table(s: &InteractionStudy) -> String {
     }
     let _ = writeln!(
         t,
-        "time course ({}-min windows; current lead = reactive − Pavlovian current onset, ms; anticipated \
-         excess, pp; false starts/min Pavlovian):",
+        "time course ({}-min windows; leads = reactive − Pavlovian onset, ms, positive = Pavlovian earlier; \
+         anticipated excess over the reactive baseline, pp; Pavlovian false starts per minute):",
         s.options.window_min
     );
     for p in &s.curve {
         let _ = writeln!(
             t,
-            "  {:>5.1}–{:<5.1} min: lead {:<34} excess {:<34} false starts {:.2}",
+            "  {:>5.1}–{:<5.1} min: decision lead {:<33} current lead {:<33} excess {:<34} false starts {:.2}",
             p.from_min,
             p.to_min,
+            diff(p.decision_lead, 1.0, " ms"),
             diff(p.current_lead, 1.0, " ms"),
             diff(p.anticipated_difference, 100.0, " pp"),
             p.false_starts_pavlovian.per_minute
@@ -126,7 +127,8 @@ pub fn table(s: &InteractionStudy) -> String {
     }
     let _ = writeln!(
         t,
-        "anticipation holds (current lead's interval above 0 from then on): {}; Figure 3 analogue at {:.1} min",
+        "anticipation holds (decision lead's interval above 0 from then on): {}; Figure 3 analogue at {:.1} min \
+         (the middle of that window, or the end of the run)",
         s.holds_from_window.and_then(|w| s.curve.get(w)).map_or(
             "never in this run".to_string(),
             |p| format!("from {:.1} min", p.from_min)
@@ -241,7 +243,7 @@ pub fn write_all(dir: &Path, s: &InteractionStudy) -> std::io::Result<()> {
 pub(crate) fn curve_csv(s: &InteractionStudy) -> String {
     let mut c = String::from(
         "from_min,to_min,commands_reactive,commands_pavlovian,\
-         current_lead_ms,current_lead_lo,current_lead_hi,motion_lead_ms,motion_lead_lo,motion_lead_hi,\
+         decision_lead_ms,decision_lead_lo,decision_lead_hi,current_lead_ms,current_lead_lo,current_lead_hi,motion_lead_ms,motion_lead_lo,motion_lead_hi,\
          anticipated_reactive,anticipated_pavlovian,anticipated_excess,anticipated_excess_lo,anticipated_excess_hi,\
          false_starts_per_min_reactive,false_starts_per_min_pavlovian,false_starts_pavlovian_lo,false_starts_pavlovian_hi\n",
     );
@@ -253,11 +255,12 @@ pub(crate) fn curve_csv(s: &InteractionStudy) -> String {
     for p in &s.curve {
         let _ = writeln!(
             c,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             p.from_min,
             p.to_min,
             p.commands_reactive,
             p.commands_pavlovian,
+            d(p.decision_lead),
             d(p.current_lead),
             d(p.motion_lead),
             p.anticipated_reactive,
