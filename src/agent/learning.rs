@@ -172,6 +172,7 @@ impl LearningStage {
                 left_avg: e.left_avg,
                 right: e.right,
                 right_avg: e.right_avg,
+                skeleton: e.skeleton,
             }
         });
         if input.elbow.is_none() {
@@ -377,6 +378,7 @@ mod tests {
             right: Some(160.0),
             right_avg: Some(160.0),
             command: false,
+            skeleton: crate::skeleton::SkeletonStatus::Tracked,
         };
         let weights = |s: &LearningStage| s.snapshot().predictions[0].weights.clone();
         let tick = |s: &mut LearningStage, left: Option<f64>| {

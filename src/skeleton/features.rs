@@ -6,7 +6,7 @@ use serde::Serialize;
 use super::ewma::Ewma;
 use super::geometry::COMMAND_THRESHOLD_DEG;
 use super::joint::Side;
-use super::pose::PoseTracker;
+use super::pose::{PoseTracker, SkeletonStatus};
 
 /// The paper's averaging weight: `μ_{t+1} = 0.8 μ_t + 0.2 LeftElbow_t`.
 ///
@@ -34,6 +34,8 @@ pub struct ElbowFeatures {
     pub right_avg: Option<f64>,
     /// Stimulus `E`: the left angle is valid and below 90°.
     pub command: bool,
+    /// Whether a skeleton is coming in.
+    pub skeleton: SkeletonStatus,
 }
 
 /// One elbow's smoothing state.
@@ -115,6 +117,7 @@ impl ElbowFeatureTracker {
             right,
             right_avg: self.right.step(right, self.max_hold_ticks),
             command: left.is_some_and(|deg| deg < COMMAND_THRESHOLD_DEG),
+            skeleton: pose.status(now_ms),
         }
     }
 }

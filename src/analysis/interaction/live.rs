@@ -12,7 +12,8 @@
 //!   *answered early* when its lead is positive. A command with no response onset in its window is *missed*
 //!   (a new command onset ends the wait for the previous one).
 //! - A *false start* is a response onset in no command's window: no command onset within `W` after it, and
-//!   none within `W` before it (a late response answers a command, it does not start falsely).
+//!   no stimulus within `W` before it (a late response answers a command, and a response restarting with a
+//!   command's flickering stimulus belongs to that command; neither starts falsely).
 //!
 //! A lead is known up to `W` after its command onset, a false start `W` after the response onset.
 
@@ -53,7 +54,7 @@ pub struct LiveInteractionFigures {
 pub struct LiveInteraction {
     commands: Debouncer,
     responses: Debouncer,
-    last_command_ms: Option<f64>,
+    last_stimulus_ms: Option<f64>,
     awaiting_command_ms: Option<f64>,
     unmatched_responses_ms: VecDeque<f64>,
     recent_leads: VecDeque<Option<f64>>,
@@ -78,7 +79,7 @@ impl LiveInteraction {
         LiveInteraction {
             commands: Debouncer::new(COMMAND, period_ms),
             responses: Debouncer::new(RESPONSE, period_ms),
-            last_command_ms: None,
+            last_stimulus_ms: None,
             awaiting_command_ms: None,
             unmatched_responses_ms: VecDeque::new(),
             recent_leads: VecDeque::new(),
@@ -96,6 +97,9 @@ impl LiveInteraction {
     /// Feeds one tick: its time (ms, non-decreasing), the stimulus and the gate.
     pub fn observe_tick(&mut self, t_ms: f64, stimulus: bool, gate: bool) {
         self.expire(t_ms);
+        if stimulus {
+            self.last_stimulus_ms = Some(t_ms);
+        }
         let response = self.responses.step(t_ms, gate);
         if let Some(onset) = self.commands.step(t_ms, stimulus) {
             self.on_command(onset);
@@ -134,7 +138,6 @@ impl LiveInteraction {
             self.resolve(None);
         }
         self.figures.commands += 1;
-        self.last_command_ms = Some(t_ms);
         // Every unmatched response onset is within the window now (older ones expired): the first answers
         // this command, the rest fall in its window and are no false starts.
         let first = self.unmatched_responses_ms.front().copied();
@@ -152,7 +155,7 @@ impl LiveInteraction {
         if let Some(c) = self.awaiting_command_ms {
             self.resolve(Some(c - t_ms));
         } else if self
-            .last_command_ms
+            .last_stimulus_ms
             .is_none_or(|c| t_ms - c > LIVE_WINDOW_MS)
         {
             self.unmatched_responses_ms.push_back(t_ms);
@@ -259,15 +262,16 @@ mod tests {
         // gate blip 3 s later is neither a response nor a false start.
         let s = run(
             400,
-            &[(100, 103), (105, 120), (122, 130), (140, 141)],
-            &[(100, 130), (250, 251)],
+            &[(100, 103), (105, 120), (122, 130), (140, 141), (170, 178)],
+            &[(100, 130), (170, 178), (250, 251)],
         );
         assert_eq!(
             (s.commands, s.early, s.missed, s.false_starts),
             (1, 0, 0, 0)
         );
         assert_eq!(s.last_lead_ms, Some(0.0));
-        // Without debouncing these were four commands and a false start.
+        // The gate restarting with the flicker at 3.4 s (1.4 s after the onset) belongs to the command.
+        // Without debouncing these were five commands and a false start.
     }
 
     #[test]
