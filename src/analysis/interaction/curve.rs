@@ -6,12 +6,15 @@
 //! [`super::physical`]), and its false starts. [`curve`] bins the commands by their onset into windows of
 //! learning time, pooling the runs of each policy (several seeds), and gives per window:
 //! - the *decision lead*: the reactive runs' mean decision latency minus the Pavlovian runs' (positive = the
-//!   Pavlovian control responded earlier), with a 95 % bootstrap interval ([`crate::analysis::bootstrap`]).
-//!   It depends on the operator and the learner only, not on the robot;
+//!   Pavlovian control responded earlier). It depends on the operator and the learner only, not on the robot;
 //! - the *current lead* and *motion lead*: the same for the physical onsets (positive = the Pavlovian robot
 //!   drew current / moved earlier). These also carry the robots' own differences: with lab variation each
-//!   run's robot has its own friction and charge, which shift its lags by tens of ms, a run-level effect the
-//!   interval over commands does not cover;
+//!   run's robot has its own friction and charge, which shift its lags by tens of ms;
+//!
+//! Every interval is a 95 % two-stage bootstrap over runs, then commands within them
+//! ([`crate::analysis::bootstrap::mean_difference_clustered`]), so it carries the spread between runs (robots
+//! and operators); with a single run per policy it cannot, and a physical lead then mixes the policy with the
+//! two robots' own differences.
 //! - the *anticipated fraction* of each policy (decision onset before the true onset) and its difference,
 //!   Pavlovian minus reactive, with a bootstrap interval: the reactive policy "anticipates" some commands
 //!   too, because sensor noise can take the observed elbow past 90° before the true one, so only the
@@ -24,7 +27,7 @@
 
 use serde::Serialize;
 
-use crate::analysis::bootstrap::{MeanDifference, RESAMPLES, mean_difference};
+use crate::analysis::bootstrap::{MeanDifference, RESAMPLES, mean_difference_clustered};
 
 /// One ground-truth command and what each measurement made of it (latencies from its onset, ms).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -136,35 +139,41 @@ pub fn curve(runs: &[RunTimeline], window_min: f64, seed: u64) -> Vec<CurvePoint
     (0..windows)
         .map(|w| {
             let (from, to) = (w as f64 * window_ms, (w + 1) as f64 * window_ms);
-            let commands = |pavlovian: bool| -> Vec<&CommandResult> {
+            // Per run of a policy, its commands in the window.
+            let commands = |pavlovian: bool| -> Vec<Vec<&CommandResult>> {
                 runs.iter()
                     .filter(|r| r.pavlovian == pavlovian)
-                    .flat_map(|r| r.commands.iter())
-                    .filter(|c| in_window(c.onset_ms, from, to))
-                    .collect()
-            };
-            let (rc, pc) = (commands(false), commands(true));
-            let pick = |cs: &[&CommandResult], f: fn(&CommandResult) -> Option<f64>| -> Vec<f64> {
-                cs.iter().filter_map(|c| f(c)).collect()
-            };
-            let anticipated = |cs: &[&CommandResult]| -> Vec<f64> {
-                cs.iter()
-                    .map(|c| {
-                        if c.decision_ms.is_some_and(|l| l < 0.0) {
-                            1.0
-                        } else {
-                            0.0
-                        }
+                    .map(|r| {
+                        r.commands
+                            .iter()
+                            .filter(|c| in_window(c.onset_ms, from, to))
+                            .collect()
                     })
                     .collect()
             };
+            let (rc, pc) = (commands(false), commands(true));
+            let pick = |runs: &[Vec<&CommandResult>],
+                        f: fn(&CommandResult) -> Option<f64>|
+             -> Vec<Vec<f64>> {
+                runs.iter()
+                    .map(|cs| cs.iter().filter_map(|c| f(c)).collect())
+                    .collect()
+            };
+            let anticipated = |c: &CommandResult| -> Option<f64> {
+                Some(if c.decision_ms.is_some_and(|l| l < 0.0) {
+                    1.0
+                } else {
+                    0.0
+                })
+            };
             let s = seed ^ (w as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-            let (ar, ap) = (anticipated(&rc), anticipated(&pc));
-            let fraction = |xs: &[f64]| {
-                if xs.is_empty() {
+            let (ar, ap) = (pick(&rc, anticipated), pick(&pc, anticipated));
+            let fraction = |xs: &[Vec<f64>]| {
+                let n: usize = xs.iter().map(Vec::len).sum();
+                if n == 0 {
                     f64::NAN
                 } else {
-                    xs.iter().sum::<f64>() / xs.len() as f64
+                    xs.iter().flatten().sum::<f64>() / n as f64
                 }
             };
             let rate = |pavlovian: bool| {
@@ -180,21 +189,21 @@ pub fn curve(runs: &[RunTimeline], window_min: f64, seed: u64) -> Vec<CurvePoint
             CurvePoint {
                 from_min: w as f64 * window_min,
                 to_min: (w + 1) as f64 * window_min,
-                commands_reactive: rc.len(),
-                commands_pavlovian: pc.len(),
-                decision_lead: mean_difference(
+                commands_reactive: rc.iter().map(Vec::len).sum(),
+                commands_pavlovian: pc.iter().map(Vec::len).sum(),
+                decision_lead: mean_difference_clustered(
                     &pick(&rc, |c| c.decision_ms),
                     &pick(&pc, |c| c.decision_ms),
                     RESAMPLES,
                     s ^ 3,
                 ),
-                current_lead: mean_difference(
+                current_lead: mean_difference_clustered(
                     &pick(&rc, |c| c.current_ms),
                     &pick(&pc, |c| c.current_ms),
                     RESAMPLES,
                     s,
                 ),
-                motion_lead: mean_difference(
+                motion_lead: mean_difference_clustered(
                     &pick(&rc, |c| c.motion_ms),
                     &pick(&pc, |c| c.motion_ms),
                     RESAMPLES,
@@ -202,7 +211,7 @@ pub fn curve(runs: &[RunTimeline], window_min: f64, seed: u64) -> Vec<CurvePoint
                 ),
                 anticipated_reactive: fraction(&ar),
                 anticipated_pavlovian: fraction(&ap),
-                anticipated_difference: mean_difference(&ap, &ar, RESAMPLES, s ^ 2),
+                anticipated_difference: mean_difference_clustered(&ap, &ar, RESAMPLES, s ^ 2),
                 false_starts_reactive: rate(false),
                 false_starts_pavlovian: rate(true),
             }

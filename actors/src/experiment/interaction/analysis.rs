@@ -3,7 +3,7 @@
 //! debounced decision onset, the anticipated fraction over the reactive baseline), the aligned averages of
 //! battery current and rotation around the observed command onsets (Figure 4), and Welch's tests.
 
-use pavlov::analysis::bootstrap::{MeanDifference, RESAMPLES, mean_difference};
+use pavlov::analysis::bootstrap::{MeanDifference, RESAMPLES, mean_difference_clustered};
 use pavlov::analysis::interaction::physical::PhysicalLatency;
 use pavlov::analysis::stats::{Describe, WelchTest, describe, welch};
 use pavlov::control::Mode;
@@ -151,7 +151,9 @@ pub(crate) fn latency_test(runs: &[InteractionRun]) -> Option<WelchTest> {
     welch(&lat(Mode::Reactive), &lat(Mode::Pavlovian))
 }
 
-/// Pavlovian minus reactive, each with a 95 % bootstrap interval (negative latency shifts = earlier).
+/// Pavlovian minus reactive, each with a 95 % two-stage bootstrap interval over runs and their commands
+/// (negative latency shifts = earlier). With one run per policy the interval covers the commands only: the
+/// physical shifts then also hold the two robots' own differences (lab variation), which it cannot see.
 #[derive(Debug, Clone, Serialize)]
 pub struct Shifts {
     /// Battery current onset, ms: the headline (the robot's physical response, not the control decision).
@@ -167,17 +169,15 @@ pub struct Shifts {
 
 /// The shifts over every command of the study's runs; `seed` fixes the bootstrap.
 pub(crate) fn shifts(runs: &[InteractionRun], seed: u64) -> Shifts {
-    let of = |mode: Mode,
-              pick: fn(&pavlov::analysis::interaction::curve::CommandResult) -> Option<f64>|
-     -> Vec<f64> {
+    type Pick = fn(&pavlov::analysis::interaction::curve::CommandResult) -> Option<f64>;
+    let of = |mode: Mode, pick: Pick| -> Vec<Vec<f64>> {
         runs.iter()
             .filter(|r| r.mode == mode)
-            .flat_map(|r| r.timeline.commands.iter().filter_map(pick))
+            .map(|r| r.timeline.commands.iter().filter_map(pick).collect())
             .collect()
     };
-    let shift = |pick: fn(&pavlov::analysis::interaction::curve::CommandResult) -> Option<f64>,
-                 s: u64| {
-        mean_difference(
+    let shift = |pick: Pick, s: u64| {
+        mean_difference_clustered(
             &of(Mode::Pavlovian, pick),
             &of(Mode::Reactive, pick),
             RESAMPLES,

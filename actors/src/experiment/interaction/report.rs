@@ -81,12 +81,19 @@ pub fn table(s: &InteractionStudy) -> String {
     let sh = &s.shifts;
     let _ = writeln!(
         t,
-        "Pavlovian − reactive (negative = earlier), 95 % bootstrap intervals over commands:\n  \
+        "Pavlovian − reactive (negative = earlier), 95 % two-stage bootstrap intervals (runs, then commands):\n  \
          battery current onset {}\n  motion onset {}\n  decision (debounced gate) onset {}",
         diff(sh.current_ms, 1.0, " ms"),
         diff(sh.motion_ms, 1.0, " ms"),
         diff(sh.decision_ms, 1.0, " ms"),
     );
+    if s.options.runs_per_policy < 2 {
+        let _ = writeln!(
+            t,
+            "  (one run per policy: the physical shifts also hold the two robots' own differences in friction \
+             and charge, which no interval over one pair can show; the decision shift does not depend on the robot)"
+        );
+    }
     let frac = |p: &str| {
         s.timing
             .iter()
