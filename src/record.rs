@@ -57,6 +57,9 @@ pub struct ElbowAngles {
     pub right: Option<f64>,
     /// Exponentially weighted average of the right angle.
     pub right_avg: Option<f64>,
+    /// Whether a skeleton is coming in: `tracked`, `stale` or `none` (recordings without it read `none`).
+    #[serde(default)]
+    pub skeleton: crate::skeleton::SkeletonStatus,
 }
 
 /// Why actuation overrode the gate's action with a stop.

@@ -4,6 +4,7 @@
 import {
   Backoff, GapCounter, Window, alignedData, connectionTarget, fmt, fmtDuration, fmtLead, paramLimits, parseParam, teleopWheels, tokenFromHash,
 } from './lib.js';
+import { ElbowPanel } from './elbow.js';
 
 const WINDOW_SECONDS = 30;
 const TELEOP_REPEAT_MS = 200;
@@ -36,6 +37,11 @@ const state = {
   teleopTimer: null,
   backoff: new Backoff(),
 };
+// The gesture experiment's elbow chart and skeleton status (elbow.js).
+state.elbow = new ElbowPanel({
+  card: $('elbow-card'), chart: $('chart-elbow'), status: $('now-skeleton'), banner: $('skeleton-banner'),
+  windowSeconds: WINDOW_SECONDS, height: CHART_HEIGHT,
+});
 // Exposed for the end-to-end test and for poking around in the console.
 window.pavlov = state;
 
@@ -157,6 +163,7 @@ function onHello(h) {
   document.body.classList.toggle('watch-only', !h.can_command);
   setConn('live', h.can_command ? `live · ${h.rate_hz} Hz` : `live · ${h.rate_hz} Hz · watch-only`);
   buildCharts(h.signals.predictions);
+  state.elbow.configure(h);
   log(`connected to ${h.server} (protocol ${h.protocol})`);
 }
 
@@ -186,6 +193,7 @@ function onTick(t) {
   state.last = t;
   state.dirty = true;
   pushCharts(t);
+  state.elbow.push(t);
   if (state.mode !== t.mode) {
     state.mode = t.mode;
     for (const b of document.querySelectorAll('.mode')) {
@@ -429,12 +437,14 @@ function frame() {
   if (state.dirty) {
     state.dirty = false;
     for (const c of state.charts) c.u.setData(c.win.data());
+    state.elbow.render();
     renderNow();
   }
   requestAnimationFrame(frame);
 }
 
 function resizeCharts() {
+  state.elbow.resize();
   for (const c of state.charts) {
     const r = c.el.getBoundingClientRect();
     c.u.setSize({ width: Math.max(300, Math.floor(r.width)), height: CHART_HEIGHT });

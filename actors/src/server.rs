@@ -18,7 +18,6 @@ use pavlov::learn::checkpoint::Checkpoint;
 use pavlov::oi::handshake;
 use pavlov::oi::parser::StreamParser;
 use pavlov::sim::faults::FaultInjector;
-use pavlov::sim::params::SimParams;
 use pavlov::sim::robot::SimRobot;
 use pavlov::skeleton::PoseTracker;
 use tokio::io::AsyncWriteExt;
@@ -268,7 +267,7 @@ fn open_robot(
     let model = config.robot.model;
     Ok(match target {
         RobotTarget::Simulated => {
-            let robot = SimRobot::new(model, SimParams::for_model(model), config.sim.seed);
+            let robot = SimRobot::new(model, config.sim.robot_params(model), config.sim.seed);
             let faults = config.sim.fault_spec()?;
             // The injector forks its own streams from the seed, apart from the robot's.
             let injector = FaultInjector::new(faults, config.sim.seed);

@@ -9,6 +9,10 @@
 //! [`crate::learn::bounds`] (α·‖x‖² ≤ 1 and the rest), and an injected human request lasts at most
 //! [`MAX_REQUEST_MS`]. A prediction whose weights were about to become non-finite stops learning, is
 //! reported by [`LearningStage::learn`], and no longer drives the gate (see [`crate::learn::set`]).
+//!
+//! With the left-elbow stimulus, a tick whose elbow angles are missing or stale (either arm: the features
+//! tile both) is acted on but not learned from, and the learning chain breaks there, as it does for stale
+//! robot data: E is unknown on such a tick, not "no command", and half the tilings are inactive.
 
 use crate::config::{Config, StimulusSpec};
 use crate::control::StallDetector;
@@ -122,6 +126,10 @@ pub struct LearningStage {
     pending_stimulus: Option<bool>,
     /// Diverged predictions already reported by `learn`.
     reported: Vec<String>,
+    /// Whether the pending tick's elbow angles are all there (always true without the elbow stimulus).
+    pending_complete: bool,
+    /// Ticks not learned from because an elbow angle was missing or stale.
+    skipped_missing_elbow: u64,
 }
 
 fn scaled_angle(a: Option<f64>) -> f64 {
@@ -154,6 +162,8 @@ impl LearningStage {
             extra: [f64::NAN; 4],
             pending_stimulus: None,
             reported: Vec::new(),
+            pending_complete: true,
+            skipped_missing_elbow: 0,
         })
     }
 
@@ -212,6 +222,7 @@ impl LearningStage {
                 left_avg: e.left_avg,
                 right: e.right,
                 right_avg: e.right_avg,
+                skeleton: e.skeleton,
             }
         });
         if input.elbow.is_none() {
@@ -220,6 +231,12 @@ impl LearningStage {
         let stimulus = self.stimulus(&input);
         self.pending_stimulus = Some(stimulus);
         self.stimuli = [stimulus];
+        self.pending_complete = match self.stimulus_spec {
+            StimulusSpec::Stall { .. } => true,
+            StimulusSpec::LeftElbow { .. } => input
+                .elbow
+                .is_some_and(|e| e.left.is_some() && e.right.is_some()),
+        };
         let outs = self.set.predict(&FeatureInputs {
             obs: &self.obs,
             extra: &self.extra,
@@ -245,11 +262,20 @@ impl LearningStage {
     }
 
     /// Step 2 of a tick: the TD(λ) update into this tick. Call once after each [`LearningStage::act`].
-    /// Reports any prediction that stopped learning on this step (the caller logs it).
+    /// Reports any prediction that stopped learning on this step (the caller logs it). A tick with a
+    /// missing or stale elbow (elbow stimulus) is not learned from and breaks the chain.
     pub fn learn(&mut self) -> Result<LearnReport, LearnError> {
         let Some(stimulus) = self.pending_stimulus.take() else {
             return Err(LearnError::LearnWithoutPredict);
         };
+        if !self.pending_complete {
+            self.skipped_missing_elbow += 1;
+            self.set.break_chain();
+            return Ok(LearnReport {
+                newly_diverged: Vec::new(),
+                divergences: self.set.divergences(),
+            });
+        }
         let before = self.set.divergences();
         self.set.learn(&[stimulus])?;
         let divergences = self.set.divergences();
@@ -277,6 +303,11 @@ impl LearningStage {
             extra: &self.extra,
             stimuli: &self.stimuli,
         }
+    }
+
+    /// Ticks not learned from because an elbow angle was missing or stale.
+    pub fn skipped_missing_elbow(&self) -> u64 {
+        self.skipped_missing_elbow
     }
 
     /// Forgets the previous tick (after a gap in the sensor stream): credit is not carried across it.
@@ -431,6 +462,45 @@ mod tests {
         }
         let mean: f64 = before.iter().sum::<f64>() / before.len() as f64;
         assert!(mean > 0.5, "prediction two ticks before the stall: {mean}");
+    }
+
+    #[test]
+    fn a_missing_elbow_is_not_learned_from_and_breaks_the_chain() {
+        let cfg = Config::from_toml(include_str!("../../config/interaction.toml")).unwrap();
+        let elbow = |left: Option<f64>| ElbowFeatures {
+            left,
+            left_avg: Some(120.0),
+            right: Some(160.0),
+            right_avg: Some(160.0),
+            command: false,
+            skeleton: crate::skeleton::SkeletonStatus::Tracked,
+        };
+        let weights = |s: &LearningStage| s.snapshot().predictions[0].weights.clone();
+        let tick = |s: &mut LearningStage, left: Option<f64>| {
+            s.act(LearnInput {
+                values: None,
+                elbow: Some(elbow(left)),
+                forced_stimulus: false,
+            });
+            s.learn().unwrap();
+        };
+        // A bent arm (E on) after a straight one: the update raises the prediction.
+        let mut s = LearningStage::new(&cfg).unwrap();
+        tick(&mut s, Some(150.0));
+        let before = weights(&s);
+        tick(&mut s, Some(60.0));
+        assert_ne!(weights(&s), before, "a complete transition is learned");
+        // The same with a tick whose left elbow is missing in between: neither transition is learned (E is
+        // unknown there, not "no command"), and the chain restarts after it.
+        let mut s = LearningStage::new(&cfg).unwrap();
+        tick(&mut s, Some(150.0));
+        let before = weights(&s);
+        tick(&mut s, None);
+        tick(&mut s, Some(60.0));
+        assert_eq!(weights(&s), before, "no update across the missing tick");
+        assert_eq!(s.skipped_missing_elbow(), 1);
+        tick(&mut s, Some(60.0));
+        assert_ne!(weights(&s), before, "learning resumes after it");
     }
 
     #[test]

@@ -5,7 +5,9 @@
 //!   time stalled, distance, energy, efficiency).
 //! - [`interaction`]: response timing against a human's commands, live and after the run.
 //! - [`stats`]: descriptive statistics, Welch's t-test and the small numerical helpers they need.
+//! - [`bootstrap`]: a difference of two means with a percentile-bootstrap confidence interval.
 
+pub mod bootstrap;
 pub mod interaction;
 pub mod run_counters;
 pub mod stats;

@@ -152,6 +152,9 @@ pub struct ControlConfig {
     pub gate_prediction: String,
 }
 
+/// The random stream the lab variation draws from (forked from `[sim] seed`).
+const LAB_VARIATION_STREAM: u64 = 0x1AB;
+
 /// `[sim]`: the simulated robot and human.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -161,6 +164,9 @@ pub struct SimConfig {
     /// Faults the simulated Create injects (see `pavlov::sim::faults::FaultSpec`), e.g. `none`, `soak`, or
     /// `drop=1e-4,flip=1e-4,hang=2e-5`.
     pub faults: String,
+    /// Draw the start charge, start pose and floor friction from the seed (`pavlov::sim::variation`), as
+    /// runs in a lab differ; off: every run starts the same.
+    pub lab_variation: bool,
 }
 
 impl Default for SimConfig {
@@ -168,11 +174,25 @@ impl Default for SimConfig {
         SimConfig {
             seed: 1,
             faults: "none".into(),
+            lab_variation: false,
         }
     }
 }
 
 impl SimConfig {
+    /// The simulated robot's parameters for `model`: the model's, with this run's lab variation drawn from
+    /// the seed when `lab_variation` is on.
+    pub fn robot_params(&self, model: crate::oi::Model) -> crate::sim::params::SimParams {
+        let params = crate::sim::params::SimParams::for_model(model);
+        if self.lab_variation {
+            // Its own stream, apart from everything else the seed drives.
+            let mut rng = crate::rng::Rng::new(self.seed).fork(LAB_VARIATION_STREAM);
+            crate::sim::variation::draw(&params, &mut rng)
+        } else {
+            params
+        }
+    }
+
     /// The parsed fault specification.
     pub fn fault_spec(&self) -> Result<crate::sim::faults::FaultSpec, ConfigError> {
         self.faults
@@ -436,6 +456,26 @@ impl Config {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn lab_variation_draws_the_robot_from_the_seed_only_when_asked() {
+        let mut sim = SimConfig::default();
+        let m = crate::oi::Model::Create1;
+        assert_eq!(
+            sim.robot_params(m),
+            crate::sim::params::SimParams::for_model(m)
+        );
+        sim.lab_variation = true;
+        let a = sim.robot_params(m);
+        assert_ne!(a, crate::sim::params::SimParams::for_model(m));
+        assert_eq!(a, sim.robot_params(m), "the same seed draws the same run");
+        sim.seed = 2;
+        assert_ne!(a, sim.robot_params(m), "another seed, another run");
+        let stall = include_str!("../../config/stall.toml");
+        assert!(Config::from_toml(stall).unwrap().sim.lab_variation);
+        let bad = stall.replace("lab_variation = true", "lab_variation = 3");
+        assert!(Config::from_toml(&bad).is_err());
+    }
+
     use super::*;
 
     const STALL: &str = include_str!("../../config/stall.toml");

@@ -4,6 +4,7 @@
 //! - [`spec`]: [`ModelSpec`], the one table of everything that differs between the models (baud, packets
 //!   and groups, stream budget, opcodes, command ranges, capabilities), one `const` entry per model.
 //! - [`sensors`]: [`SensorValues`], a snapshot of raw packet values indexed by packet id.
+//! - [`events`]: the event bits (over-currents, bumps, wheel drops, cliffs) OR-ed over the frames between ticks.
 //! - [`error`]: [`OiError`], what can be wrong with a packet id, value, command or stream request.
 //! - [`packets`]: the table of sensor packets 7–58 and groups, and their byte encoding.
 //! - [`command`]: host-to-robot commands, encoded and parsed per model.
@@ -18,6 +19,7 @@
 
 pub mod command;
 pub mod error;
+pub mod events;
 pub mod frame;
 pub mod handshake;
 pub mod mode;

@@ -9,6 +9,7 @@ pub mod odometry;
 pub mod params;
 pub mod readings;
 pub mod robot;
+pub mod variation;
 pub mod world;
 
 /// The OI sensor period and the world's step, s [C1 p13; C2 p21].

@@ -8,14 +8,19 @@
 //!   nothing (hosts re-send every tick).
 //! - **motor**: armature current `i = (u·V_batt − k·v) / R` (the electrical time constant, ~1 ms, is
 //!   below the 1 ms sub-step and is neglected); force `k·i`.
+//! - **current limit**: the driver limits the armature current to the wheel's over-current limit (1.0 A on
+//!   the Create 1 [C1 p17]) by lowering the duty, as the spec says of its current limits ("If too much
+//!   current is requested, the current is limited and the overcurrent flag is set" [C1 p10]). The current
+//!   the duty would have driven, the *demand*, is what the over-current flag compares with the limit
+//!   (`sim::readings`); the battery supplies only the limited current.
 //! - **wheel**: mass `m`; kinetic friction, viscous friction and a breakaway (static) friction that
 //!   holds a wheel at rest until the motor force exceeds it. Friction is scaled by a slowly varying
 //!   floor-irregularity factor.
 //! - **sensing**: the firmware's current measurement is a first-order low-pass of the armature current.
 //!
 //! A wheel whose robot is pushed against a wall is held at zero speed by the world (the weighted robot
-//! does not slip); the integral then winds up to full duty and the current rises toward
-//! `V_batt / R`, the stall current.
+//! does not slip); the integral then winds up to full duty and the demand rises toward `V_batt / R`, the
+//! stall current, while the current itself stays at the limit.
 
 use super::params::SimParams;
 use crate::rng::Rng;
@@ -48,6 +53,7 @@ pub struct MotorConstants {
     floor_sd: f64,
     floor_tau_s: f64,
     driver_efficiency: f64,
+    current_limit_a: f64,
     /// Sub-step length, s.
     dt_s: f64,
     /// Low-pass factor of the current measurement per sub-step.
@@ -78,6 +84,7 @@ impl MotorConstants {
             floor_sd: p.floor_friction_sd,
             floor_tau_s: p.floor_friction_tau_s,
             driver_efficiency: p.driver_efficiency,
+            current_limit_a: p.overcurrent_limit_a,
             dt_s,
             sense_alpha,
         }
@@ -108,6 +115,7 @@ pub struct WheelMotor {
     duty: f64,
     current_a: f64,
     sensed_current_a: f64,
+    sensed_demand_a: f64,
     battery_current_a: f64,
     floor: f64,
     pushing: bool,
@@ -123,6 +131,7 @@ impl Default for WheelMotor {
             duty: 0.0,
             current_a: 0.0,
             sensed_current_a: 0.0,
+            sensed_demand_a: 0.0,
             battery_current_a: 0.0,
             floor: 0.0,
             pushing: false,
@@ -183,7 +192,13 @@ impl WheelMotor {
                 (c.feed_forward(self.setpoint_m_s) + c.kp * e + self.integral).clamp(-1.0, 1.0)
             }
         };
-        self.current_a = (self.duty * v_batt - c.back_emf * v) / c.resistance_ohm;
+        let demand = (self.duty * v_batt - c.back_emf * v) / c.resistance_ohm;
+        self.current_a = demand;
+        if demand.abs() > c.current_limit_a && v_batt > 0.0 {
+            // The driver lowers the duty until the current is at the limit.
+            self.current_a = c.current_limit_a * demand.signum();
+            self.duty = (self.current_a * c.resistance_ohm + c.back_emf * v) / v_batt;
+        }
         self.battery_current_a = (self.duty * self.current_a).max(0.0) / c.driver_efficiency;
 
         let force = c.back_emf * self.current_a;
@@ -209,6 +224,7 @@ impl WheelMotor {
         }
 
         self.sensed_current_a += (self.current_a - self.sensed_current_a) * c.sense_alpha;
+        self.sensed_demand_a += (demand - self.sensed_demand_a) * c.sense_alpha;
     }
 
     /// Sets the wheel's speed from outside (a wall holding the robot). A wheel brought to rest while
@@ -248,6 +264,12 @@ impl WheelMotor {
     /// Armature current as the firmware measures it (low-passed), A.
     pub fn sensed_current_a(&self) -> f64 {
         self.sensed_current_a
+    }
+
+    /// The current the duty asked for before the driver's limit, as the firmware measures it (low-passed), A:
+    /// what the over-current flag compares with the limit.
+    pub fn sensed_demand_a(&self) -> f64 {
+        self.sensed_demand_a
     }
 
     /// Current this wheel's driver draws from the battery, A (≥ 0).
@@ -305,7 +327,7 @@ mod tests {
     }
 
     #[test]
-    fn a_held_wheel_winds_up_to_the_stall_current() {
+    fn a_held_wheel_demands_the_stall_current_and_draws_the_limit() {
         let p = SimParams::default();
         let c = MotorConstants::new(&p);
         let mut m = WheelMotor::default();
@@ -315,10 +337,23 @@ mod tests {
             m.constrain_speed(0.0);
         }
         let stall = 16.0 / p.motor_resistance_ohm();
+        assert!(stall > 1.5, "{stall}");
         assert!(
-            (m.sensed_current_a() - stall).abs() < 0.02,
+            (m.sensed_demand_a() - stall).abs() < 0.02,
+            "demand {}",
+            m.sensed_demand_a()
+        );
+        // The current is limited at 1.0 A [C1 p17]; the battery supplies the limited current only.
+        assert!(
+            (m.sensed_current_a() - p.overcurrent_limit_a).abs() < 1e-6,
             "i {}",
             m.sensed_current_a()
+        );
+        let duty = p.overcurrent_limit_a * p.motor_resistance_ohm() / 16.0;
+        assert!((m.duty() - duty).abs() < 1e-9, "duty {}", m.duty());
+        assert!(
+            (m.battery_current_a() - duty * p.overcurrent_limit_a / p.driver_efficiency).abs()
+                < 1e-9
         );
         assert!(m.pushing());
         // Reversing clears the wind-up at once.

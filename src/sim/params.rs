@@ -121,8 +121,9 @@ pub struct SimParams {
     /// Battery voltage at which the motor constants below hold, V: 14.4 V nominal pack [HR p33].
     pub motor_nominal_voltage_v: f64,
     /// Current of a blocked motor at full duty and nominal voltage, A (*estimate*: comfortably above
-    /// the 1.0 A over-current limit [C1 p10], as a stalled Create's persistent over-current flags need).
-    /// Sets the armature resistance `R = V_nominal / I_stall`.
+    /// the 1.0 A over-current limit [C1 p17], as a stalled Create's persistent over-current flags need).
+    /// Sets the armature resistance `R = V_nominal / I_stall`. It is the *demand* of a stalled wheel: the
+    /// driver limits the current itself to `overcurrent_limit_a` (`sim::motor`).
     pub stall_current_a: f64,
     /// Unloaded wheel speed at full duty and nominal voltage, mm/s (*estimate*: some headroom above the
     /// 500 mm/s the firmware allows). Sets the back-EMF constant.
@@ -150,13 +151,18 @@ pub struct SimParams {
     /// Time constant of the firmware's current measurement (battery and wheel currents), s (*estimate*:
     /// a sense resistor and RC filter averaged over a control cycle or two).
     pub current_sense_tau_s: f64,
-    /// Wheel over-current limit, A: 1.0 A [C1 p10, p17] (the model's
+    /// Wheel over-current limit, A: 1.0 A [C1 p17] (the model's
     /// [`crate::oi::ModelSpec::wheel_overcurrent_limit_a`]). The Create 2 limit is unpublished; the
-    /// same value is used.
+    /// same value is used. The driver limits the wheel's current to it and sets the flag: packet 14 lists
+    /// the wheels' 1.0 A with the low side drivers' limits as "the current limits" [C1 p17], and of those
+    /// limits the spec says "If too much current is requested, the current is limited and the overcurrent
+    /// flag is set" [C1 p10] (written on the low side drivers' page; applying it to the wheels is our
+    /// reading of one table of limits).
     pub overcurrent_limit_a: f64,
     /// Each 15 ms the over-current bit of a wheel is set with probability
-    /// `1 / (1 + exp(-(|I| - limit) / scale))`, `I` the sensed wheel current: rare when cruising
-    /// (≈0.2 A), occasional on a hard start or a rough patch, almost always when stalled (≈1.5 A).
+    /// `1 / (1 + exp(-(|I| - limit) / scale))`, `I` the sensed current the duty demands before the limit:
+    /// rare when cruising (≈0.2 A), occasional on a hard start or a rough patch, almost always when
+    /// stalled (a demand of ≈1.6 A, the current itself held at the limit).
     /// Scale in A (*estimate*, tuned so isolated flags occur several times a minute in normal driving,
     /// as the paper reports, while a stalled wheel is flagged in ≈98 % of frames).
     pub overcurrent_scale_a: f64,

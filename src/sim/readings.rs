@@ -90,7 +90,8 @@ impl Sensing {
             | flag(self.caster_bit && drop_l && drop_r, bits::WHEEL_DROP_CASTER);
 
         for side in [LEFT, RIGHT] {
-            let amps = world.wheel_current_a(side).abs();
+            // The flag says the driver is limiting: the demanded current against the limit.
+            let amps = world.wheel_current_demand_a(side).abs();
             let z = (amps - p.overcurrent_limit_a) / p.overcurrent_scale_a.max(1e-9);
             let probability = 1.0 / (1.0 + (-z).exp());
             if self.overcurrent.chance(probability) {

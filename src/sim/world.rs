@@ -336,6 +336,11 @@ impl World {
         self.wheel(side).sensed_current_a()
     }
 
+    /// The motor current the duty asked for before the driver's limit, A, as the firmware measures it.
+    pub fn wheel_current_demand_a(&self, side: usize) -> f64 {
+        self.wheel(side).sensed_demand_a()
+    }
+
     /// Motor duty −1..=1.
     pub fn wheel_duty(&self, side: usize) -> f64 {
         self.wheel(side).duty()

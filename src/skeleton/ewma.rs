@@ -1,5 +1,7 @@
 //! The exponentially weighted moving average the paper feeds to the tile coder alongside each elbow angle
-//! (`μ_{t+1} = 0.8 μ_t + 0.2 LeftElbow_t`).
+//! (`μ_{t+1} = 0.8 μ_t + 0.2 LeftElbow_t`). [`Ewma::update`] folds an input in and returns the new average;
+//! the feature tracker ([`super::features`]) reads μ_t before folding in the tick's angle, as the paper's
+//! recurrence has it.
 //!
 //! Policy for missing input, which the paper leaves open:
 //! - The first valid sample initialises μ to that sample (no ramp up from an arbitrary 0).

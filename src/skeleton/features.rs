@@ -6,9 +6,13 @@ use serde::Serialize;
 use super::ewma::Ewma;
 use super::geometry::COMMAND_THRESHOLD_DEG;
 use super::joint::Side;
-use super::pose::PoseTracker;
+use super::pose::{PoseTracker, SkeletonStatus};
 
 /// The paper's averaging weight: `μ_{t+1} = 0.8 μ_t + 0.2 LeftElbow_t`.
+///
+/// As the paper writes it, the average a tick uses, μ_t, holds the angles of the ticks *before* it; this
+/// tick's angle enters μ_{t+1}. So the tile coder sees the angle now and its average up to the previous tick
+/// (a tracker whose first valid angle is x starts from μ = x).
 pub const ELBOW_EWMA_KEEP: f64 = 0.8;
 
 /// Consecutive invalid ticks after which an elbow's average is forgotten (50 ticks = 1 s at 20 ms). Shorter
@@ -30,6 +34,8 @@ pub struct ElbowFeatures {
     pub right_avg: Option<f64>,
     /// Stimulus `E`: the left angle is valid and below 90°.
     pub command: bool,
+    /// Whether a skeleton is coming in.
+    pub skeleton: SkeletonStatus,
 }
 
 /// One elbow's smoothing state.
@@ -47,6 +53,8 @@ impl SmoothedElbow {
         }
     }
 
+    /// μ_t for this tick (the average of the earlier angles; the first valid angle when there are none),
+    /// then folds this tick's angle in for μ_{t+1}.
     fn step(&mut self, angle: Option<f64>, max_hold_ticks: u32) -> Option<f64> {
         if angle.is_some() {
             self.invalid_run = 0;
@@ -56,7 +64,9 @@ impl SmoothedElbow {
                 self.avg.reset();
             }
         }
-        self.avg.update(angle)
+        let mu_t = self.avg.value().or(angle.filter(|deg| deg.is_finite()));
+        self.avg.update(angle);
+        mu_t
     }
 }
 
@@ -107,6 +117,7 @@ impl ElbowFeatureTracker {
             right,
             right_avg: self.right.step(right, self.max_hold_ticks),
             command: left.is_some_and(|deg| deg < COMMAND_THRESHOLD_DEG),
+            skeleton: pose.status(now_ms),
         }
     }
 }
@@ -172,13 +183,21 @@ mod tests {
     }
 
     #[test]
-    fn average_follows_the_paper_recurrence() {
+    fn average_follows_the_paper_recurrence_one_tick_behind_the_angle() {
+        // μ_{t+1} = 0.8 μ_t + 0.2 LeftElbow_t: a tick's average does not contain its own angle.
         let mut pose = PoseTracker::new(100);
         let mut f = ElbowFeatureTracker::new();
         set_left(&mut pose, 160.0, 0);
         assert!((f.step(&pose, 0).left_avg.unwrap() - 160.0).abs() < 1e-9);
         set_left(&mut pose, 60.0, 20);
-        let avg = f.step(&pose, 20).left_avg.unwrap();
+        let second = f.step(&pose, 20);
+        assert!((second.left.unwrap() - 60.0).abs() < 1e-9);
+        assert!(
+            (second.left_avg.unwrap() - 160.0).abs() < 1e-9,
+            "{second:?}"
+        );
+        set_left(&mut pose, 60.0, 40);
+        let avg = f.step(&pose, 40).left_avg.unwrap();
         assert!((avg - (0.8 * 160.0 + 0.2 * 60.0)).abs() < 1e-9, "{avg}");
     }
 
@@ -197,6 +216,8 @@ mod tests {
         set_left(&mut pose, 150.0, now);
         // Re-initialised from the new sample, not blended with the old 60°.
         let avg = f.step(&pose, now).left_avg.unwrap();
+        assert!((avg - 150.0).abs() < 1e-9, "{avg}");
+        let avg = f.step(&pose, now + 20).left_avg.unwrap();
         assert!((avg - 150.0).abs() < 1e-9, "{avg}");
     }
 }

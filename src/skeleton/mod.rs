@@ -25,4 +25,4 @@ pub use geometry::{
     COMMAND_THRESHOLD_DEG, elbow_angle_deg, mm_to_osceleton_normalized, osceleton_normalized_to_mm,
 };
 pub use joint::{Joint, Side};
-pub use pose::{ElbowAngle, InvalidReason, JointSample, PoseTracker};
+pub use pose::{ElbowAngle, InvalidReason, JointSample, PoseTracker, SkeletonStatus};

@@ -5,7 +5,7 @@
 //! joint as unusable once it is older than `max_age_ms`; an angle built from an unusable joint is
 //! [`ElbowAngle::Invalid`] with the reason, never 0.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::geometry::elbow_angle_deg;
 use super::joint::{Joint, Side};
@@ -68,6 +68,21 @@ impl ElbowAngle {
     }
 }
 
+/// Whether a skeleton is coming in, for the dashboard's warning.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SkeletonStatus {
+    /// A joint of the selected person arrived within the age limit.
+    Tracked,
+    /// Joints are held, but the newest is older than the age limit (the stream stopped, or the person
+    /// stands still out of view).
+    Stale,
+    /// No joint at all: nobody selected yet, or the person was lost.
+    #[default]
+    #[serde(rename = "none")]
+    Absent,
+}
+
 /// Holds the newest sample of each joint and judges whether it is still usable.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PoseTracker {
@@ -116,6 +131,16 @@ impl PoseTracker {
     /// The newest raw sample of `joint`, whatever its age or quality.
     pub fn sample(&self, joint: Joint) -> Option<&JointSample> {
         self.samples[joint.index()].as_ref()
+    }
+
+    /// Whether a skeleton is coming in at `now_ms`: tracked when the newest joint is within the age limit,
+    /// stale when joints are held but all older, none without any joint.
+    pub fn status(&self, now_ms: u64) -> SkeletonStatus {
+        match self.samples.iter().flatten().map(|s| s.at_ms).max() {
+            None => SkeletonStatus::Absent,
+            Some(at) if now_ms.saturating_sub(at) <= self.max_age_ms => SkeletonStatus::Tracked,
+            Some(_) => SkeletonStatus::Stale,
+        }
     }
 
     /// Milliseconds since the newest sample of `joint` was received (0 if it is stamped after `now_ms`).
@@ -305,5 +330,23 @@ mod tests {
         p.clear();
         assert_eq!(p.sample(Joint::Head), None);
         assert_eq!(p.age_ms(Joint::Head, 500), None);
+    }
+
+    #[test]
+    fn status_is_none_then_tracked_then_stale_and_none_again_when_cleared() {
+        let mut p = PoseTracker::new(100);
+        assert_eq!(p.status(0), SkeletonStatus::Absent);
+        p.update(
+            Joint::Head,
+            JointSample {
+                pos_mm: [1.0, 2.0, 3.0],
+                at_ms: 50,
+                confidence: 1.0,
+            },
+        );
+        assert_eq!(p.status(150), SkeletonStatus::Tracked);
+        assert_eq!(p.status(151), SkeletonStatus::Stale);
+        p.clear();
+        assert_eq!(p.status(151), SkeletonStatus::Absent);
     }
 }

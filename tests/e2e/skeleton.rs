@@ -175,7 +175,9 @@ async fn replay(format: SkeletonFormat) -> (usize, f64, f64) {
     for (k, b) in bodies.iter().enumerate() {
         match format {
             SkeletonFormat::KinectV2 => {
-                // Unbundled, one message per joint, as KinectV2-OSC sends; every 10th frame bundled.
+                // Unbundled, one message per joint, as KinectV2-OSC sends (ShoulderLeft before ElbowLeft);
+                // every 10th frame bundled, but not the first: the first frame of a newly selected person
+                // must keep the joints sent before its elbow (item 8 of issue 12).
                 let msgs: Vec<OscPacket> = b
                     .joints
                     .iter()
@@ -192,7 +194,7 @@ async fn replay(format: SkeletonFormat) -> (usize, f64, f64) {
                         )
                     })
                     .collect();
-                if k % 10 == 0 {
+                if k % 10 == 5 {
                     tx.packet(&bundle(msgs)).await;
                 } else {
                     for m in &msgs {

@@ -36,12 +36,24 @@ pub enum Experiment {
 /// `pavlov experiment interaction`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct InteractionArgs {
-    /// Runs per policy (the paper: 1).
-    #[arg(long, default_value_t = 1, value_name = "N")]
-    pub runs: usize,
-    /// Minutes per run (the paper: under 10).
-    #[arg(long, default_value_t = 10.0, value_name = "MIN")]
-    pub minutes: f64,
+    /// The time course: several seeds for an hour (defaults --runs 3 --minutes 60, no recordings); writes
+    /// curve.csv and fig_curve.svg (every study writes them; this sets the defaults for a long one).
+    #[arg(long)]
+    pub curve: bool,
+    /// The sensitivity table: the whole study (defaults as --curve) for each operator and learner variant,
+    /// each labelled paper or non-paper; writes sensitivity.md and sensitivity.csv.
+    #[arg(long, conflicts_with = "curve")]
+    pub sensitivity: bool,
+    /// Runs per policy, each pair with its own operator (default 1, the paper; 3 with --curve).
+    #[arg(long, value_name = "N")]
+    pub runs: Option<usize>,
+    /// Minutes per run (default 10, the paper's "under 10"; 60 with --curve).
+    #[arg(long, value_name = "MIN")]
+    pub minutes: Option<f64>,
+    /// Length of a window of the time course, minutes (5: about 80 commands per policy per window over 3
+    /// seeds, a 95 % interval of about ±10 ms on the decision lead).
+    #[arg(long, default_value_t = 5.0, value_name = "MIN")]
+    pub window: f64,
     /// How many of each run's last observed commands the aligned averages (Figure 4) use (the paper: 40).
     #[arg(long, default_value_t = 40, value_name = "N")]
     pub commands: usize,
@@ -54,7 +66,7 @@ pub struct InteractionArgs {
     /// Configuration (TOML); default: the built-in config/interaction.toml.
     #[arg(long, short = 'c', value_name = "FILE")]
     pub config: Option<PathBuf>,
-    /// Do not write per-tick recordings of the runs.
+    /// Do not write per-tick recordings of the runs (always off with --curve).
     #[arg(long)]
     pub no_record: bool,
 }
@@ -116,17 +128,51 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
         }
         Experiment::Interaction(a) => {
             let config = load_config(a.config.as_ref(), INTERACTION_CONFIG)?;
-            let opts = interaction::InteractionOptions {
-                runs_per_policy: a.runs,
-                minutes: a.minutes,
-                aligned_commands: a.commands,
-                seed: a.seed,
-                record: !a.no_record,
-                threads: default_threads(),
-                out: a
-                    .out
-                    .unwrap_or_else(|| PathBuf::from(format!("results/interaction-{}", a.seed))),
+            let long = a.curve || a.sensitivity;
+            let (runs, minutes) = if long { (3, 60.0) } else { (1, 10.0) };
+            let name = if a.sensitivity {
+                "interaction-sensitivity"
+            } else if a.curve {
+                "interaction-curve"
+            } else {
+                "interaction"
             };
+            let out = a
+                .out
+                .unwrap_or_else(|| PathBuf::from(format!("results/{name}-{}", a.seed)));
+            let mut opts = interaction::InteractionOptions::new(
+                a.seed,
+                a.runs.unwrap_or(runs),
+                a.minutes.unwrap_or(minutes),
+                out,
+            );
+            opts.aligned_commands = a.commands;
+            opts.record = !a.no_record && !long;
+            opts.threads = default_threads();
+            opts.window_min = a.window;
+            anyhow::ensure!(
+                opts.window_min > 0.0 && opts.window_min.is_finite(),
+                "--window must be a positive number of minutes"
+            );
+            if a.sensitivity {
+                let wall = std::time::Instant::now();
+                let rows = interaction::sensitivity::run_sensitivity(&config, &opts, true)?;
+                let table = interaction::sensitivity::table(&rows, &opts);
+                std::fs::create_dir_all(&opts.out)
+                    .with_context(|| format!("cannot create {}", opts.out.display()))?;
+                std::fs::write(opts.out.join("sensitivity.md"), &table)?;
+                std::fs::write(
+                    opts.out.join("sensitivity.csv"),
+                    interaction::sensitivity::csv(&rows),
+                )?;
+                say!("{}", table.trim_end());
+                say!(
+                    "results: {} ({:.0} s wall)",
+                    opts.out.display(),
+                    wall.elapsed().as_secs_f64()
+                );
+                return Ok(());
+            }
             let summary = interaction::run_study_with_progress(&config, &opts, true)?;
             interaction::report::write_all(&opts.out, &summary)?;
             say!("{}", interaction::report::table(&summary).trim_end());

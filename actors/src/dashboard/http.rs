@@ -38,6 +38,7 @@ use crate::telemetry::prometheus::MetricsSnapshot;
 const INDEX_HTML: &str = include_str!("../../../web/index.html");
 const APP_JS: &str = include_str!("../../../web/app.js");
 const LIB_JS: &str = include_str!("../../../web/lib.js");
+const ELBOW_JS: &str = include_str!("../../../web/elbow.js");
 const STYLE_CSS: &str = include_str!("../../../web/style.css");
 
 /// The files of the uPlot package the page loads, relative to the web directory.
@@ -179,6 +180,10 @@ pub(crate) fn router(state: Arc<AppState>) -> Router {
         .route(
             "/lib.js",
             get(|| async { asset("text/javascript; charset=utf-8", LIB_JS) }),
+        )
+        .route(
+            "/elbow.js",
+            get(|| async { asset("text/javascript; charset=utf-8", ELBOW_JS) }),
         )
         .route(
             "/style.css",

@@ -80,8 +80,12 @@ impl Hub {
         (
             Hub {
                 metrics: RunCounters::new(period_ms),
-                interaction: track_interaction
-                    .then(|| (LiveInteraction::new(), LiveAligned::new(period_ms))),
+                interaction: track_interaction.then(|| {
+                    (
+                        LiveInteraction::with_period(period_ms),
+                        LiveAligned::new(period_ms),
+                    )
+                }),
                 tx: tx.clone(),
             },
             HubHandle { tx },

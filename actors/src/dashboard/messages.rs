@@ -400,4 +400,30 @@ mod tests {
                    "max_request_ms":10000})
         );
     }
+
+    #[test]
+    fn the_elbow_carries_the_angles_their_averages_and_the_skeleton_status() {
+        let record = TickRecord {
+            elbow: Some(pavlov::record::ElbowAngles {
+                left: Some(80.5),
+                left_avg: Some(120.0),
+                right: None,
+                right_avg: Some(160.0),
+                skeleton: pavlov::skeleton::SkeletonStatus::Stale,
+            }),
+            ..TickRecord::at_rest(3, 60.0, Mode::Pavlovian)
+        };
+        let v: Value = serde_json::from_str(&TickMessage::new(&record).to_json()).unwrap();
+        assert_eq!(
+            v["elbow"],
+            json!({"left":80.5,"left_avg":120.0,"right":null,"right_avg":160.0,"skeleton":"stale"})
+        );
+        let none = pavlov::record::ElbowAngles::default();
+        assert_eq!(serde_json::to_value(&none).unwrap()["skeleton"], "none");
+        // Recordings made before the field read as `none`.
+        let old: pavlov::record::ElbowAngles =
+            serde_json::from_str(r#"{"left":1.0,"left_avg":null,"right":null,"right_avg":null}"#)
+                .unwrap();
+        assert_eq!(old.skeleton, pavlov::skeleton::SkeletonStatus::Absent);
+    }
 }

@@ -94,6 +94,7 @@ pub(crate) fn tick_record() -> Value {
         ("left_avg", number()),
         ("right", number()),
         ("right_avg", number()),
+        ("skeleton", one_of(&["tracked", "stale", "none"])),
     ]);
     let prediction = object([
         ("name", string()),
@@ -328,6 +329,7 @@ pub(crate) mod tests {
                 left_avg: None,
                 right: Some(170.0),
                 right_avg: Some(169.0),
+                skeleton: pavlov::skeleton::SkeletonStatus::Tracked,
             }),
             stimulus: true,
             predictions: vec![PredictionValue {

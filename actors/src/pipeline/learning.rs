@@ -298,6 +298,12 @@ impl Learning {
                 "ticks not learned from: stale observation or link not up"
             );
         }
+        if self.stage.skipped_missing_elbow() > 0 {
+            tracing::info!(
+                ticks = self.stage.skipped_missing_elbow(),
+                "ticks not learned from: an elbow angle missing or stale"
+            );
+        }
         let autosave = self.autosave.take();
         let last = match &autosave {
             Some(_) => self.checkpoint(seq).ok(),

@@ -3,7 +3,9 @@
 //! It reads the link continuously and feeds the core's [`StreamParser`], which resynchronises after garbage
 //! and only commits frames whose checksum holds. It keeps just the newest frame (it never works through a
 //! backlog) but sums the odometry packets (distance 19, angle 20) over every frame, because the robot resets
-//! them each time it reports them. On each tick it sends learning an [`Observation`] with the frame's age
+//! them each time it reports them, and ORs the event bits (over-currents, bumps, wheel drops, cliffs) over
+//! every frame into the tick's snapshot ([`EventLatch`]), so a flag in a frame that was never the newest is
+//! not lost. On each tick it sends learning an [`Observation`] with the frame's age
 //! and the link's state. It hosts link supervision ([`Supervisor`]): every frame and tick goes to it, and
 //! a reopened port's reader replaces the old one here. Taking a tick is the tick loop's heartbeat, which
 //! `/healthz` judges: the timer thread fires on its own, so only the runtime's side shows a stuck loop.
@@ -11,6 +13,7 @@
 use std::time::Duration;
 
 use pavlov::oi::SensorValues;
+use pavlov::oi::events::EventLatch;
 use pavlov::oi::packets::id;
 use pavlov::oi::parser::StreamParser;
 use pavlov::record::LinkStatus;
@@ -86,6 +89,7 @@ pub(crate) async fn run(
     let mut buf = vec![0u8; 4096];
     let mut newest: Option<(SensorValues, Instant)> = None;
     let (mut distance, mut angle) = (0i32, 0i32);
+    let mut events = EventLatch::new();
     let mut commands_open = true;
     loop {
         tokio::select! {
@@ -108,9 +112,14 @@ pub(crate) async fn run(
                     let age = tick.deadline.saturating_duration_since(*at);
                     (age.as_micros() / period.as_micros().max(1)) as u32
                 });
+                let values = newest.as_ref().map(|(v, _)| {
+                    let mut v = v.clone();
+                    events.apply_and_clear(&mut v);
+                    v
+                });
                 let obs = Observation {
                     tick,
-                    values: newest.as_ref().map(|(v, _)| v.clone()),
+                    values,
                     age_ticks,
                     distance_mm: std::mem::take(&mut distance),
                     angle_deg: std::mem::take(&mut angle),
@@ -149,6 +158,7 @@ pub(crate) async fn run(
                         distance = distance.saturating_add(frame.get_or_zero(id::DISTANCE));
                         angle = angle.saturating_add(frame.get_or_zero(id::ANGLE));
                         supervisor.on_frame(&frame);
+                        events.fold(&frame);
                         newest = Some((frame, now));
                     });
                     let stats = parser.stats();

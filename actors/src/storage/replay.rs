@@ -147,6 +147,7 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
             right: e.right,
             right_avg: e.right_avg,
             command: false,
+            skeleton: e.skeleton,
         });
         let out = learning.act(LearnInput {
             values: inputs.values.as_ref(),

@@ -2,15 +2,18 @@
 //! observed stimulus E as the command and the gate (the fixed response ϱ selected) as the response.
 //!
 //! Definitions (window `W` = [`LIVE_WINDOW_MS`], 1 s either side of a command onset):
-//! - A *command onset* is a rising edge of the stimulus; a *response onset* a rising edge of the gate (the first
-//!   tick counts as an edge when it is on).
+//! - A *command onset* is a debounced onset of the stimulus ([`super::debounce::COMMAND`]: the stimulus was off
+//!   for more than a second before, so a flickering gesture is one command); a *response onset* a debounced
+//!   onset of the gate ([`super::debounce::RESPONSE`]: held for 100 ms, so a one-tick blip is no response). A
+//!   response onset is known 100 ms after it, and is then judged with its own time.
 //! - A command's response is the first response onset in `[onset − W, onset + W]` not already taken by an
 //!   earlier command. Its *lead* is the command onset minus the response onset, ms: positive = the gate engaged
 //!   before the stimulus (anticipation, the point of Pavlovian control), negative = after. A command is
 //!   *answered early* when its lead is positive. A command with no response onset in its window is *missed*
 //!   (a new command onset ends the wait for the previous one).
 //! - A *false start* is a response onset in no command's window: no command onset within `W` after it, and
-//!   none within `W` before it (a late response answers a command, it does not start falsely).
+//!   no stimulus within `W` before it (a late response answers a command, and a response restarting with a
+//!   command's flickering stimulus belongs to that command; neither starts falsely).
 //!
 //! A lead is known up to `W` after its command onset, a false start `W` after the response onset.
 
@@ -18,6 +21,7 @@ use std::collections::VecDeque;
 
 use serde::Serialize;
 
+use super::debounce::{COMMAND, Debouncer, RESPONSE};
 use super::live_physical::LivePhysical;
 use crate::record::TickRecord;
 
@@ -26,7 +30,7 @@ pub use super::{LIVE_WINDOW_MS, RECENT_COMMANDS};
 /// The figures so far.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct LiveInteractionFigures {
-    /// Command onsets seen.
+    /// Command onsets seen (debounced).
     pub commands: u64,
     /// Commands whose response onset came before the command onset.
     pub early: u64,
@@ -46,10 +50,11 @@ pub struct LiveInteractionFigures {
 }
 
 /// The live tracker.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct LiveInteraction {
-    previous: Option<(bool, bool)>,
-    last_command_ms: Option<f64>,
+    commands: Debouncer,
+    responses: Debouncer,
+    last_stimulus_ms: Option<f64>,
     awaiting_command_ms: Option<f64>,
     unmatched_responses_ms: VecDeque<f64>,
     recent_leads: VecDeque<Option<f64>>,
@@ -57,10 +62,30 @@ pub struct LiveInteraction {
     physical: LivePhysical,
 }
 
+impl Default for LiveInteraction {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl LiveInteraction {
-    /// A tracker that has seen nothing.
+    /// A tracker that has seen nothing, for 20 ms ticks.
     pub fn new() -> Self {
-        Self::default()
+        Self::with_period(20.0)
+    }
+
+    /// A tracker that has seen nothing, for ticks `period_ms` apart.
+    pub fn with_period(period_ms: f64) -> Self {
+        LiveInteraction {
+            commands: Debouncer::new(COMMAND, period_ms),
+            responses: Debouncer::new(RESPONSE, period_ms),
+            last_stimulus_ms: None,
+            awaiting_command_ms: None,
+            unmatched_responses_ms: VecDeque::new(),
+            recent_leads: VecDeque::new(),
+            figures: LiveInteractionFigures::default(),
+            physical: LivePhysical::with_period(period_ms),
+        }
     }
 
     /// Feeds one tick record.
@@ -71,14 +96,16 @@ impl LiveInteraction {
 
     /// Feeds one tick: its time (ms, non-decreasing), the stimulus and the gate.
     pub fn observe_tick(&mut self, t_ms: f64, stimulus: bool, gate: bool) {
-        let (was_stimulus, was_gate) = self.previous.unwrap_or((false, false));
-        self.previous = Some((stimulus, gate));
         self.expire(t_ms);
-        if stimulus && !was_stimulus {
-            self.on_command(t_ms);
+        if stimulus {
+            self.last_stimulus_ms = Some(t_ms);
         }
-        if gate && !was_gate {
-            self.on_response(t_ms);
+        let response = self.responses.step(t_ms, gate);
+        if let Some(onset) = self.commands.step(t_ms, stimulus) {
+            self.on_command(onset);
+        }
+        if let Some(onset) = response {
+            self.on_response(onset);
         }
     }
 
@@ -111,7 +138,6 @@ impl LiveInteraction {
             self.resolve(None);
         }
         self.figures.commands += 1;
-        self.last_command_ms = Some(t_ms);
         // Every unmatched response onset is within the window now (older ones expired): the first answers
         // this command, the rest fall in its window and are no false starts.
         let first = self.unmatched_responses_ms.front().copied();
@@ -129,7 +155,7 @@ impl LiveInteraction {
         if let Some(c) = self.awaiting_command_ms {
             self.resolve(Some(c - t_ms));
         } else if self
-            .last_command_ms
+            .last_stimulus_ms
             .is_none_or(|c| t_ms - c > LIVE_WINDOW_MS)
         {
             self.unmatched_responses_ms.push_back(t_ms);
@@ -222,11 +248,30 @@ mod tests {
     #[test]
     fn a_gate_onset_is_judged_only_once_its_window_has_passed() {
         let mut live = LiveInteraction::new();
-        live.observe_tick(0.0, false, true);
-        live.observe_tick(500.0, false, false);
+        for k in 0..50 {
+            live.observe_tick(k as f64 * TICK_MS, false, k < 10);
+        }
         assert_eq!(live.figures().false_starts, 0, "a command may still come");
         live.observe_tick(1001.0, false, false);
         assert_eq!(live.figures().false_starts, 1);
+    }
+
+    #[test]
+    fn a_flickering_stimulus_is_one_command_and_a_gate_blip_is_no_response() {
+        // The stimulus flickers (dropouts, noise around 90°) within one gesture: one command. A one-tick
+        // gate blip 3 s later is neither a response nor a false start.
+        let s = run(
+            400,
+            &[(100, 103), (105, 120), (122, 130), (140, 141), (170, 178)],
+            &[(100, 130), (170, 178), (250, 251)],
+        );
+        assert_eq!(
+            (s.commands, s.early, s.missed, s.false_starts),
+            (1, 0, 0, 0)
+        );
+        assert_eq!(s.last_lead_ms, Some(0.0));
+        // The gate restarting with the flicker at 3.4 s (1.4 s after the onset) belongs to the command.
+        // Without debouncing these were five commands and a false start.
     }
 
     #[test]
@@ -239,24 +284,25 @@ mod tests {
 
     #[test]
     fn the_mean_lead_covers_the_last_forty_commands() {
+        // One command every 5 s (250 ticks), the stimulus on for 30 ticks from tick 50 of each period: 10
+        // answered 300 ms late (15 ticks), then 40 answered 100 ms early (5 ticks).
         let mut live = LiveInteraction::new();
-        let mut t = 0.0;
-        // 10 commands answered 300 ms late, then 40 answered 100 ms early, one every 5 s.
-        for (n, lead) in [(10, -300.0), (40, 100.0)] {
+        let mut k0 = 0u64;
+        for (n, lead_ticks) in [(10i64, -15i64), (40, 5)] {
             for _ in 0..n {
-                let command = t + 1000.0;
-                let response = command - lead;
-                live.observe_tick(t, false, false);
-                live.observe_tick(
-                    command.min(response),
-                    command <= response,
-                    response <= command,
-                );
-                live.observe_tick(command.max(response), true, true);
-                live.observe_tick(t + 2500.0, false, false);
-                t += 5000.0;
+                let command = 50i64;
+                let response = command - lead_ticks;
+                for k in 0..250i64 {
+                    let stimulus = (command..command + 30).contains(&k);
+                    let gate = (response..response + 30).contains(&k);
+                    live.observe_tick((k0 as i64 + k) as f64 * TICK_MS, stimulus, gate);
+                }
+                k0 += 250;
             }
-            assert_eq!(live.figures().mean_lead_ms, Some(lead));
+            assert_eq!(
+                live.figures().mean_lead_ms,
+                Some(lead_ticks as f64 * TICK_MS)
+            );
         }
         let s = live.figures();
         assert_eq!(

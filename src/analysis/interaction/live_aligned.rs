@@ -1,7 +1,7 @@
 //! Live aligned averages for the dashboard, after the paper's Figure 4 ("averaged sensor observations from 40
 //! commands, aligned to the onset of the command request"): the battery current and the wheel rotation per
-//! tick from [`BEFORE_MS`] before to [`AFTER_MS`] after each observed command onset (a rising edge of the
-//! stimulus), averaged over the last [`RECENT_COMMANDS`] commands of each mode, reactive and Pavlovian.
+//! tick from [`BEFORE_MS`] before to [`AFTER_MS`] after each observed command onset (the stimulus's debounced
+//! onset, [`super::debounce::COMMAND`]: a flickering stimulus is one command), averaged over the last [`RECENT_COMMANDS`] commands of each mode, reactive and Pavlovian.
 //!
 //! A command belongs to the mode in force on its onset tick (commands under manual control are ignored). It is
 //! stored once its window has passed; a command with a tick lacking the battery current is skipped. Samples
@@ -12,6 +12,7 @@ use std::collections::VecDeque;
 use serde::Serialize;
 
 use super::RECENT_COMMANDS;
+use super::debounce::{COMMAND, Debouncer};
 use crate::control::Mode;
 use crate::record::TickRecord;
 
@@ -58,7 +59,7 @@ pub struct AlignedFigures {
 #[derive(Debug, Clone)]
 pub struct LiveAligned {
     period_ms: f64,
-    was_stimulus: bool,
+    commands: Debouncer,
     samples: VecDeque<AlignedSample>,
     pending: VecDeque<(f64, Mode)>,
     reactive: VecDeque<CommandCurve>,
@@ -96,13 +97,14 @@ fn mean_curve(commands: &VecDeque<CommandCurve>, bins: usize) -> AlignedCurve {
 impl LiveAligned {
     /// A tracker for ticks `period_ms` apart (a non-positive or non-finite period counts as 20 ms).
     pub fn new(period_ms: f64) -> Self {
+        let period_ms = if period_ms.is_finite() && period_ms > 0.0 {
+            period_ms
+        } else {
+            20.0
+        };
         LiveAligned {
-            period_ms: if period_ms.is_finite() && period_ms > 0.0 {
-                period_ms
-            } else {
-                20.0
-            },
-            was_stimulus: false,
+            period_ms,
+            commands: Debouncer::new(COMMAND, period_ms),
             samples: VecDeque::new(),
             pending: VecDeque::new(),
             reactive: VecDeque::new(),
@@ -129,10 +131,9 @@ impl LiveAligned {
     /// Feeds one tick record (times non-decreasing).
     pub fn observe(&mut self, record: &TickRecord) {
         let t = record.t_ms;
-        if record.stimulus && !self.was_stimulus {
-            self.pending.push_back((t, record.mode));
+        if let Some(onset) = self.commands.step(t, record.stimulus) {
+            self.pending.push_back((onset, record.mode));
         }
-        self.was_stimulus = record.stimulus;
         self.samples.push_back(AlignedSample {
             t_ms: t,
             current_ma: record.sensors.battery_current_ma.map(f64::from),

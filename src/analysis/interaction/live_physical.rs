@@ -1,5 +1,5 @@
-//! Live physical response onsets for the dashboard: for every observed command onset (a rising edge of the
-//! stimulus), when the battery current dropped and the wheels started moving, by the definitions of
+//! Live physical response onsets for the dashboard: for every observed command onset (the stimulus's debounced
+//! onset, [`super::debounce::COMMAND`]), when the battery current dropped and the wheels started moving, by the definitions of
 //! [`super::physical`], in the window `[onset − W, onset + W]` (`W` = [`LIVE_WINDOW_MS`]).
 //!
 //! A *lead* is the command onset minus the physical onset, ms: positive = before the stimulus. Each command is
@@ -8,14 +8,15 @@
 
 use std::collections::VecDeque;
 
+use super::debounce::{COMMAND, Debouncer};
 use super::physical::{PhysicalParams, PhysicalSample, onsets_in_window};
 use super::{LIVE_WINDOW_MS, RECENT_COMMANDS};
 use crate::record::TickRecord;
 
 /// The live tracker of physical onsets.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct LivePhysical {
-    was_stimulus: bool,
+    commands: Debouncer,
     samples: VecDeque<PhysicalSample>,
     pending_onsets_ms: VecDeque<f64>,
     recent_current_leads: VecDeque<Option<f64>>,
@@ -44,10 +45,28 @@ fn mean(queue: &VecDeque<Option<f64>>) -> Option<f64> {
     (!known.is_empty()).then(|| known.iter().sum::<f64>() / known.len() as f64)
 }
 
+impl Default for LivePhysical {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl LivePhysical {
-    /// A tracker that has seen nothing, with the default thresholds.
+    /// A tracker that has seen nothing, with the default thresholds, for 20 ms ticks.
     pub fn new() -> Self {
-        Self::default()
+        Self::with_period(20.0)
+    }
+
+    /// The same for ticks `period_ms` apart.
+    pub fn with_period(period_ms: f64) -> Self {
+        LivePhysical {
+            commands: Debouncer::new(COMMAND, period_ms),
+            samples: VecDeque::new(),
+            pending_onsets_ms: VecDeque::new(),
+            recent_current_leads: VecDeque::new(),
+            recent_motion_leads: VecDeque::new(),
+            params: PhysicalParams::default(),
+        }
     }
 
     /// Feeds one tick record.
@@ -58,10 +77,9 @@ impl LivePhysical {
     /// Feeds one tick (times non-decreasing): the stimulus and the physical sample.
     pub fn observe_tick(&mut self, stimulus: bool, sample: PhysicalSample) {
         let t = sample.t_ms;
-        if stimulus && !self.was_stimulus {
-            self.pending_onsets_ms.push_back(t);
+        if let Some(onset) = self.commands.step(t, stimulus) {
+            self.pending_onsets_ms.push_back(onset);
         }
-        self.was_stimulus = stimulus;
         self.samples.push_back(sample);
         while let Some(&onset) = self.pending_onsets_ms.front() {
             if t < onset + LIVE_WINDOW_MS {

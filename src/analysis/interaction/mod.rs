@@ -6,8 +6,9 @@
 //! was the fixed response being executed?) and the [`CommandWindow`]s.
 //!
 //! Definitions:
-//! - A *response onset* is a tick whose sample is responding while the previous one was not (the first sample
-//!   counts as an onset when it is responding).
+//! - A *response onset* is the first tick of a response episode that lasted at least the debounce's hold
+//!   ([`MatchParams::response`], by default [`debounce::RESPONSE`]: held 100 ms, gaps up to 100 ms bridged), so
+//!   a one-tick gate blip is not a response. [`response_onsets`] gives the raw rising edges.
 //! - A command's window is `[onset − anticipation_ms, end + max_lag_ms]`. The command's response onset is the
 //!   first onset inside its window; its *latency* is that onset's time minus the command onset (negative =
 //!   the response anticipated the command, the point of Pavlovian control). A command whose window holds no
@@ -24,6 +25,8 @@ pub const LIVE_WINDOW_MS: f64 = 1000.0;
 /// How many recent commands the live mean lead covers.
 pub const RECENT_COMMANDS: usize = 40;
 
+pub mod curve;
+pub mod debounce;
 pub mod live;
 pub mod live_aligned;
 pub mod live_physical;
@@ -63,14 +66,17 @@ pub struct MatchParams {
     pub anticipation_ms: f64,
     /// How long after a command's end a response still counts as answering it, ms.
     pub max_lag_ms: f64,
+    /// How response onsets are debounced.
+    pub response: debounce::Debounce,
 }
 
 impl Default for MatchParams {
-    /// 1 s of anticipation (the paper's 0.5 s timescale, twice) and 0.5 s of lag.
+    /// 1 s of anticipation (the paper's 0.5 s timescale, twice), 0.5 s of lag, [`debounce::RESPONSE`].
     fn default() -> Self {
         MatchParams {
             anticipation_ms: 1000.0,
             max_lag_ms: 500.0,
+            response: debounce::RESPONSE,
         }
     }
 }
@@ -96,6 +102,8 @@ pub struct ResponseTiming {
     pub outcomes: Vec<CommandOutcome>,
     /// Response onsets in no command's window.
     pub false_starts: usize,
+    /// When they were, ms.
+    pub false_starts_ms: Vec<f64>,
     /// Responding time outside every command window, ms.
     pub responding_outside_ms: f64,
     /// Duration covered by the samples, ms.
@@ -169,7 +177,7 @@ pub fn measure(
     commands: &[CommandWindow],
     params: &MatchParams,
 ) -> ResponseTiming {
-    let onsets = response_onsets(samples);
+    let onsets = debounce::onsets(samples, &params.response);
     let windows: Vec<(f64, f64)> = commands.iter().map(|c| window(c, params)).collect();
     let in_any = |t: f64| windows.iter().any(|&(lo, hi)| t >= lo && t <= hi);
     let outcomes = commands
@@ -196,7 +204,7 @@ pub fn measure(
             }
         })
         .collect();
-    let false_starts = onsets.iter().filter(|&&t| !in_any(t)).count();
+    let false_starts_ms: Vec<f64> = onsets.iter().copied().filter(|&t| !in_any(t)).collect();
     let responding_outside_ms = samples
         .windows(2)
         .filter(|w| w[0].responding && !in_any(w[0].t_ms))
@@ -208,7 +216,8 @@ pub fn measure(
     };
     ResponseTiming {
         outcomes,
-        false_starts,
+        false_starts: false_starts_ms.len(),
+        false_starts_ms,
         responding_outside_ms,
         duration_ms,
     }
@@ -268,11 +277,33 @@ mod tests {
     }
 
     #[test]
+    fn a_one_tick_gate_blip_is_neither_an_anticipation_nor_a_false_start() {
+        let commands = [cmd(2000.0, 3000.0)];
+        // A blip 100 ms before the command, another at 6 s, the real response from 2.1 s.
+        let s = ticks(
+            8000.0,
+            &[(1900.0, 1920.0), (2100.0, 3000.0), (6000.0, 6020.0)],
+        );
+        let m = measure(&s, &commands, &MatchParams::default());
+        assert_eq!(m.latencies_ms(), vec![100.0]);
+        assert_eq!((m.anticipated(), m.false_starts), (0, 0));
+        // Undebounced, the blip would have been an anticipation and the second a false start.
+        let raw = MatchParams {
+            response: debounce::NONE,
+            ..MatchParams::default()
+        };
+        let m = measure(&s, &commands, &raw);
+        assert_eq!(m.latencies_ms(), vec![-100.0]);
+        assert_eq!(m.false_starts, 1);
+    }
+
+    #[test]
     fn false_starts_and_time_responding_outside_commands() {
         let commands = [cmd(5000.0, 5600.0)];
         let p = MatchParams {
             anticipation_ms: 500.0,
             max_lag_ms: 200.0,
+            ..MatchParams::default()
         };
         // A 200 ms false start at 1 s, a correct anticipation at 4.8 s, and a late stray at 8 s.
         let m = measure(
@@ -295,6 +326,7 @@ mod tests {
         let p = MatchParams {
             anticipation_ms: 500.0,
             max_lag_ms: 200.0,
+            ..MatchParams::default()
         };
         // Nothing near the first; the response is on from 4 s to 7 s, across the second's whole window.
         let m = measure(&ticks(10_000.0, &[(4000.0, 7000.0)]), &commands, &p);

@@ -411,11 +411,19 @@ fn driving_into_the_wall_stalls_with_persistent_overcurrents_and_backing_off_cle
         .count();
     assert!(both >= 60, "persistent over-current: {both}/67");
     assert!(r.world().stalled(LEFT) && r.world().stalled(RIGHT));
-    assert!(r.world().wheel_current_a(LEFT) > 1.0 && r.world().wheel_current_a(RIGHT) > 1.0);
+    // The wheels demand more than the 1.0 A limit; the driver holds them at it [C1 p10, p17].
+    for side in [LEFT, RIGHT] {
+        assert!(r.world().wheel_current_demand_a(side) > 1.4);
+        assert!((r.world().wheel_current_a(side) - 1.0).abs() < 0.01);
+    }
+    // So the battery supplies two limited wheels plus the electronics: about 1.5 A, not 3.5 A.
+    let battery: Vec<i32> = last_second
+        .iter()
+        .map(|v| v.get_or_zero(id::CURRENT))
+        .collect();
     assert!(
-        last_second
-            .iter()
-            .all(|v| v.get_or_zero(id::CURRENT) < -2500)
+        battery.iter().all(|&ma| (-1700..-1300).contains(&ma)),
+        "{battery:?}"
     );
     assert_eq!(r.oi_mode(), OiMode::Safe, "a bump is no safety trip");
 
@@ -484,7 +492,8 @@ fn battery_charge_and_energy_fall_while_driving() {
     steps(&mut r, 2000);
     let after = r.sensors();
     assert!(after.get_or_zero(id::BATTERY_CHARGE) < before.get_or_zero(id::BATTERY_CHARGE));
-    assert!(r.world().battery().energy_j() > 30.0 * 2.0 * 14.0);
+    // 30 s, most of it pushing the wall with both wheels held at their 1.0 A limit.
+    assert!(r.world().battery().energy_j() > 30.0 * 1.2 * 14.0);
     assert!(after.get_or_zero(id::VOLTAGE) < before.get_or_zero(id::VOLTAGE));
 }
 

@@ -7,7 +7,10 @@
 //! (`web/tests/trip.e2e.mjs`, simulator with trips injected) checks the trip banner, its cause, that nothing
 //! re-arms by itself, and the Re-arm button (`target/dashboard-trip.png`). A third (`web/tests/watcher.e2e.mjs`,
 //! a server with a token, the page opened without it) checks that a watcher's page draws from the
-//! watcher's `hello` and that its E-STOP click is refused (`target/dashboard-watcher.png`).
+//! watcher's `hello` and that its E-STOP click is refused (`target/dashboard-watcher.png`). A fourth (`web/tests/elbow.e2e.mjs`,
+//! config/interaction.toml) checks the gesture experiment's elbow chart, the skeleton status and its warning
+//! before and after a `pavlov human` operator starts, and the debounced command count
+//! (`target/dashboard-elbow.png`, and `target/dashboard-elbow-none.png` before the operator).
 //!
 //! Needs Node, `npm ci --prefix web` and `apt-get install chromium` (the test command installs them; see
 //! `web/tests/run-browser-test.sh`). It fails, never skips, when any of them is missing.
@@ -112,11 +115,22 @@ fn start_server_with(extra: &[&str]) -> (Serve, String) {
 /// Runs the browser script `web/tests/<script>` against `url`, saving a screenshot to `screenshot`, and
 /// returns its JSON summary (after checking it says `ok`).
 async fn run_browser_script(script: &str, url: &str, screenshot: &std::path::Path) -> Value {
+    run_browser_script_with(script, url, screenshot, &[]).await
+}
+
+/// [`run_browser_script`] with extra environment variables for the script.
+async fn run_browser_script_with(
+    script: &str,
+    url: &str,
+    screenshot: &std::path::Path,
+    env: &[(&str, &str)],
+) -> Value {
     let _ = std::fs::remove_file(screenshot);
     let run = tokio::process::Command::new("node")
         .arg(repo().join("web/tests").join(script))
         .arg(url)
         .arg(screenshot)
+        .envs(env.iter().copied())
         .current_dir(repo().join("web"))
         .kill_on_drop(true)
         .output();
@@ -205,4 +219,38 @@ async fn the_dashboard_shows_live_ticks_and_its_estop_stops_the_robot() {
         "the screenshot is suspiciously small ({} bytes)",
         png.len()
     );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_gesture_dashboard_shows_the_elbows_the_skeleton_status_and_debounced_commands() {
+    preflight();
+    // The interaction configuration with its skeleton port on a free loopback port.
+    let port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .expect("a free UDP port")
+        .port();
+    let to = format!("127.0.0.1:{port}");
+    let config = std::fs::read_to_string(repo().join("config/interaction.toml")).unwrap()
+        + &format!("\n[skeleton]\nlisten = \"{to}\"\n");
+    let config_path = target_dir().join(format!("dashboard-elbow-{}.toml", std::process::id()));
+    std::fs::write(&config_path, config).unwrap();
+    let (_serve, url) = start_server_with(&["--config", config_path.to_str().unwrap()]);
+    let screenshot = target_dir().join("dashboard-elbow.png");
+    let summary = run_browser_script_with(
+        "elbow.e2e.mjs",
+        &url,
+        &screenshot,
+        &[
+            ("PAVLOV_BIN", env!("CARGO_BIN_EXE_pavlov")),
+            ("SKELETON_TO", &to),
+        ],
+    )
+    .await;
+    let _ = std::fs::remove_file(&config_path);
+    assert_eq!(summary["warned_without_skeleton"], true, "{summary}");
+    assert!(
+        summary["commands"]["debounced"].as_u64() >= Some(2),
+        "{summary}"
+    );
+    assert!(std::fs::metadata(&screenshot).is_ok_and(|m| m.len() > 20_000));
 }

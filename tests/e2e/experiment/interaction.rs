@@ -17,15 +17,10 @@ fn interaction_config() -> Config {
 }
 
 fn options(out: &std::path::Path, record: bool) -> InteractionOptions {
-    InteractionOptions {
-        runs_per_policy: 1,
-        minutes: 1.0,
-        aligned_commands: 40,
-        seed: 4,
-        record,
-        threads: 2,
-        out: out.to_path_buf(),
-    }
+    let mut o = InteractionOptions::new(4, 1, 1.0, out.to_path_buf());
+    o.record = record;
+    o.window_min = 0.5;
+    o
 }
 
 #[test]
@@ -49,6 +44,8 @@ fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
         a.runs.iter().map(|r| r.mode).collect::<Vec<_>>(),
         vec![Mode::Reactive, Mode::Pavlovian]
     );
+    // Both policies of the pair answered the same operator: the same ground-truth commands.
+    assert_eq!(a.runs[0].commands, a.runs[1].commands);
     for r in &a.runs {
         assert_eq!(r.records.len(), 3000);
         assert!(!r.commands.is_empty(), "the operator commanded in a minute");
@@ -76,6 +73,8 @@ fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
         "aligned.csv",
         "fig3_timing.svg",
         "fig4_aligned.svg",
+        "curve.csv",
+        "fig_curve.svg",
     ] {
         assert!(
             std::fs::metadata(out.join(f))
@@ -85,24 +84,31 @@ fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
         );
     }
     assert!(table(&a).contains("pavlovian"));
+    // Two 30-s windows of the time course, each with the commands of both policies.
+    assert_eq!(a.curve.len(), 2);
+    assert!(
+        a.curve
+            .iter()
+            .all(|p| p.commands_reactive > 0 && p.commands_pavlovian > 0)
+    );
+    let csv = std::fs::read_to_string(out.join("curve.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+    assert_eq!(
+        csv.lines().next().unwrap().split(',').count(),
+        csv.lines().nth(1).unwrap().split(',').count()
+    );
     let _ = std::fs::remove_dir_all(&out);
 }
 
 /// With the paper's parameters the logistic learner starts from σ(−5), where σ′ ≈ 0.007, so it learns slowly:
-/// after an hour of commands the Pavlovian control answers earlier than the reactive one on average, with few
-/// false starts. (After 10 minutes, the paper's duration, it does not yet: see the README's Results.)
+/// after an hour of commands the Pavlovian control answers earlier than the reactive one on average and
+/// anticipates more commands than the reactive baseline, with few false starts; in the first 10 minutes (the
+/// paper's duration) it does not. The physical onsets are not asserted here: with one pair of runs, the two
+/// robots' own differences (lab variation) are as large as the shift.
 #[test]
 fn after_an_hour_the_pavlovian_control_responds_earlier_with_few_false_starts() {
     let out = std::env::temp_dir().join(format!("pavlov-interaction-hour-{}", std::process::id()));
-    let opts = InteractionOptions {
-        runs_per_policy: 1,
-        minutes: 60.0,
-        aligned_commands: 40,
-        seed: 1,
-        record: false,
-        threads: 2,
-        out,
-    };
+    let opts = InteractionOptions::new(1, 1, 60.0, out);
     let s = run_study(&interaction_config(), &opts).expect("study runs");
     let of = |p: &str| {
         s.timing
@@ -127,7 +133,15 @@ fn after_an_hour_the_pavlovian_control_responds_earlier_with_few_false_starts() 
         pavlovian.false_starts_per_minute
     );
     assert_eq!(pavlovian.missed, 0);
-    // The physical response (battery current drop) follows the decision: earlier too.
+    let excess = s.shifts.anticipated_fraction.expect("anticipated excess");
+    assert!(excess.above_zero(), "{excess:?}");
+    let decision = s.shifts.decision_ms.expect("decision shift");
+    assert!(decision.below_zero(), "{decision:?}");
+    // Not in the first 10 minutes: the decision lead there is nil (5-minute windows 0 and 1).
+    for p in &s.curve[..2] {
+        let d = p.decision_lead.expect("lead");
+        assert!(!d.above_zero(), "{p:?}");
+    }
     println!(
         "current latency: Pavlovian {:.1} ± {:.1} ms vs reactive {:.1} ± {:.1} ms; motion latency: \
          Pavlovian {:.1} ± {:.1} ms vs reactive {:.1} ± {:.1} ms",
@@ -140,5 +154,49 @@ fn after_an_hour_the_pavlovian_control_responds_earlier_with_few_false_starts() 
         reactive.motion_latency_ms.mean,
         reactive.motion_latency_ms.se
     );
-    assert!(pavlovian.current_latency_ms.mean < reactive.current_latency_ms.mean);
+    assert!(pavlovian.current_latency_ms.n * 10 >= pavlovian.commands * 9);
+}
+
+/// `--curve` runs several seeds (here shortened: 2 pairs × 1 minute, 0.5-minute windows), writes the time
+/// course as CSV and SVG, and records nothing.
+#[test]
+fn the_curve_cli_writes_the_time_course() {
+    let out = std::env::temp_dir().join(format!("pavlov-curve-cli-{}", std::process::id()));
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_pavlov"))
+        .args([
+            "experiment",
+            "interaction",
+            "--curve",
+            "--runs",
+            "2",
+            "--minutes",
+            "1",
+            "--window",
+            "0.5",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("pavlov experiment interaction --curve");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(stdout.contains("anticipation holds"), "{stdout}");
+    assert!(stdout.contains("2 run(s) per policy"), "{stdout}");
+    let csv = std::fs::read_to_string(out.join("curve.csv")).expect("curve.csv");
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+    let svg = std::fs::read_to_string(out.join("fig_curve.svg")).expect("fig_curve.svg");
+    assert!(svg.contains("minutes of learning"));
+    assert!(!out.join("runs").exists(), "--curve records nothing");
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_pavlov"))
+        .args(["experiment", "interaction", "--window", "0", "--out"])
+        .arg(out.join("bad"))
+        .output()
+        .expect("pavlov");
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--window"));
+    let _ = std::fs::remove_dir_all(&out);
 }

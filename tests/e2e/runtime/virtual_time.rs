@@ -99,7 +99,10 @@ async fn estop_stops_the_wheels_until_released() {
 
 #[tokio::test(start_paused = true)]
 async fn shutdown_leaves_the_simulated_wheels_stopped_in_passive() {
-    let (records, server) = run_sim(stall_config(), 300).await;
+    // The fixed start pose (no lab variation), where the default policy is driving 6 s in.
+    let mut config = stall_config();
+    config.sim.lab_variation = false;
+    let (records, server) = run_sim(config, 300).await;
     assert!(
         records.last().unwrap().command != Action::STOP,
         "driving when shut down"

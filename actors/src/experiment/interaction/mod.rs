@@ -1,28 +1,35 @@
 //! The paper's interaction experiment ("Reducing Lag By Predicting the Next Command") on the simulated
 //! Create: a simulated operator commands a left spin with the left elbow; runs alternate reactive /
 //! Pavlovian (config/interaction.toml: π = stay still, ϱ = spin left, E = left elbow below 90°), each
-//! learning from scratch through the one [`super::runner`]. Run `i` draws its robot and operator seeds
+//! learning from scratch through the one [`super::runner`]. Run `i` draws its robot seed and its pair's operator seed
 //! from [`super::run_rng`]. Per policy: when the response started relative to each ground-truth command
 //! onset ([`pavlov::analysis::interaction`]), and the battery current and rotation averaged over the last
-//! N observed command onsets of each run (`--commands`, the paper: 40; the paper's Figure 4).
+//! N observed command onsets of each run (`--commands`, the paper: 40; the paper's Figure 4); the shifts of
+//! the physical and decision onsets with bootstrap intervals; and the time course over windows of learning
+//! ([`pavlov::analysis::interaction::curve`]), from which the Figure 3 analogue takes its moment: when
+//! anticipation first holds, or the end of the run.
 //!
 //! - [`run`]: one run; [`analysis`]: the statistics; [`report`]: files and the terminal table;
-//!   [`plots`]: the Figure 3 and Figure 4 analogues.
+//!   [`plots`]: the Figure 3 and Figure 4 analogues and the time course; [`sensitivity`]: the study over
+//!   operator and learner variants.
 
 pub(crate) mod analysis;
 pub(crate) mod plots;
 pub mod report;
 pub(crate) mod run;
+pub mod sensitivity;
 
 use std::path::PathBuf;
 
+use pavlov::analysis::interaction::curve::{CurvePoint, curve, holds_from};
 use pavlov::analysis::stats::WelchTest;
 use pavlov::config::Config;
 use pavlov::control::Mode;
+use pavlov::sim::human::HumanParams;
 use serde::Serialize;
 
-use analysis::{AlignedPoint, PolicyTiming, aligned, latency_test, timing};
-use run::InteractionRun;
+use analysis::{AlignedPoint, PolicyTiming, Shifts, aligned, latency_test, shifts, timing};
+use run::{InteractionRun, RunPlan};
 
 use super::runner::{RunError, run_all};
 use super::{interleaved_mode, mode_name};
@@ -44,6 +51,28 @@ pub struct InteractionOptions {
     pub threads: usize,
     /// Results directory.
     pub out: PathBuf,
+    /// Length of a window of the time course, minutes.
+    pub window_min: f64,
+    /// The simulated operator.
+    pub human: HumanParams,
+}
+
+impl InteractionOptions {
+    /// `runs_per_policy` pairs of `minutes` each, 40 aligned commands, 5-minute windows, the default
+    /// operator, not recorded.
+    pub fn new(seed: u64, runs_per_policy: usize, minutes: f64, out: PathBuf) -> Self {
+        InteractionOptions {
+            runs_per_policy,
+            minutes,
+            aligned_commands: 40,
+            seed,
+            record: false,
+            threads: 2,
+            out,
+            window_min: 5.0,
+            human: HumanParams::default(),
+        }
+    }
 }
 
 /// Everything `summary.json` holds.
@@ -59,6 +88,15 @@ pub struct InteractionStudy {
     pub timing: Vec<PolicyTiming>,
     /// Welch's test of the latencies, Pavlovian vs reactive.
     pub(crate) latency_welch: Option<WelchTest>,
+    /// Pavlovian minus reactive, with bootstrap intervals.
+    pub shifts: Shifts,
+    /// The time course over windows of learning.
+    pub curve: Vec<CurvePoint>,
+    /// The window from which anticipation holds (the current lead's interval above 0 from there on).
+    pub holds_from_window: Option<usize>,
+    /// Where the Figure 3 analogue is drawn, minutes into the runs: the middle of the first window from
+    /// which anticipation holds, or the end of the run.
+    pub fig3_at_min: f64,
     /// Aligned averages around the observed command onsets.
     pub aligned: Vec<AlignedPoint>,
     /// Wall time, s.
@@ -89,7 +127,20 @@ pub fn run_study_with_progress(
         let dir = o
             .record
             .then(|| o.out.join("runs").join(format!("{i:02}-{}", mode_name(m))));
-        run::run(base, i, m, o.seed, ticks, o.aligned_commands, dir)
+        run::run(
+            base,
+            RunPlan {
+                index: i,
+                mode: m,
+                seed: o.seed,
+                ticks,
+                aligned_commands: o.aligned_commands,
+                record_dir: dir,
+                // The Figure 3 analogue draws the first run of each policy.
+                keep_records: i < 2,
+                human: o.human.clone(),
+            },
+        )
     };
     let on_done = |r: &InteractionRun| {
         bar.inc(1);
@@ -105,13 +156,24 @@ pub fn run_study_with_progress(
     };
     let runs = run_all(&specs, o.threads, &one, &on_done)?;
     bar.finish_and_clear();
+    let timelines: Vec<_> = runs.iter().map(|r| r.timeline.clone()).collect();
+    let curve = curve(&timelines, o.window_min, o.seed);
+    let holds_from_window = holds_from(&curve);
+    let fig3_at_min = holds_from_window
+        .and_then(|w| curve.get(w))
+        .map_or(o.minutes, |p| (p.from_min + p.to_min) / 2.0);
     Ok(InteractionStudy {
         options: o.clone(),
         seed_derivation: "run i (even = reactive, odd = Pavlovian): robot seed \
-                          Rng::new(seed).fork(i).next_u64(), operator seed Rng::new(seed).fork(i).fork(1).next_u64()"
+                          Rng::new(seed).fork(i).next_u64(), operator seed of the pair Rng::new(seed).fork(i - i % 2).fork(1).next_u64() \
+                          (both runs of a pair see the same operator)"
             .into(),
         timing: vec![timing(&runs, Mode::Reactive), timing(&runs, Mode::Pavlovian)],
         latency_welch: latency_test(&runs),
+        shifts: shifts(&runs, o.seed),
+        curve,
+        holds_from_window,
+        fig3_at_min,
         aligned: aligned(&runs),
         runs,
         wall_s: wall.elapsed().as_secs_f64(),

@@ -1,6 +1,7 @@
-//! The interaction experiment's figures: analogues of the paper's Figure 3 (signals around a command after
-//! 2.5 min, per policy) and Figure 4 (battery current and rotation averaged over commands, aligned on the
-//! observed command onset).
+//! The interaction experiment's figures: analogues of the paper's Figure 3 (signals around a command, per
+//! policy, at the study's stated moment: when anticipation first holds, or the end of the run), Figure 4
+//! (battery current and rotation averaged over commands, aligned on the observed command onset), and the time
+//! course (lead, anticipated fraction and false starts against minutes of learning, with 95 % intervals).
 
 use std::path::Path;
 use std::sync::Arc;
@@ -81,19 +82,27 @@ fn panel(
 const RED: RGBColor = RGBColor(200, 80, 40);
 const BLUE: RGBColor = RGBColor(40, 100, 200);
 const GREY: RGBColor = RGBColor(90, 90, 90);
+const BLACK_ISH: RGBColor = RGBColor(30, 30, 30);
 
-/// Ten seconds after 2.5 min of each policy's first run, centred on an observed command onset.
-fn excerpt(r: &InteractionRun) -> &[Arc<TickRecord>] {
-    let from = 150 * 50;
-    let onset = r
-        .aligned_onsets
+/// Ten seconds of a run centred on its first observed command onset at or after `at_min` minutes (the last
+/// one whose ten seconds fit, when none comes later).
+fn excerpt(r: &InteractionRun, at_min: f64) -> &[Arc<TickRecord>] {
+    let half = 250usize;
+    let fits: Vec<usize> = interaction::observed_onsets(&r.records)
+        .into_iter()
+        .map(|i| i as usize)
+        .filter(|&i| i >= half && i + half <= r.records.len())
+        .collect();
+    let at_ms = at_min * 60_000.0;
+    let onset = fits
         .iter()
-        .map(|&i| i as usize)
-        .find(|&i| i >= from + 250)
-        .unwrap_or(from + 250);
-    let start = onset.saturating_sub(250);
+        .copied()
+        .find(|&i| r.records.get(i).is_some_and(|x| x.t_ms >= at_ms))
+        .or_else(|| fits.last().copied())
+        .unwrap_or(half);
+    let start = onset.saturating_sub(half);
     r.records
-        .get(start..(start + 500).min(r.records.len()))
+        .get(start..(start + 2 * half).min(r.records.len()))
         .unwrap_or(&[])
 }
 
@@ -101,19 +110,23 @@ fn excerpt(r: &InteractionRun) -> &[Arc<TickRecord>] {
 pub(crate) fn fig3(path: &Path, s: &InteractionStudy) -> std::io::Result<()> {
     let root = SVGBackend::new(path, (1000, 800)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
-    let root = root
-        .titled(
-            "Fig. 3 analogue: timing of signals after 2.5 min (10 s around a command)",
-            ("sans-serif", 18),
-        )
-        .map_err(err)?;
+    let title = format!(
+        "Fig. 3 analogue: timing of signals at {:.1} min ({}; 10 s around a command)",
+        s.fig3_at_min,
+        if s.holds_from_window.is_some() {
+            "middle of the first window from which anticipation holds"
+        } else {
+            "end of run: anticipation never held"
+        }
+    );
+    let root = root.titled(&title, ("sans-serif", 18)).map_err(err)?;
     let firsts: Vec<&InteractionRun> = [Mode::Reactive, Mode::Pavlovian]
         .iter()
         .filter_map(|m| s.runs.iter().find(|r| r.mode == *m))
         .collect();
     let cols = root.split_evenly((1, firsts.len().max(1)));
     for (r, col) in firsts.iter().zip(cols.iter()) {
-        let recs = excerpt(r);
+        let recs = excerpt(r, s.fig3_at_min);
         let t0 = recs.first().map_or(0.0, |x| x.t_ms);
         let t = |x: &TickRecord| (x.t_ms - t0) / 1000.0;
         let span = 0.0..10.0;
@@ -256,6 +269,124 @@ pub(crate) fn fig4(path: &Path, s: &InteractionStudy) -> std::io::Result<()> {
             &ang,
             &ang_bands,
             "time from the command onset, s",
+        )?;
+    }
+    root.present().map_err(err)
+}
+
+/// The time course: current and motion lead, anticipated fraction, false starts per minute, against
+/// minutes of learning, with 95 % intervals.
+pub(crate) fn fig_curve(path: &Path, s: &InteractionStudy) -> std::io::Result<()> {
+    use pavlov::analysis::bootstrap::MeanDifference;
+    let root = SVGBackend::new(path, (900, 900)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let title = format!(
+        "Time course: {} run(s) per policy × {} min, {}-min windows",
+        s.options.runs_per_policy, s.options.minutes, s.options.window_min
+    );
+    let root = root.titled(&title, ("sans-serif", 18)).map_err(err)?;
+    let rows = root.split_evenly((3, 1));
+    let mid = |p: &pavlov::analysis::interaction::curve::CurvePoint| (p.from_min + p.to_min) / 2.0;
+    let span = 0.0..s.curve.last().map_or(1.0, |p| p.to_min);
+    let diff_series =
+        |label: &str,
+         color: RGBColor,
+         pick: fn(&pavlov::analysis::interaction::curve::CurvePoint) -> Option<MeanDifference>,
+         scale: f64|
+         -> (Series, Band) {
+            let pts: Vec<(f64, MeanDifference)> = s
+                .curve
+                .iter()
+                .filter_map(|p| pick(p).map(|d| (mid(p), d)))
+                .collect();
+            (
+                (
+                    label.to_string(),
+                    color,
+                    pts.iter()
+                        .map(|(x, d)| (*x, d.difference * scale))
+                        .collect(),
+                ),
+                (
+                    color,
+                    pts.iter()
+                        .map(|(x, d)| (*x, d.lo * scale, d.hi * scale))
+                        .collect(),
+                ),
+            )
+        };
+    let zero: Series = ("0".into(), GREY, vec![(span.start, 0.0), (span.end, 0.0)]);
+    let (dec, dec_band) = diff_series("decision (gate)", BLACK_ISH, |p| p.decision_lead, 1.0);
+    let (cur, cur_band) = diff_series("battery current", BLUE, |p| p.current_lead, 1.0);
+    let (mot, mot_band) = diff_series("motion", RED, |p| p.motion_lead, 1.0);
+    if let Some(a) = rows.first() {
+        panel(
+            a,
+            "anticipation lead, ms: reactive − Pavlovian onset (95 % bootstrap CI)",
+            span.clone(),
+            &[dec, cur, mot, zero.clone()],
+            &[dec_band, cur_band, mot_band],
+            "minutes of learning",
+        )?;
+    }
+    let (excess, excess_band) = diff_series(
+        "Pavlovian − reactive",
+        BLUE,
+        |p| p.anticipated_difference,
+        100.0,
+    );
+    let reactive: Series = (
+        "reactive (noise baseline)".into(),
+        RED,
+        s.curve
+            .iter()
+            .map(|p| (mid(p), p.anticipated_reactive * 100.0))
+            .collect(),
+    );
+    if let Some(a) = rows.get(1) {
+        panel(
+            a,
+            "commands anticipated by the decision, % (excess over the reactive baseline, 95 % CI)",
+            span.clone(),
+            &[excess, reactive, zero],
+            &[excess_band],
+            "minutes of learning",
+        )?;
+    }
+    let rate = |label: &str,
+                color: RGBColor,
+                pick: fn(
+        &pavlov::analysis::interaction::curve::CurvePoint,
+    ) -> pavlov::analysis::interaction::curve::Rate|
+     -> (Series, Band) {
+        (
+            (
+                label.to_string(),
+                color,
+                s.curve
+                    .iter()
+                    .map(|p| (mid(p), pick(p).per_minute))
+                    .collect(),
+            ),
+            (
+                color,
+                s.curve
+                    .iter()
+                    .map(|p| (mid(p), pick(p).lo, pick(p).hi))
+                    .collect(),
+            ),
+        )
+    };
+    let (fp, fp_band) = rate("Pavlovian", BLUE, |p| p.false_starts_pavlovian);
+    let (fr, fr_band) = rate("reactive", RED, |p| p.false_starts_reactive);
+    if let Some(a) = rows.get(2) {
+        panel(
+            a,
+            "false starts per minute (95 % CI)",
+            span,
+            &[fp, fr],
+            &[fp_band, fr_band],
+            "minutes of learning",
         )?;
     }
     root.present().map_err(err)

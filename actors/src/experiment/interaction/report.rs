@@ -1,9 +1,10 @@
-//! `pavlov experiment interaction`'s outputs: `summary.json`, `commands.csv`, `aligned.csv`, the Figure 3 /
-//! Figure 4 analogues, and the terminal table.
+//! `pavlov experiment interaction`'s outputs: `summary.json`, `commands.csv`, `aligned.csv`, `curve.csv`,
+//! the Figure 3 / Figure 4 analogues, the time course (`fig_curve.svg`), and the terminal table.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
+use pavlov::analysis::bootstrap::MeanDifference;
 use pavlov::analysis::stats::Describe;
 
 use super::{InteractionStudy, plots};
@@ -14,6 +15,18 @@ fn num(x: f64) -> String {
         format!("{x:.0}")
     } else {
         "–".into()
+    }
+}
+
+fn diff(d: Option<MeanDifference>, scale: f64, unit: &str) -> String {
+    match d {
+        Some(d) => format!(
+            "{:+.1}{unit} [95 % CI {:+.1}, {:+.1}]",
+            d.difference * scale,
+            d.lo * scale,
+            d.hi * scale
+        ),
+        None => "–".into(),
     }
 }
 
@@ -65,35 +78,97 @@ pub fn table(s: &InteractionStudy) -> String {
             p.responding_outside_s_per_minute + 0.0
         );
     }
+    let sh = &s.shifts;
+    let _ = writeln!(
+        t,
+        "Pavlovian − reactive (negative = earlier), 95 % two-stage bootstrap intervals (runs, then commands):\n  \
+         battery current onset {}\n  motion onset {}\n  decision (debounced gate) onset {}",
+        diff(sh.current_ms, 1.0, " ms"),
+        diff(sh.motion_ms, 1.0, " ms"),
+        diff(sh.decision_ms, 1.0, " ms"),
+    );
+    if s.options.runs_per_policy < 2 {
+        let _ = writeln!(
+            t,
+            "  (one run per policy: the physical shifts also hold the two robots' own differences in friction \
+             and charge, which no interval over one pair can show; the decision shift does not depend on the robot)"
+        );
+    }
+    let frac = |p: &str| {
+        s.timing
+            .iter()
+            .find(|x| x.policy == p)
+            .map_or(f64::NAN, |x| x.anticipated_fraction * 100.0)
+    };
+    let _ = writeln!(
+        t,
+        "  anticipated (decision before the true onset): reactive {:.1} %, Pavlovian {:.1} %, excess {}",
+        frac("reactive"),
+        frac("pavlovian"),
+        diff(sh.anticipated_fraction, 100.0, " pp"),
+    );
     if let Some(w) = s.latency_welch {
         let _ = writeln!(
             t,
-            "latency, Pavlovian vs reactive: Welch t = {:.2}, df = {:.1}, p = {:.3}",
+            "  decision latency, Welch t = {:.2}, df = {:.1}, p = {:.3}",
             w.t, w.df, w.p
         );
     }
     let _ = writeln!(
         t,
-        "aligned on the observed onset (last {} per run): battery current mA, reactive / Pavlovian",
-        s.options.aligned_commands
+        "time course ({}-min windows; leads = reactive − Pavlovian onset, ms, positive = Pavlovian earlier; \
+         anticipated excess over the reactive baseline, pp; Pavlovian false starts per minute):",
+        s.options.window_min
     );
-    let mut line = String::new();
-    for p in s
-        .aligned
-        .iter()
-        .filter(|p| [-10, 0, 5, 10, 15, 25].contains(&p.offset))
-    {
-        let _ = write!(
-            line,
-            " {:+} ms: {}/{}{}",
+    for p in &s.curve {
+        let _ = writeln!(
+            t,
+            "  {:>5.1}–{:<5.1} min: decision lead {:<33} current lead {:<33} excess {:<34} false starts {:.2}",
+            p.from_min,
+            p.to_min,
+            diff(p.decision_lead, 1.0, " ms"),
+            diff(p.current_lead, 1.0, " ms"),
+            diff(p.anticipated_difference, 100.0, " pp"),
+            p.false_starts_pavlovian.per_minute
+        );
+    }
+    let _ = writeln!(
+        t,
+        "anticipation holds (decision lead's interval above 0 from then on): {}; Figure 3 analogue at {:.1} min \
+         (the middle of that window, or the end of the run)",
+        s.holds_from_window.and_then(|w| s.curve.get(w)).map_or(
+            "never in this run".to_string(),
+            |p| format!("from {:.1} min", p.from_min)
+        ),
+        s.fig3_at_min
+    );
+    let _ = writeln!(
+        t,
+        "aligned on the observed onset (last {} per run), every 100 ms (aligned.csv: every tick):\n  \
+         {:>7} {:>17} {:>8} {:>8} {:>19} {:>8}",
+        s.options.aligned_commands,
+        "offset",
+        "current mA R / P",
+        "Δ mA",
+        "p",
+        "rotation °/tick R/P",
+        "p"
+    );
+    for p in s.aligned.iter().filter(|p| p.offset % 5 == 0) {
+        let _ = writeln!(
+            t,
+            "  {:>+5} ms {:>8}/{:<8} {:>+8.1} {:>8} {:>9.2}/{:<9.2} {:>8}",
             p.offset * 20,
             num(p.current_reactive.mean),
             num(p.current_pavlovian.mean),
+            p.current_pavlovian.mean - p.current_reactive.mean,
             p.current_welch
-                .map_or("", |w| if w.p < 0.05 { "*" } else { "" })
+                .map_or("–".into(), |w| format!("{:.3}", w.p)),
+            p.angle_reactive.mean,
+            p.angle_pavlovian.mean,
+            p.angle_welch.map_or("–".into(), |w| format!("{:.3}", w.p)),
         );
     }
-    let _ = writeln!(t, "{}  (* p < 0.05)", line.trim_start());
     let _ = writeln!(
         t,
         "seeds: {}; {:.1} s wall",
@@ -164,7 +239,45 @@ pub fn write_all(dir: &Path, s: &InteractionStudy) -> std::io::Result<()> {
         );
     }
     std::fs::write(dir.join("aligned.csv"), a)?;
+    std::fs::write(dir.join("curve.csv"), curve_csv(s))?;
     plots::fig3(&dir.join("fig3_timing.svg"), s)?;
     plots::fig4(&dir.join("fig4_aligned.svg"), s)?;
+    plots::fig_curve(&dir.join("fig_curve.svg"), s)?;
     Ok(())
+}
+
+/// The time course, one row per window.
+pub(crate) fn curve_csv(s: &InteractionStudy) -> String {
+    let mut c = String::from(
+        "from_min,to_min,commands_reactive,commands_pavlovian,\
+         decision_lead_ms,decision_lead_lo,decision_lead_hi,current_lead_ms,current_lead_lo,current_lead_hi,motion_lead_ms,motion_lead_lo,motion_lead_hi,\
+         anticipated_reactive,anticipated_pavlovian,anticipated_excess,anticipated_excess_lo,anticipated_excess_hi,\
+         false_starts_per_min_reactive,false_starts_per_min_pavlovian,false_starts_pavlovian_lo,false_starts_pavlovian_hi\n",
+    );
+    let d = |x: Option<MeanDifference>| {
+        x.map_or(",,".to_string(), |x| {
+            format!("{},{},{}", x.difference, x.lo, x.hi)
+        })
+    };
+    for p in &s.curve {
+        let _ = writeln!(
+            c,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            p.from_min,
+            p.to_min,
+            p.commands_reactive,
+            p.commands_pavlovian,
+            d(p.decision_lead),
+            d(p.current_lead),
+            d(p.motion_lead),
+            p.anticipated_reactive,
+            p.anticipated_pavlovian,
+            d(p.anticipated_difference),
+            p.false_starts_reactive.per_minute,
+            p.false_starts_pavlovian.per_minute,
+            p.false_starts_pavlovian.lo,
+            p.false_starts_pavlovian.hi,
+        );
+    }
+    c
 }

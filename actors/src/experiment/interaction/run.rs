@@ -3,7 +3,9 @@
 //!
 //! Runs alternate reactive / Pavlovian (config/interaction.toml: π = stay still, ϱ = spin left, E = left
 //! elbow below 90°), each learning from scratch under tokio's paused clock. Run `i` uses robot seed
-//! `Rng::new(seed).fork(i).next_u64()` and operator seed `Rng::new(seed).fork(i).fork(1).next_u64()`.
+//! `Rng::new(seed).fork(i).next_u64()`; both runs of a pair (2k reactive, 2k + 1 Pavlovian) see the same
+//! operator, seed `Rng::new(seed).fork(2k).fork(1).next_u64()`: the learner does not depend on the robot, so
+//! the policies are compared on the same commands.
 //! Per policy: when the response started relative to each ground-truth command onset
 //! ([`pavlov::analysis::interaction`]), and the battery current and rotation averaged over the last
 //! N observed command onsets of each run (`--commands`, the paper: 40; the paper's Figure 4).
@@ -11,10 +13,12 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use pavlov::analysis::interaction::curve::{CommandResult, RunTimeline};
+use pavlov::analysis::interaction::debounce::{self, COMMAND};
 use pavlov::analysis::interaction::live_physical::physical_sample;
 use pavlov::analysis::interaction::physical::{PhysicalLatency, PhysicalParams, measure_physical};
 use pavlov::analysis::interaction::{
-    CommandWindow, MatchParams, ResponseSample, ResponseTiming, measure,
+    CommandOutcome, CommandWindow, MatchParams, ResponseSample, ResponseTiming, measure,
 };
 use pavlov::config::Config;
 use pavlov::control::Mode;
@@ -31,8 +35,10 @@ use crate::server::Server;
 pub(crate) const BEFORE_TICKS: i64 = 25;
 /// Aligned window: ticks after the onset.
 pub(crate) const AFTER_TICKS: i64 = 50;
-/// An onset counts only after this many ticks without the stimulus (one gesture can flicker).
-pub(crate) const DEBOUNCE_TICKS: usize = 50;
+
+/// One observed command onset's aligned window: per offset from [`BEFORE_TICKS`] before to [`AFTER_TICKS`]
+/// after, the battery current (mA, `None` when not reported) and the rotation odometry reported (° per tick).
+pub(crate) type AlignedWindow = Vec<(Option<f64>, f64)>;
 
 /// One run's outcome.
 #[derive(Debug, Clone, Serialize)]
@@ -54,19 +60,27 @@ pub struct InteractionRun {
     pub physical: Vec<PhysicalLatency>,
     /// Ticks of the observed command onsets used for the aligned averages.
     pub(crate) aligned_onsets: Vec<u64>,
+    /// The aligned windows of those onsets (not serialised).
+    #[serde(skip)]
+    pub(crate) aligned_windows: Vec<AlignedWindow>,
+    /// The run reduced for the time course ([`pavlov::analysis::interaction::curve`]; not serialised).
+    #[serde(skip)]
+    pub(crate) timeline: RunTimeline,
     /// The recording, if written.
     pub recording: Option<PathBuf>,
     /// Wall time, s.
     pub(crate) wall_s: f64,
-    /// Every tick (not serialised).
+    /// Every tick when the run was asked to keep them (the runs the Figure 3 analogue draws), else empty
+    /// (not serialised).
     #[serde(skip)]
     pub records: Vec<Arc<TickRecord>>,
 }
 
-/// The seeds of run `index`: (robot, operator).
+/// The seeds of run `index`: (robot, operator). The operator is the pair's: runs 2k and 2k + 1 share it.
 pub(crate) fn run_seeds(seed: u64, index: usize) -> (u64, u64) {
-    let run = run_rng(seed, index);
-    (run.clone().next_u64(), run.fork(1).next_u64())
+    let robot = run_rng(seed, index).next_u64();
+    let operator = run_rng(seed, index - index % 2).fork(1).next_u64();
+    (robot, operator)
 }
 
 /// What an interaction run keeps: every record, and the simulated operator driving the pose channel.
@@ -112,16 +126,38 @@ impl Collect for InteractionCollector {
     }
 }
 
-/// Runs one interaction run of `ticks` ticks.
-pub(crate) fn run(
-    base: &Config,
-    index: usize,
-    mode: Mode,
-    seed: u64,
-    ticks: usize,
-    aligned_commands: usize,
-    record_dir: Option<PathBuf>,
-) -> Result<InteractionRun, RunError> {
+/// What one run is asked to do.
+pub(crate) struct RunPlan {
+    /// Position in the interleaved sequence.
+    pub(crate) index: usize,
+    /// Reactive or Pavlovian.
+    pub(crate) mode: Mode,
+    /// The study's seed.
+    pub(crate) seed: u64,
+    /// Ticks to run.
+    pub(crate) ticks: usize,
+    /// How many of the last observed onsets the aligned averages use.
+    pub(crate) aligned_commands: usize,
+    /// Record the run into this directory.
+    pub(crate) record_dir: Option<PathBuf>,
+    /// Keep every tick record in the result (for the Figure 3 analogue).
+    pub(crate) keep_records: bool,
+    /// The simulated operator.
+    pub(crate) human: HumanParams,
+}
+
+/// Runs one interaction run.
+pub(crate) fn run(base: &Config, plan: RunPlan) -> Result<InteractionRun, RunError> {
+    let RunPlan {
+        index,
+        mode,
+        seed,
+        ticks,
+        aligned_commands,
+        record_dir,
+        keep_records,
+        human,
+    } = plan;
     let (robot_seed, human_seed) = run_seeds(seed, index);
     let mut config = base.clone();
     config.control.mode = mode;
@@ -133,7 +169,7 @@ pub(crate) fn run(
         record: record_dir.map(|d| (d, format!("interaction run {index} {mode:?}"))),
     };
     let collector = InteractionCollector {
-        human: Some(SimHuman::new(HumanParams::default(), human_seed)),
+        human: Some(SimHuman::new(human, human_seed)),
         driver: None,
         cancel: CancellationToken::new(),
         records: Vec::with_capacity(ticks),
@@ -160,12 +196,35 @@ pub(crate) fn run(
         &MatchParams::default(),
         &PhysicalParams::default(),
     );
-    let aligned_onsets = observed_onsets(&records)
+    let aligned_onsets: Vec<u64> = observed_onsets(&records)
         .into_iter()
         .rev()
         .take(aligned_commands)
         .rev()
         .collect();
+    let aligned_windows = aligned_onsets
+        .iter()
+        .map(|&i| aligned_window(&records, i))
+        .collect();
+    let timeline = RunTimeline {
+        pavlovian: mode == Mode::Pavlovian,
+        duration_ms: records.len() as f64 * base.tick.period_ms.max(1) as f64,
+        commands: commands
+            .iter()
+            .zip(&metrics.outcomes)
+            .zip(&physical)
+            .map(|((c, o), p)| CommandResult {
+                onset_ms: c.onset_ms,
+                decision_ms: match o {
+                    CommandOutcome::Answered { latency_ms } => Some(*latency_ms),
+                    _ => None,
+                },
+                current_ms: p.current_ms,
+                motion_ms: p.motion_ms,
+            })
+            .collect(),
+        false_starts_ms: metrics.false_starts_ms.clone(),
+    };
     Ok(InteractionRun {
         index,
         mode,
@@ -175,26 +234,43 @@ pub(crate) fn run(
         commands,
         physical,
         aligned_onsets,
+        aligned_windows,
+        timeline,
         recording: done.recording,
         wall_s: done.wall_s,
-        records,
+        records: if keep_records { records } else { Vec::new() },
     })
 }
 
-/// Ticks (indices into `records`) where the stimulus comes on after [`DEBOUNCE_TICKS`] without it, and
-/// the aligned window fits.
+fn aligned_window(records: &[Arc<TickRecord>], onset: u64) -> AlignedWindow {
+    (-BEFORE_TICKS..=AFTER_TICKS)
+        .map(|offset| {
+            let r = usize::try_from(onset as i64 + offset)
+                .ok()
+                .and_then(|k| records.get(k));
+            (
+                r.and_then(|t| t.sensors.battery_current_ma.map(f64::from)),
+                r.map_or(f64::NAN, |t| f64::from(t.sensors.angle_deg)),
+            )
+        })
+        .collect()
+}
+
+/// Ticks (indices into `records`) of the observed command onsets, debounced ([`debounce::COMMAND`]: the
+/// stimulus was off for more than a second before), where the aligned window fits.
 pub(crate) fn observed_onsets(records: &[Arc<TickRecord>]) -> Vec<u64> {
+    let period = match records {
+        [a, b, ..] => b.t_ms - a.t_ms,
+        _ => 20.0,
+    };
+    let mut commands = debounce::Debouncer::new(COMMAND, period);
     let mut out = Vec::new();
-    let mut quiet = DEBOUNCE_TICKS;
     for (i, r) in records.iter().enumerate() {
-        if r.stimulus {
+        if commands.step(r.t_ms, r.stimulus).is_some() {
             let fits = i as i64 >= BEFORE_TICKS && (i as i64 + AFTER_TICKS) < records.len() as i64;
-            if quiet >= DEBOUNCE_TICKS && fits {
+            if fits {
                 out.push(i as u64);
             }
-            quiet = 0;
-        } else {
-            quiet += 1;
         }
     }
     out
@@ -224,12 +300,18 @@ mod tests {
     }
 
     #[test]
-    fn run_seeds_differ_between_runs_and_between_robot_and_operator() {
+    fn both_runs_of_a_pair_see_the_same_operator_and_pairs_differ() {
         let (r0, h0) = run_seeds(1, 0);
         let (r1, h1) = run_seeds(1, 1);
+        let (r2, h2) = run_seeds(1, 2);
         assert_ne!(r0, h0);
         assert_ne!(r0, r1);
-        assert_ne!(h0, h1);
+        assert_eq!(
+            h0, h1,
+            "reactive and Pavlovian runs of a pair share the operator"
+        );
+        assert_ne!(h0, h2, "each pair has its own operator");
+        assert_ne!(r1, r2);
         assert_eq!(run_seeds(1, 0), (r0, h0));
         assert_eq!(r0, crate::experiment::stall::run_seed(1, 0));
     }

@@ -1,6 +1,8 @@
-//! The stall experiment's statistics: per-policy mean ± SE of each metric, the relative change with
-//! Welch's t-test, and the learning curve (over-current observations per window, mean over runs).
+//! The stall experiment's statistics: per-policy mean ± SE, the spread across runs (SD, range) of each metric,
+//! the relative change with a 95 % bootstrap interval and Welch's t-test, and the learning curve
+//! (over-current observations per window, mean over runs).
 
+use pavlov::analysis::bootstrap::{RESAMPLES, mean_difference};
 use pavlov::analysis::stats::{Describe, WelchTest, describe, relative_change, welch};
 use pavlov::control::Mode;
 use serde::{Deserialize, Serialize};
@@ -50,6 +52,15 @@ pub struct Comparison {
     pub pavlovian: Describe,
     /// (Pavlovian − reactive) / reactive.
     pub(crate) relative_change: Option<f64>,
+    /// 95 % bootstrap interval of the relative change (the difference's interval over the reactive mean).
+    #[serde(default)]
+    pub(crate) relative_change_ci: Option<(f64, f64)>,
+    /// Smallest and largest value over the reactive runs.
+    #[serde(default)]
+    pub(crate) reactive_range: Option<(f64, f64)>,
+    /// The same over the Pavlovian runs.
+    #[serde(default)]
+    pub(crate) pavlovian_range: Option<(f64, f64)>,
     /// Welch's t-test of Pavlovian against reactive.
     pub(crate) welch: Option<WelchTest>,
 }
@@ -76,6 +87,9 @@ pub struct Analysis {
     pub(crate) learning_curve: Vec<CurvePoint>,
     /// The first window from which on the Pavlovian mean stays below the reactive mean (None: never).
     pub(crate) benefit_from_window: Option<usize>,
+    /// The first window whose Pavlovian mean is below the reactive mean (None: none).
+    #[serde(default)]
+    pub(crate) first_below_window: Option<usize>,
     /// When the Pavlovian runs first stopped on the prediction alone, s (over the runs that did).
     pub(crate) first_predictive_stop_s: Describe,
 }
@@ -95,6 +109,17 @@ pub(crate) fn analyse(runs: &[RunResult], window_s: f64) -> Analysis {
             let a = values(runs, Mode::Reactive, key);
             let b = values(runs, Mode::Pavlovian, key);
             let (da, db) = (describe(&a), describe(&b));
+            let range = |xs: &[f64]| {
+                (!xs.is_empty()).then(|| {
+                    xs.iter()
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+                            (l.min(x), h.max(x))
+                        })
+                })
+            };
+            let relative_change_ci = mean_difference(&b, &a, RESAMPLES, 1)
+                .filter(|_| da.mean != 0.0 && da.mean.is_finite())
+                .map(|d| (d.lo / da.mean, d.hi / da.mean));
             Comparison {
                 metric: (*key).to_string(),
                 label: (*label).to_string(),
@@ -102,6 +127,9 @@ pub(crate) fn analyse(runs: &[RunResult], window_s: f64) -> Analysis {
                 reactive: da,
                 pavlovian: db,
                 relative_change: relative_change(da.mean, db.mean),
+                relative_change_ci,
+                reactive_range: range(&a),
+                pavlovian_range: range(&b),
                 welch: welch(&a, &b),
             }
         })
@@ -129,6 +157,9 @@ pub(crate) fn analyse(runs: &[RunResult], window_s: f64) -> Analysis {
             .get(w..)
             .is_some_and(|rest| rest.iter().all(|p| p.pavlovian.mean < p.reactive.mean))
     });
+    let first_below_window = learning_curve
+        .iter()
+        .position(|p| p.pavlovian.mean < p.reactive.mean);
     let firsts: Vec<f64> = runs
         .iter()
         .filter(|r| r.mode == Mode::Pavlovian)
@@ -138,6 +169,7 @@ pub(crate) fn analyse(runs: &[RunResult], window_s: f64) -> Analysis {
         comparisons,
         learning_curve,
         benefit_from_window,
+        first_below_window,
         first_predictive_stop_s: describe(&firsts),
     }
 }
@@ -199,6 +231,11 @@ mod tests {
         assert_eq!(a.learning_curve[0].pavlovian.mean, 57.5);
         // Window 0: Pavlovian above reactive; from window 1 on, below.
         assert_eq!(a.benefit_from_window, Some(1));
+        assert_eq!(a.first_below_window, Some(1));
+        assert_eq!(oc.reactive_range, Some((100.0, 110.0)));
+        assert_eq!(oc.pavlovian_range, Some((50.0, 60.0)));
+        let (lo, hi) = oc.relative_change_ci.unwrap();
+        assert!(lo <= oc.relative_change.unwrap() && oc.relative_change.unwrap() <= hi);
         assert_eq!(a.first_predictive_stop_s.n, 2);
         assert_eq!(a.first_predictive_stop_s.mean, 6.0);
         assert_eq!(total(&runs[0], "nope"), None);

@@ -170,13 +170,14 @@ pub fn table(study: &StallStudy) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Stall experiment: seed {}, {} runs per policy × {} min, interleaved (reactive first); mean ± SE over runs",
+        "Stall experiment: seed {}, {} runs per policy × {} min, interleaved (reactive first); mean ± SE over runs, \
+         change with its 95 % bootstrap interval",
         o.seed, o.runs_per_policy, o.minutes
     );
     let _ = writeln!(
         s,
-        "{:<28} {:>24} {:>24} {:>9} {:>8} {:>6} {:>8}",
-        "metric", "reactive", "Pavlovian", "change", "t", "df", "p"
+        "{:<28} {:>24} {:>24} {:>9} {:>18} {:>8} {:>6} {:>8}",
+        "metric", "reactive", "Pavlovian", "change", "95 % CI", "t", "df", "p"
     );
     for c in &study.analysis.comparisons {
         let (t, df, p) = c.welch.map_or(("–".into(), "–".into(), "–".into()), |w| {
@@ -193,16 +194,37 @@ pub fn table(study: &StallStudy) -> String {
         let change = c
             .relative_change
             .map_or("–".into(), |r| format!("{:+.1}%", r * 100.0));
+        let ci = c.relative_change_ci.map_or("–".into(), |(lo, hi)| {
+            format!("{:+.1}, {:+.1}%", lo * 100.0, hi * 100.0)
+        });
         let _ = writeln!(
             s,
-            "{:<28} {:>24} {:>24} {:>9} {:>8} {:>6} {:>8}",
+            "{:<28} {:>24} {:>24} {:>9} {:>18} {:>8} {:>6} {:>8}",
             format!("{} ({})", c.label, c.unit),
             pm(&c.reactive),
             pm(&c.pavlovian),
             change,
+            ci,
             t,
             df,
             p
+        );
+    }
+    let _ = writeln!(
+        s,
+        "spread across runs, SD [min – max]: reactive / Pavlovian"
+    );
+    let range =
+        |r: Option<(f64, f64)>| r.map_or("–".into(), |(l, h)| format!("{} – {}", num(l), num(h)));
+    for c in &study.analysis.comparisons {
+        let _ = writeln!(
+            s,
+            "  {:<28} {} [{}] / {} [{}]",
+            c.label,
+            num(c.reactive.sd),
+            range(c.reactive_range),
+            num(c.pavlovian.sd),
+            range(c.pavlovian_range)
         );
     }
     let _ = writeln!(
@@ -218,6 +240,19 @@ pub fn table(study: &StallStudy) -> String {
         );
     }
     let _ = writeln!(s, "{}", line.trim_start());
+    match study.analysis.first_below_window {
+        Some(w) => {
+            let _ = writeln!(
+                s,
+                "first window with the Pavlovian mean below the reactive one: {}–{} s",
+                w as f64 * WINDOW_S,
+                (w + 1) as f64 * WINDOW_S
+            );
+        }
+        None => {
+            let _ = writeln!(s, "no window has the Pavlovian mean below the reactive one");
+        }
+    }
     match study.analysis.benefit_from_window {
         Some(w) => {
             let _ = writeln!(

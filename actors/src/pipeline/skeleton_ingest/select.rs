@@ -11,8 +11,11 @@
 //!
 //! Selection looks at a whole datagram first ([`UserSelector::apply_all`]): when a bundle holds an elbow of a
 //! user that may be selected, that user is selected before any of the bundle's events is applied, so the
-//! joints that precede the elbow in the same bundle are kept. With unbundled messages (KinectV2-OSC), joints
-//! that arrive before the first elbow are dropped and used from the next frame on.
+//! joints that precede the elbow in the same bundle are kept. With unbundled messages (KinectV2-OSC sends one
+//! datagram per joint, ShoulderLeft before ElbowLeft), the joints a user sends while the selection is vacant
+//! are held aside, the newest of each joint for up to [`MAX_CANDIDATES`] users; when the user is selected
+//! they go into the cleared pose before the elbow, so the frame being selected keeps its shoulder and the
+//! left elbow angle is there from the first frame. Held joints older than `silence_ms` are forgotten.
 
 use pavlov::skeleton::{Joint, JointSample, PoseTracker};
 
@@ -20,6 +23,17 @@ use super::decode::{SkeletonEvent, UserId};
 
 /// How long the selected user may be silent before another user can take over, ms.
 pub(crate) const DEFAULT_SILENCE_MS: u64 = 1000;
+
+/// How many not-yet-selected users' joints are held aside (a Kinect v2 tracks up to 6 bodies).
+pub(crate) const MAX_CANDIDATES: usize = 6;
+
+/// The newest joints of one user that is not (yet) selected.
+#[derive(Debug, Clone, PartialEq)]
+struct Candidate {
+    user: UserId,
+    last_heard_ms: u64,
+    joints: Vec<(Joint, JointSample)>,
+}
 
 /// What applying an event did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -39,11 +53,12 @@ pub enum Applied {
 }
 
 /// The selection state.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub(crate) struct UserSelector {
     current: Option<UserId>,
     last_heard_ms: u64,
     silence_ms: u64,
+    candidates: Vec<Candidate>,
 }
 
 impl UserSelector {
@@ -53,6 +68,7 @@ impl UserSelector {
             current: None,
             last_heard_ms: 0,
             silence_ms,
+            candidates: Vec::new(),
         }
     }
 
@@ -88,10 +104,56 @@ impl UserSelector {
         done
     }
 
+    /// Selects `user`: clears the pose of the previous person and puts in the joints `user` sent while
+    /// waiting (newer than `silence_ms`).
     fn select(&mut self, user: UserId, now_ms: u64, pose: &mut PoseTracker) {
         self.current = Some(user);
         self.last_heard_ms = now_ms;
         pose.clear();
+        let held = std::mem::take(&mut self.candidates);
+        if let Some(c) = held.into_iter().find(|c| c.user == user) {
+            for (joint, sample) in c.joints {
+                if now_ms.saturating_sub(sample.at_ms) <= self.silence_ms {
+                    pose.update(joint, sample);
+                }
+            }
+        }
+    }
+
+    /// Holds a joint of a user that is not selected while the selection is vacant.
+    fn hold(&mut self, user: UserId, joint: Joint, sample: JointSample) {
+        let now = sample.at_ms;
+        let silence = self.silence_ms;
+        self.candidates
+            .retain(|c| now.saturating_sub(c.last_heard_ms) <= silence);
+        let i = match self.candidates.iter().position(|c| c.user == user) {
+            Some(i) => i,
+            None => {
+                if self.candidates.len() >= MAX_CANDIDATES
+                    && let Some(oldest) = self
+                        .candidates
+                        .iter()
+                        .enumerate()
+                        .min_by_key(|(_, c)| c.last_heard_ms)
+                        .map(|(i, _)| i)
+                {
+                    self.candidates.swap_remove(oldest);
+                }
+                self.candidates.push(Candidate {
+                    user,
+                    last_heard_ms: now,
+                    joints: Vec::new(),
+                });
+                self.candidates.len() - 1
+            }
+        };
+        if let Some(c) = self.candidates.get_mut(i) {
+            c.last_heard_ms = now;
+            match c.joints.iter_mut().find(|(j, _)| *j == joint) {
+                Some(slot) => slot.1 = sample,
+                None => c.joints.push((joint, sample)),
+            }
+        }
     }
 
     /// Apply one event received at `now_ms`, updating `pose`.
@@ -123,6 +185,9 @@ impl UserSelector {
                     pose.update(joint, sample);
                     Applied::Selected(user)
                 } else {
+                    if self.vacant(now_ms) {
+                        self.hold(user, joint, sample);
+                    }
                     Applied::OtherUser
                 }
             }
@@ -131,14 +196,16 @@ impl UserSelector {
                 pose.clear();
                 Applied::Lost(user)
             }
+            SkeletonEvent::LostUser(user) => {
+                self.candidates.retain(|c| c.user != user);
+                Applied::Nothing
+            }
             SkeletonEvent::NewSkeleton(user) if self.current == Some(user) => {
                 self.last_heard_ms = now_ms;
                 pose.clear();
                 Applied::Restarted(user)
             }
-            SkeletonEvent::LostUser(_)
-            | SkeletonEvent::NewSkeleton(_)
-            | SkeletonEvent::NewUser(_) => Applied::Nothing,
+            SkeletonEvent::NewSkeleton(_) | SkeletonEvent::NewUser(_) => Applied::Nothing,
         }
     }
 }
@@ -188,6 +255,50 @@ mod tests {
         );
         assert_eq!(pose.sample(Joint::Head).map(|j| j.at_ms), Some(10));
         assert_eq!(s.current(), Some(3));
+    }
+
+    #[test]
+    fn unbundled_joints_sent_before_the_selecting_elbow_are_kept_for_that_user_only() {
+        // KinectV2-OSC: one datagram per joint. User 2's shoulder comes before its elbow; user 9's head
+        // and a stale head of user 2 from long ago must not survive.
+        let mut s = UserSelector::new(1000);
+        let mut pose = PoseTracker::new(100);
+        s.apply_all(&[joint(2, Joint::Head, 7.0)], 0, &mut pose);
+        s.apply_all(&[joint(9, Joint::Neck, 1.0)], 4990, &mut pose);
+        s.apply_all(&[joint(2, Joint::LeftShoulder, 3.0)], 5000, &mut pose);
+        assert_eq!(pose.sample(Joint::LeftShoulder), None, "not yet selected");
+        let done = s.apply_all(&[joint(2, Joint::LeftElbow, 4.0)], 5001, &mut pose);
+        assert_eq!(done, vec![Applied::Selected(2), Applied::JointUsed]);
+        let shoulder = pose
+            .sample(Joint::LeftShoulder)
+            .expect("the frame's shoulder kept");
+        assert_eq!((shoulder.pos_mm[0], shoulder.at_ms), (3.0, 5000));
+        assert!(pose.sample(Joint::LeftElbow).is_some());
+        assert_eq!(pose.sample(Joint::Neck), None, "another user's joint");
+        assert_eq!(
+            pose.sample(Joint::Head),
+            None,
+            "older than the silence limit"
+        );
+        // Once selected, nothing is held any more.
+        s.apply_all(&[joint(9, Joint::LeftElbow, 1.0)], 5010, &mut pose);
+        assert!(s.candidates.is_empty());
+    }
+
+    #[test]
+    fn at_most_six_waiting_users_are_held() {
+        let mut s = UserSelector::new(1000);
+        let mut pose = PoseTracker::new(100);
+        for user in 0..20 {
+            s.apply_all(&[joint(user, Joint::Head, 1.0)], user, &mut pose);
+        }
+        assert_eq!(s.candidates.len(), MAX_CANDIDATES);
+        assert!(
+            s.candidates.iter().all(|c| c.user >= 14),
+            "the newest are kept"
+        );
+        s.apply_all(&[SkeletonEvent::LostUser(19)], 30, &mut pose);
+        assert_eq!(s.candidates.len(), MAX_CANDIDATES - 1);
     }
 
     #[test]
