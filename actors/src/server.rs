@@ -69,6 +69,29 @@ impl std::fmt::Debug for RobotTarget {
     }
 }
 
+/// Which robot a server drives, as the dashboard's header shows it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum RobotLinkKind {
+    /// The simulated Create, in process (or behind a link a test opened for one).
+    Simulated,
+    /// A serial device at this path.
+    Serial(String),
+    /// A link opened by the caller, with no simulator behind it that the server knows of.
+    External,
+}
+
+impl RobotTarget {
+    /// What the dashboard says of this target.
+    fn kind(&self) -> RobotLinkKind {
+        match self {
+            RobotTarget::Simulated => RobotLinkKind::Simulated,
+            RobotTarget::Serial(path) => RobotLinkKind::Serial(path.clone()),
+            RobotTarget::Link { sim: Some(_), .. } => RobotLinkKind::Simulated,
+            RobotTarget::Link { sim: None, .. } => RobotLinkKind::External,
+        }
+    }
+}
+
 /// Errors starting the server.
 #[derive(Debug, thiserror::Error)]
 pub enum ServerError {
@@ -130,6 +153,7 @@ impl ServerBuilder {
             .map_err(ServerError::Skeleton)?;
 
         let sim_cancel = CancellationToken::new();
+        let robot = target.kind();
         let (link, sim, sim_status) = open_robot(&config, target, &sim_cancel)?;
         let OpenLink {
             reader,
@@ -164,6 +188,7 @@ impl ServerBuilder {
             writer_stats.clone(),
         ));
         let obs_names = learning.obs_names();
+        let params_at_start = learning.params_in_force();
         let (feed, events, recorder_commands) = match &recorder {
             Some(r) => {
                 let feed = TickFeed::new().with_recorder(r.input.clone());
@@ -234,6 +259,8 @@ impl ServerBuilder {
             config,
             checkpoints,
             obs_names,
+            params_at_start,
+            robot,
             skeleton,
             health,
             _cancel_on_drop: cancel.clone().drop_guard(),
@@ -330,6 +357,11 @@ pub struct Server {
     pub skeleton: Option<SkeletonIngest>,
     /// Names of the observation vector's dimensions, in record order.
     pub obs_names: Vec<String>,
+    /// Every prediction's learning parameters at the first tick (a resumed checkpoint's, where it has
+    /// them), in configuration order; later changes are `params_set` events.
+    pub params_at_start: Vec<pavlov::agent::learning::ParamsInForce>,
+    /// Which robot this server drives.
+    pub robot: RobotLinkKind,
     health: Health,
     cancel: CancellationToken,
     actors: Vec<JoinHandle<()>>,
