@@ -3,6 +3,7 @@
 
 mod abuse;
 mod abusers;
+mod analysis;
 mod browser;
 mod learning_bounds;
 mod metrics;
