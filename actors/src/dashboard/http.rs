@@ -38,9 +38,13 @@ use crate::telemetry::prometheus::MetricsSnapshot;
 const INDEX_HTML: &str = include_str!("../../../web/index.html");
 const STYLE_CSS: &str = include_str!("../../../web/style.css");
 /// The page's modules, by path.
-const SCRIPTS: [(&str, &str); 2] = [
+const SCRIPTS: [(&str, &str); 6] = [
     ("/app.js", include_str!("../../../web/app.js")),
     ("/lib.js", include_str!("../../../web/lib.js")),
+    ("/timeline.js", include_str!("../../../web/timeline.js")),
+    ("/charts.js", include_str!("../../../web/charts.js")),
+    ("/controls.js", include_str!("../../../web/controls.js")),
+    ("/panels.js", include_str!("../../../web/panels.js")),
 ];
 
 /// The files of the uPlot package the page loads, relative to the web directory.

@@ -5,6 +5,7 @@ mod abuse;
 mod abusers;
 mod analysis;
 mod browser;
+mod browser_analysis;
 mod learning_bounds;
 mod metrics;
 mod operator;
