@@ -5,12 +5,14 @@
 //! - [`load`]: websocket clients reading the dashboard stream during the run;
 //! - [`abuse`]: abusive clients (floods, storms, never-reading sockets) for `--ws-abuse`, and [`floods`],
 //!   its watcher and idle-socket floods;
-//! - [`estop_probe`]: the operator's e-stop, timed from send to ack, during the run.
+//! - [`estop_probe`]: the operator's e-stop, timed from send to ack, during the run;
+//! - [`reconnect`]: clients that reconnect again and again, timing the history each connection gets.
 
 pub mod abuse;
 pub mod estop_probe;
 pub(crate) mod floods;
 pub mod load;
+pub(crate) mod reconnect;
 
 use std::fmt;
 use std::time::Duration;
