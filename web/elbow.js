@@ -5,7 +5,32 @@
 //
 // The pure helpers (elbowRow, skeletonWarning) have no DOM and are unit-tested under Node.
 
-import { Window } from './lib.js';
+/** The newest `capacity` rows of a few series, as uPlot's columns (x first). */
+class RollingWindow {
+  constructor(series, capacity) {
+    this.capacity = capacity;
+    this.columns = Array.from({ length: series + 1 }, () => []);
+  }
+
+  push(x, values) {
+    this.columns[0].push(x);
+    for (let i = 1; i < this.columns.length; i++) {
+      const v = values[i - 1];
+      this.columns[i].push(v === undefined || v === null || Number.isNaN(v) ? null : v);
+    }
+    // Trim in batches, so the copy happens once every `slack` rows rather than on every row.
+    const slack = Math.max(1, Math.floor(this.capacity / 10));
+    if (this.columns[0].length > this.capacity + slack) {
+      const excess = this.columns[0].length - this.capacity;
+      for (const c of this.columns) c.splice(0, excess);
+    }
+  }
+
+  data() {
+    const extra = this.columns[0].length - this.capacity;
+    return extra <= 0 ? this.columns : this.columns.map((c) => c.slice(extra));
+  }
+}
 
 /** The angle below which the left elbow is a command, degrees (the paper's 90°). */
 export const COMMAND_DEG = 90;
@@ -63,7 +88,7 @@ export class ElbowPanel {
   /** A new connection: forget the old data; the card shows once a tick carries `elbow`. */
   configure(hello) {
     this.periodMs = (hello && hello.tick_period_ms) || 20;
-    this.win = new Window(SERIES.length, Math.round((this.windowSeconds * 1000) / this.periodMs));
+    this.win = new RollingWindow(SERIES.length, Math.round((this.windowSeconds * 1000) / this.periodMs));
     if (this.u) {
       this.u.destroy();
       this.u = null;

@@ -1,4 +1,7 @@
-// Pure helpers of the dashboard (no DOM, no network), shared by app.js and the Node unit tests.
+// Pure helpers of the dashboard (no DOM, no network), shared by the page's modules and the Node unit tests;
+// the data of the charts (samples, timeline, gaps, CSV, markers) is in timeline.js, re-exported here.
+
+export * from './timeline.js';
 
 /** The websocket subprotocol of PROTOCOL.md. */
 export const SUBPROTOCOL = 'pavlov.v1';
@@ -42,42 +45,6 @@ export class Backoff {
   }
   reset() {
     this.nextMs = this.firstMs;
-  }
-}
-
-/**
- * A sliding window of columns for a uPlot chart: column 0 is x (time, s), the others are series.
- * Appending is amortised O(1); the window keeps the newest `capacity` rows.
- */
-export class Window {
-  constructor(series, capacity) {
-    this.capacity = capacity;
-    this.columns = Array.from({ length: series + 1 }, () => []);
-  }
-  push(x, values) {
-    this.columns[0].push(x);
-    for (let i = 1; i < this.columns.length; i++) {
-      const v = values[i - 1];
-      this.columns[i].push(v === undefined || v === null || Number.isNaN(v) ? null : v);
-    }
-    // Trim in batches so that the copy happens once every `slack` rows, not on every row.
-    const slack = Math.max(1, Math.floor(this.capacity / 10));
-    if (this.columns[0].length > this.capacity + slack) {
-      const excess = this.columns[0].length - this.capacity;
-      for (const c of this.columns) c.splice(0, excess);
-    }
-  }
-  /** The columns as uPlot wants them (only the newest `capacity` rows). */
-  data() {
-    const extra = this.columns[0].length - this.capacity;
-    if (extra <= 0) return this.columns;
-    return this.columns.map((c) => c.slice(extra));
-  }
-  get length() {
-    return Math.min(this.columns[0].length, this.capacity);
-  }
-  clear() {
-    for (const c of this.columns) c.length = 0;
   }
 }
 

@@ -70,6 +70,29 @@ impl std::fmt::Debug for RobotTarget {
     }
 }
 
+/// Which robot a server drives, as the dashboard's header shows it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum RobotLinkKind {
+    /// The simulated Create, in process (or behind a link a test opened for one).
+    Simulated,
+    /// A serial device at this path.
+    Serial(String),
+    /// A link opened by the caller, with no simulator behind it that the server knows of.
+    External,
+}
+
+impl RobotTarget {
+    /// What the dashboard says of this target.
+    fn kind(&self) -> RobotLinkKind {
+        match self {
+            RobotTarget::Simulated => RobotLinkKind::Simulated,
+            RobotTarget::Serial(path) => RobotLinkKind::Serial(path.clone()),
+            RobotTarget::Link { sim: Some(_), .. } => RobotLinkKind::Simulated,
+            RobotTarget::Link { sim: None, .. } => RobotLinkKind::External,
+        }
+    }
+}
+
 /// Errors starting the server.
 #[derive(Debug, thiserror::Error)]
 pub enum ServerError {
@@ -131,6 +154,7 @@ impl ServerBuilder {
             .map_err(ServerError::Skeleton)?;
 
         let sim_cancel = CancellationToken::new();
+        let robot = target.kind();
         let (link, sim, sim_status) = open_robot(&config, target, &sim_cancel)?;
         let OpenLink {
             reader,
@@ -166,6 +190,7 @@ impl ServerBuilder {
         ));
         let obs_names = learning.obs_names();
         let horde = learning.horde_view();
+        let params_at_start = learning.params_in_force();
         let (feed, events, recorder_commands) = match &recorder {
             Some(r) => {
                 let feed = TickFeed::new().with_recorder(r.input.clone());
@@ -239,6 +264,8 @@ impl ServerBuilder {
             config,
             checkpoints,
             obs_names,
+            params_at_start,
+            robot,
             skeleton,
             horde,
             health,
@@ -338,6 +365,11 @@ pub struct Server {
     pub obs_names: Vec<String>,
     /// The Horde's figures and values, when `[horde]` has families.
     pub horde: Option<HordeView>,
+    /// Every prediction's learning parameters at the first tick (a resumed checkpoint's, where it has
+    /// them), in configuration order; later changes are `params_set` events.
+    pub params_at_start: Vec<pavlov::agent::learning::ParamsInForce>,
+    /// Which robot this server drives.
+    pub robot: RobotLinkKind,
     health: Health,
     cancel: CancellationToken,
     actors: Vec<JoinHandle<()>>,

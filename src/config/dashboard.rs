@@ -12,6 +12,9 @@ pub const MIN_PUBLIC_TOKEN_CHARS: usize = 16;
 /// The longest per-client outgoing queue, messages: 200 s of ticks at 50 Hz, about 10 MB. A client that
 /// reads nothing is disconnected after 10 s anyway; a longer queue only holds memory and delay.
 pub const MAX_CLIENT_QUEUE: usize = 10_000;
+/// The longest `history_s`: an hour of ticks, about 11 MB of compact rows at 50 Hz with one prediction
+/// (the ring stores about 64 bytes a tick, not the JSON it sends).
+pub const MAX_HISTORY_S: u64 = 3600;
 
 /// `[dashboard]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -44,6 +47,9 @@ pub struct DashboardConfig {
     /// Most TCP connections that are not (yet) websockets from one source address; beyond it, a new
     /// connection from that address evicts its oldest.
     pub max_pending_per_address: usize,
+    /// Seconds of recent ticks (and the events among them) the server keeps in memory and sends a newly
+    /// connected client after `hello`, so a page opened mid-run shows what came before; 0 keeps none.
+    pub history_s: u64,
 }
 
 impl Default for DashboardConfig {
@@ -60,6 +66,7 @@ impl Default for DashboardConfig {
             max_watchers_per_address: 16,
             max_pending: 128,
             max_pending_per_address: 16,
+            history_s: 300,
         }
     }
 }
@@ -145,6 +152,15 @@ impl DashboardConfig {
             1,
             self.max_pending,
         )?;
+        if self.history_s > MAX_HISTORY_S {
+            return Err(invalid(
+                "dashboard.history_s",
+                format!(
+                    "must be between 0 and {MAX_HISTORY_S} (an hour), got {}",
+                    self.history_s
+                ),
+            ));
+        }
         Ok(())
     }
 }
@@ -212,6 +228,18 @@ mod tests {
             assert_eq!(key_of(Err(e)), key);
         }
         assert_eq!(with(|d| d.max_watchers = 0), Ok(()));
+    }
+
+    #[test]
+    fn history_is_bounded_to_an_hour() {
+        assert_eq!(DashboardConfig::default().history_s, 300);
+        assert_eq!(with(|d| d.history_s = 0), Ok(()));
+        assert_eq!(with(|d| d.history_s = MAX_HISTORY_S), Ok(()));
+        let e = with(|d| d.history_s = MAX_HISTORY_S + 1).unwrap_err();
+        assert!(e.to_string().contains("between 0 and 3600"), "{e}");
+        assert_eq!(key_of(Err(e)), "dashboard.history_s");
+        let d: DashboardConfig = toml::from_str("history_s = 60").unwrap();
+        assert_eq!(d.history_s, 60);
     }
 
     #[test]

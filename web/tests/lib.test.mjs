@@ -3,7 +3,9 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  Backoff, GapCounter, SUBPROTOCOL, Window, alignedData, connectionTarget, fmt, fmtDuration, fmtLead, paramLimits, parseParam, teleopWheels, tokenFromHash,
+  Backoff, GapCounter, SUBPROTOCOL, Timeline, WINDOWS, alignedData, applyParams, columns, connectionTarget, fmt, fmtDuration,
+  fmtLead, fmtParam, markerLabel, paramLimits, parseParam, redrawIntervalMs, sampleFromTick, samplesFromHistory, sensorsLive,
+  teleopWheels, toCsv, tokenFromHash,
 } from '../lib.js';
 
 test('the token comes from the URL fragment', () => {
@@ -27,21 +29,6 @@ test('reconnect delays double up to the cap and reset', () => {
   assert.deepEqual([b.next(), b.next(), b.next(), b.next(), b.next()], [500, 1000, 2000, 4000, 4000]);
   b.reset();
   assert.equal(b.next(), 500);
-});
-
-test('the chart window keeps the newest rows and maps bad numbers to gaps', () => {
-  const w = new Window(2, 100);
-  for (let i = 0; i < 1000; i++) w.push(i * 0.02, [i, i % 3 === 0 ? NaN : -i]);
-  const [x, a, b] = w.data();
-  assert.equal(x.length, 100);
-  assert.equal(w.length, 100);
-  assert.equal(a[0], 900);
-  assert.equal(a[99], 999);
-  assert.equal(b[99], 999 % 3 === 0 ? null : -999);
-  assert.ok(b.includes(null));
-  assert.ok(w.columns[0].length <= 110, 'trimmed in batches');
-  w.clear();
-  assert.equal(w.length, 0);
 });
 
 test('teleop keys become wheel speeds', () => {
@@ -128,4 +115,121 @@ test('aligned averages become uPlot data with gaps for missing points and modes'
   assert.deepEqual(partial.counts, { reactive: 1, pavlovian: 0 });
   assert.equal(alignedData(undefined), null);
   assert.equal(alignedData({}), null);
+});
+
+// ---------------------------------------------------------------- timeline.js
+
+const tick = (seq, extra = {}) => ({
+  type: 'tick', seq, t: seq * 0.02, mode: 'pavlovian', stimulus: false, gate: seq % 2 === 0, estop: false, safety_stop: null,
+  predictions: [{ name: 'stall', value: seq / 1000, threshold: 0.5 }],
+  command: { left: 200, right: 200 }, default: { left: 200, right: 200 },
+  sensors: { overcurrent_left: false, overcurrent_right: true, battery_current_ma: -300 },
+  link: { up: true, state: 'up' }, ...extra,
+});
+
+const FIELDS = ['seq', 't', 'mode', 'stimulus', 'gate', 'estop', 'safety_stop', 'overcurrent_left', 'overcurrent_right',
+  'battery_current_ma', 'command_left', 'command_right', 'default_left', 'default_right', 'link', 'predictions'];
+
+test('a tick and a history row become the same sample', () => {
+  const fromTick = sampleFromTick(tick(10));
+  const row = [10, 0.2, 'pavlovian', 0, 1, 0, null, 0, 1, -300, 200, 200, 200, 200, 'up', [[0.01, 0.5]]];
+  const [fromRow] = samplesFromHistory({ type: 'history', fields: FIELDS, rows: [row] });
+  assert.deepEqual(fromRow, fromTick);
+  assert.equal(fromTick.ocR, true);
+  assert.deepEqual(fromTick.preds, [[0.01, 0.5]]);
+  // Fields are read by name, whatever their order; malformed rows are left out.
+  const reversed = [...FIELDS].reverse();
+  const [again] = samplesFromHistory({ fields: reversed, rows: [[...row].reverse(), 'junk', [null]] });
+  assert.deepEqual(again, fromTick);
+  assert.deepEqual(samplesFromHistory({}), []);
+});
+
+test('the timeline keeps ticks in order, merges history over what it had, and lets old ones go', () => {
+  const tl = new Timeline(10);
+  for (let s = 0; s < 100; s++) assert.ok(tl.push(sampleFromTick(tick(s))));
+  assert.equal(tl.push(sampleFromTick(tick(50))), false, 'an older tick is ignored');
+  assert.equal(tl.last.seq, 99);
+  // A history from tick 90 to 200 (a reconnect): what the page had from 90 on is replaced.
+  const history = Array.from({ length: 111 }, (_, k) => sampleFromTick(tick(90 + k, { mode: 'reactive' })));
+  tl.merge(history);
+  assert.equal(tl.samples[89].mode, 'pavlovian');
+  assert.equal(tl.samples[90].mode, 'reactive');
+  assert.equal(tl.last.seq, 200);
+  assert.equal(new Set(tl.samples.map((x) => x.seq)).size, tl.samples.length, 'no tick twice');
+  // 10 s kept: 500 ticks (trimmed in batches of a tenth).
+  for (let s = 201; s < 2000; s++) tl.push(sampleFromTick(tick(s)));
+  assert.ok(tl.samples.length >= 500 && tl.samples.length <= 560, `${tl.samples.length}`);
+  assert.ok(tl.samples[0].t >= tl.last.t - 10 - 1.2);
+  assert.deepEqual(tl.between(30, 30.1).map((x) => x.seq), [1500, 1501, 1502, 1503, 1504, 1505]);
+});
+
+test('events are kept once each, in time order, and go with the samples', () => {
+  const tl = new Timeline(10);
+  tl.push(sampleFromTick(tick(0)));
+  assert.ok(tl.addEvent({ id: 2, t: 5, kind: 'mode_set' }));
+  assert.ok(tl.addEvent({ id: 1, t: 1, kind: 'e_stop' }));
+  assert.equal(tl.addEvent({ id: 2, t: 5, kind: 'mode_set' }), false);
+  assert.deepEqual(tl.events.map((e) => e.id), [1, 2]);
+  assert.deepEqual(tl.eventsBetween(2, 6).map((e) => e.id), [2]);
+  for (let s = 1; s <= 1000; s++) tl.push(sampleFromTick(tick(s)));
+  assert.deepEqual(tl.events, [], 'older than the 10 s kept');
+  assert.ok(tl.addEvent({ id: 1, t: 19.9, kind: 'e_stop' }), 'an id let go may come back (a new run)');
+  tl.clear();
+  assert.equal(tl.samples.length + tl.events.length, 0);
+});
+
+test('chart columns break at missing ticks and where the link was down', () => {
+  const samples = [0, 1, 2, 5, 6].map((s) => sampleFromTick(tick(s, s === 6 ? { link: { up: false, state: 'reconnecting' } } : {})));
+  const live = (f) => (s) => (sensorsLive(s) ? f(s) : null);
+  const [x, current, cmd] = columns(samples, [live((s) => s.current), (s) => s.cmdL], 0.02);
+  assert.deepEqual(x, [0, 0.02, 0.04, 0.05, 0.1, 0.12]);
+  assert.deepEqual(current, [-300, -300, -300, null, -300, null]);
+  assert.deepEqual(cmd, [200, 200, 200, null, 200, 200]);
+  assert.equal(sensorsLive({ link: 'tripped' }), true);
+  assert.equal(sensorsLive({ link: 'stale' }), false);
+  assert.deepEqual(columns([], [(s) => s.cmdL], 0.02), [[], []]);
+  // Non-finite values are gaps too.
+  assert.deepEqual(columns([sampleFromTick(tick(0))], [() => NaN], 0.02)[1], [null]);
+});
+
+test('the CSV has a row per tick, named prediction columns, event labels, and quotes what needs it', () => {
+  const samples = [0, 1, 2].map((s) => sampleFromTick(tick(s)));
+  samples[1].safety = 'e_stop';
+  samples[2].current = null;
+  const csv = toCsv(samples, ['stall'], [{ t: 0.02, label: 'α=0.01' }, { t: 0.02, label: 'mode→"x",y' }, { t: 1, label: null }]);
+  const lines = csv.trimEnd().split('\n');
+  assert.equal(lines.length, 4);
+  assert.equal(lines[0], 'seq,t_s,mode,stall,stall_threshold,stimulus,gate,estop,safety_stop,overcurrent_left,overcurrent_right,'
+    + 'battery_current_ma,command_left,command_right,default_left,default_right,link,events');
+  assert.equal(lines[1], '0,0,pavlovian,0,0.5,0,1,0,,0,1,-300,200,200,200,200,up,');
+  assert.equal(lines[2], '1,0.02,pavlovian,0.001,0.5,0,0,0,e_stop,0,1,-300,200,200,200,200,up,"α=0.01; mode→""x"",y"');
+  assert.ok(lines[3].includes(',,200,'), lines[3]);
+});
+
+test('markers say what changed, briefly', () => {
+  const before = { prediction: 'stall', alpha: 0.0136, lambda: 0.9, threshold: 0.5 };
+  const set = { kind: 'params_set', prediction: 'stall', alpha: 0.01, lambda: 0.9, threshold: 0.5 };
+  assert.equal(markerLabel(set, before), 'α=0.01');
+  assert.equal(markerLabel({ ...set, threshold: 0.4 }, before), 'α=0.01 θ=0.4');
+  assert.equal(markerLabel(set, null), 'α=0.01 λ=0.9 θ=0.5', 'all values when what came before is unknown');
+  assert.equal(markerLabel(set, set), 'α=0.01 λ=0.9 θ=0.5', 'all values when nothing changed');
+  assert.equal(markerLabel({ kind: 'mode_set', mode: 'reactive' }), 'mode→reactive');
+  assert.equal(markerLabel({ kind: 'e_stop', latched: true }), 'e-stop');
+  assert.equal(markerLabel({ kind: 'e_stop', latched: false }), 'e-stop released');
+  assert.equal(markerLabel({ kind: 'link', state: 'tripped', trip: 'cliff' }), 'link→tripped (cliff)');
+  assert.equal(markerLabel({ kind: 'teleop', action: {} }), null, 'no marker for teleop');
+  assert.equal(markerLabel({ kind: 'something_new' }), 'something_new');
+  assert.equal(fmtParam(0.022727272727), '0.0227');
+  assert.equal(fmtParam(undefined), '—');
+  const params = { stall: before };
+  const after = applyParams(params, set);
+  assert.equal(after.stall.alpha, 0.01);
+  assert.equal(params.stall.alpha, 0.0136, 'the map given is not changed');
+  assert.equal(applyParams(params, { kind: 'mode_set' }), params);
+});
+
+test('windows go from 10 s to 10 min and wide ones redraw less often', () => {
+  assert.deepEqual(WINDOWS.map((w) => w.seconds), [10, 30, 60, 300, 600]);
+  assert.equal(redrawIntervalMs(10), 20);
+  assert.equal(redrawIntervalMs(600), 1000);
 });

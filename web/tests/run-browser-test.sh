@@ -14,5 +14,5 @@ fi
 
 npm ci --prefix web --no-audit --no-fund
 npm test --prefix web
-cargo test -p pavlov-actors --test dashboard_browser -- --nocapture
-echo "screenshot: target/dashboard.png"
+cargo test -p pavlov-actors --test e2e dashboard::browser -- --nocapture
+echo "screenshots: target/dashboard*.png"

@@ -21,6 +21,7 @@ use tokio::sync::watch;
 
 use super::abuse::{Abuse, Thrown};
 use super::estop_probe::{self, EstopLatency};
+use super::reconnect::{self, Fetches};
 use crate::bench::{BenchReport, measure};
 use crate::dashboard::{Dashboard, DashboardError, DashboardStats};
 use crate::server::{RobotTarget, Server, ServerError};
@@ -37,6 +38,9 @@ pub struct Load {
     pub clients: usize,
     /// Whether to add one client that never reads.
     pub stalled: bool,
+    /// With a value, the reading clients close and connect again this often, reading the server's history
+    /// every time ([`super::reconnect`]).
+    pub reconnect_every: Option<Duration>,
 }
 
 /// Errors of a load run.
@@ -66,6 +70,8 @@ pub struct LoadReport {
     pub(crate) dashboard: DashboardStats,
     /// The operator's e-stop latency during the run (abuse comparisons only).
     pub(crate) estop: Option<EstopLatency>,
+    /// The history each reconnecting client's connections received (with `reconnect_every`).
+    pub(crate) history: Fetches,
 }
 
 impl fmt::Display for LoadReport {
@@ -83,6 +89,7 @@ impl fmt::Display for LoadReport {
                 self.bench.records
             )?;
         }
+        write!(f, "{}", self.history)?;
         writeln!(
             f,
             "stalled client: {}; telemetry dropped for slow clients: {}; clients connected at the end: {}",
@@ -311,8 +318,11 @@ async fn run_with(
                 None => Ok(None),
             };
             match tokio::task::spawn_blocking(move || clients.join()).await {
-                Ok(Ok(Ok(mut ticks_per_client))) => {
+                Ok(Ok(Ok(per_client))) => {
+                    let (mut ticks_per_client, fetches): (Vec<u64>, Vec<_>) =
+                        per_client.into_iter().unzip();
                     ticks_per_client.sort_unstable();
+                    let history = Fetches(fetches.into_iter().flatten().collect());
                     thrown.map(|thrown| {
                         (
                             LoadReport {
@@ -321,6 +331,7 @@ async fn run_with(
                                 ticks_per_client,
                                 dashboard,
                                 estop,
+                                history,
                             },
                             thrown,
                         )
@@ -375,15 +386,21 @@ async fn run_clients(
     token: Option<String>,
     stop: watch::Receiver<bool>,
     ready: tokio::sync::oneshot::Sender<Result<(), String>>,
-) -> Result<Vec<u64>, String> {
+) -> Result<Vec<(u64, Vec<reconnect::Fetch>)>, String> {
     let url = match &token {
         Some(t) => format!("ws://{addr}/ws?token={t}"),
         None => format!("ws://{addr}/ws"),
     };
     let mut readers = Vec::with_capacity(load.clients);
+    // Reconnecting clients connect by themselves.
+    let persistent = if load.reconnect_every.is_some() {
+        0
+    } else {
+        load.clients
+    };
     let connected = async {
         let mut streams = Vec::new();
-        for _ in 0..load.clients {
+        for _ in 0..persistent {
             let (ws, _) = tokio_tungstenite::connect_async(url.as_str())
                 .await
                 .map_err(|e| format!("connect {url}: {e}"))?;
@@ -428,8 +445,17 @@ async fn run_clients(
                     },
                 }
             }
-            ticks
+            (ticks, Vec::new())
         }));
+    }
+    if let Some(every) = load.reconnect_every {
+        for _ in 0..load.clients {
+            readers.push(tokio::spawn(reconnect::reader(
+                url.clone(),
+                every,
+                stop.clone(),
+            )));
+        }
     }
     let _ = ready.send(Ok(()));
     let mut stop = stop;
@@ -437,7 +463,7 @@ async fn run_clients(
     drop(stalled);
     let mut counts = Vec::with_capacity(readers.len());
     for r in readers {
-        counts.push(r.await.unwrap_or(0));
+        counts.push(r.await.unwrap_or_default());
     }
     Ok(counts)
 }

@@ -22,6 +22,10 @@ pub struct BenchArgs {
     /// With --ws-clients: add one websocket client that never reads.
     #[arg(long)]
     stalled_client: bool,
+    /// With --ws-clients: the clients close and connect again every this many seconds, reading the
+    /// dashboard's history each time (and the report times it).
+    #[arg(long, value_name = "SECONDS")]
+    ws_reconnect_every: Option<f64>,
     /// Run the websocket load twice, without and with abusers (command and malformed-message floods,
     /// over-size messages, connection storms, clients that never read, 100 watchers, 200 idle sockets
     /// reopened as soon as closed), and compare tick lateness and an operator's e-stop latency.
@@ -53,10 +57,18 @@ pub async fn run(args: BenchArgs) -> Result<()> {
         say!("{report}");
         return Ok(());
     }
+    let reconnect_every = match args.ws_reconnect_every {
+        None => None,
+        Some(s) if s.is_finite() && s > 0.0 && s <= 3600.0 => Some(Duration::from_secs_f64(s)),
+        Some(s) => {
+            anyhow::bail!("--ws-reconnect-every must be above 0 and at most 3600 seconds, got {s}")
+        }
+    };
     if args.ws_abuse {
         let load = load::Load {
             clients: args.ws_clients.max(1),
             stalled: args.stalled_client,
+            reconnect_every,
         };
         let report =
             load::run_abuse_comparison(cfg, duration, repository_web_dir(), load, Abuse::default())
@@ -70,13 +82,18 @@ pub async fn run(args: BenchArgs) -> Result<()> {
         let load = load::Load {
             clients: args.ws_clients,
             stalled: args.stalled_client,
+            reconnect_every,
         };
         let loaded =
             load::run_realtime_with_clients(cfg.clone(), duration, repository_web_dir(), load)
                 .await?;
         say!(
-            "with {} websocket clients{}:",
+            "with {} websocket clients{}{}:",
             args.ws_clients,
+            match reconnect_every {
+                Some(d) => format!(" reconnecting every {:.1} s", d.as_secs_f64()),
+                None => String::new(),
+            },
             if args.stalled_client {
                 " + 1 stalled"
             } else {

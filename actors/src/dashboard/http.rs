@@ -1,6 +1,6 @@
-//! The HTTP side of the dashboard endpoint: the page and its assets, `/healthz`, `/metrics`, and the `/ws`
-//! handshake: the origin, then the wrong-token throttle (429), the token (401), then a seat as operator
-//! or watcher (503), all before the upgrade.
+//! The HTTP side of the dashboard endpoint: the page and its assets, `/healthz`, `/metrics`, `/recording`
+//! ([`super::download`]), and the `/ws` handshake: the origin, then the wrong-token throttle (429), the
+//! token (401), then a seat as operator or watcher (503), all before the upgrade.
 //!
 //! The page, its script and its style sheet are compiled into the binary. uPlot is not: it is an npm
 //! dependency, served from `<web dir>/node_modules/uplot/dist/` at run time; when it is missing the
@@ -25,7 +25,7 @@ use super::admission::Admission;
 use super::auth::{Access, AccessPolicy, Denied, presented_token};
 use super::guard::{Peer, SharedPool};
 use super::hub::{HubCounters, HubHandle};
-use super::messages::{Hello, Limits, Signals};
+use super::messages::{Hello, HelloRun, Limits, Signals};
 use super::protocol::SUBPROTOCOL;
 use super::rate::RateLimit;
 use super::session::{Session, SessionCounters};
@@ -36,10 +36,17 @@ use crate::telemetry::Health;
 use crate::telemetry::prometheus::MetricsSnapshot;
 
 const INDEX_HTML: &str = include_str!("../../../web/index.html");
-const APP_JS: &str = include_str!("../../../web/app.js");
-const LIB_JS: &str = include_str!("../../../web/lib.js");
-const ELBOW_JS: &str = include_str!("../../../web/elbow.js");
 const STYLE_CSS: &str = include_str!("../../../web/style.css");
+/// The page's modules, by path.
+const SCRIPTS: [(&str, &str); 7] = [
+    ("/app.js", include_str!("../../../web/app.js")),
+    ("/lib.js", include_str!("../../../web/lib.js")),
+    ("/timeline.js", include_str!("../../../web/timeline.js")),
+    ("/charts.js", include_str!("../../../web/charts.js")),
+    ("/controls.js", include_str!("../../../web/controls.js")),
+    ("/panels.js", include_str!("../../../web/panels.js")),
+    ("/elbow.js", include_str!("../../../web/elbow.js")),
+];
 
 /// The files of the uPlot package the page loads, relative to the web directory.
 pub(crate) const UPLOT_DIST: &str = "node_modules/uplot/dist";
@@ -66,6 +73,8 @@ pub(crate) struct AppState {
     pub(crate) operator_config: serde_json::Value,
     /// The configuration a watcher's `hello` carries (what the page draws).
     pub(crate) watcher_config: serde_json::Value,
+    /// What every `hello` says of this run (its id, the robot, the history's length).
+    pub(crate) hello_run: HelloRun,
     /// Message size cap, bytes.
     pub(crate) max_message_bytes: usize,
     /// Per-client telemetry queue.
@@ -111,7 +120,10 @@ impl AppState {
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .len();
+        let (history_ticks, history_bytes) = self.hub.history().footprint();
         DashboardStats {
+            history_ticks,
+            history_bytes,
             clients: self.hub_counters.clients.load(Ordering::Relaxed),
             watchers,
             pending,
@@ -168,22 +180,17 @@ async fn metrics(State(state): State<Arc<AppState>>) -> Response {
 
 /// The router of the endpoint.
 pub(crate) fn router(state: Arc<AppState>) -> Router {
-    Router::new()
+    let mut router = Router::new();
+    for (path, text) in SCRIPTS {
+        router = router.route(
+            path,
+            get(move || async move { asset("text/javascript; charset=utf-8", text) }),
+        );
+    }
+    router
         .route(
             "/",
             get(|| async { asset("text/html; charset=utf-8", INDEX_HTML) }),
-        )
-        .route(
-            "/app.js",
-            get(|| async { asset("text/javascript; charset=utf-8", APP_JS) }),
-        )
-        .route(
-            "/lib.js",
-            get(|| async { asset("text/javascript; charset=utf-8", LIB_JS) }),
-        )
-        .route(
-            "/elbow.js",
-            get(|| async { asset("text/javascript; charset=utf-8", ELBOW_JS) }),
         )
         .route(
             "/style.css",
@@ -193,6 +200,7 @@ pub(crate) fn router(state: Arc<AppState>) -> Router {
         .route("/vendor/uplot.min.css", get(uplot_css))
         .route("/healthz", get(healthz))
         .route("/metrics", get(metrics))
+        .route("/recording", get(super::download::recording))
         .route("/ws", get(ws_handler))
         .fallback(|| async { (StatusCode::NOT_FOUND, "not found\n") })
         .with_state(state)
@@ -261,7 +269,7 @@ pub(crate) struct WsQuery {
     pub(crate) token: Option<String>,
 }
 
-fn refuse(state: &AppState, status: StatusCode, why: String) -> Response {
+pub(crate) fn refuse(state: &AppState, status: StatusCode, why: String) -> Response {
     let n = state.rejected.fetch_add(1, Ordering::Relaxed) + 1;
     if super::session::worth_logging(n) {
         tracing::info!(%status, total = n, "websocket handshake refused: {why}");
@@ -279,7 +287,7 @@ fn refuse(state: &AppState, status: StatusCode, why: String) -> Response {
 /// Checks the token presented by a client from `source`: 429 without looking at it when the source has
 /// used up its wrong-token allowance, 401 (and one allowance less) when it is wrong. The error is the
 /// refusal's status and reason.
-fn check_token(
+pub(crate) fn check_token(
     state: &AppState,
     presented: Option<&str>,
     source: Source,
@@ -373,13 +381,17 @@ async fn ws_handler(
         } else {
             state.watcher_config.clone()
         },
-    )
-    .to_json();
+        &state.hello_run,
+    );
     let session = Session {
         hub: state.hub.clone(),
         commands: state.commands.clone(),
         access,
         hello,
+        history_message_bytes: state
+            .max_message_bytes
+            .min(super::history_messages::HISTORY_MESSAGE_BYTES),
+        period_ms: state.tick_period_ms,
         queue: state.client_queue,
         tick_hz: 1000.0 / state.tick_period_ms.max(1) as f64,
         rate: state.rate,

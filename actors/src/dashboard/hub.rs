@@ -1,10 +1,10 @@
-//! The hub: turns each tick record into its JSON message once, keeps the run counters, and fans the
-//! messages out to every websocket client over a lossy broadcast.
+//! The hub: turns each tick record and each event into its JSON message once, keeps the run counters and
+//! the [`History`], and fans the messages out to every websocket client over a lossy broadcast.
 //!
 //! Serialising once per tick (not once per client) keeps the cost of 50 clients near that of one: a client
 //! gets a cheap clone of the same bytes. The hub reads the tick feed's broadcast, so it never slows the
-//! tick either; if it ever lagged, the records it missed are counted and logged. It also keeps the newest
-//! record's link summary for `/metrics`.
+//! tick either; if it ever lagged, the records it missed are counted and logged. Per tick it only pushes a
+//! compact row into the history; what a new client is sent of it is made by that client's own writer.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
@@ -13,10 +13,13 @@ use axum::extract::ws::Utf8Bytes;
 use pavlov::analysis::interaction::live::LiveInteraction;
 use pavlov::analysis::interaction::live_aligned::LiveAligned;
 use pavlov::analysis::run_counters::RunCounters;
+use pavlov::event::Event;
 use pavlov::record::TickRecord;
 use tokio::sync::broadcast;
 use tokio_util::sync::CancellationToken;
 
+use super::history::{History, Snapshot};
+use super::history_messages::event_json;
 use super::messages::{StatusHealth, StatusMessage, TickMessage};
 use super::protocol::STATUS_EVERY_TICKS;
 use crate::telemetry::Health;
@@ -40,6 +43,15 @@ pub(crate) enum Outgoing {
     },
     /// A `status` message (every client gets every one).
     Status(Utf8Bytes),
+    /// An `event` message (every client gets every one): as an operator and as a watcher sees it.
+    Event {
+        /// The event's id.
+        id: u64,
+        /// The operators' text.
+        operator: Utf8Bytes,
+        /// The watchers' text (no file paths).
+        watcher: Utf8Bytes,
+    },
 }
 
 /// Counters the hub shares with the endpoint.
@@ -55,12 +67,28 @@ pub(crate) struct HubCounters {
 #[derive(Clone)]
 pub(crate) struct HubHandle {
     tx: broadcast::Sender<Outgoing>,
+    history: Arc<History>,
 }
 
 impl HubHandle {
     /// A new subscription, starting with the next message.
+    #[cfg(test)]
     pub(crate) fn subscribe(&self) -> broadcast::Receiver<Outgoing> {
         self.tx.subscribe()
+    }
+
+    /// A new subscription and the history as of now: every tick and event up to the snapshot's
+    /// `last_seq` and `last_event_id` is in the snapshot, every later one comes on the subscription (which
+    /// may also repeat some of the snapshot's: skip them).
+    pub(crate) fn join(&self) -> (broadcast::Receiver<Outgoing>, Snapshot) {
+        // Subscribe first: the hub keeps a tick in the history before it sends it, so nothing falls between.
+        let rx = self.tx.subscribe();
+        (rx, self.history.snapshot())
+    }
+
+    /// The history.
+    pub(crate) fn history(&self) -> &History {
+        &self.history
     }
 }
 
@@ -69,27 +97,50 @@ impl HubHandle {
 pub(crate) struct Hub {
     metrics: RunCounters,
     interaction: Option<(LiveInteraction, LiveAligned)>,
+    history: Arc<History>,
+    period_ms: u64,
     tx: broadcast::Sender<Outgoing>,
 }
 
 impl Hub {
-    /// A hub for a run ticking every `period_ms`, and the handle clients subscribe with. With
-    /// `track_interaction` (the stimulus is the left-elbow command) the statuses carry `interaction`.
-    pub(crate) fn new(period_ms: f64, track_interaction: bool) -> (Hub, HubHandle) {
+    /// A hub for a run ticking every `period_ms` that keeps `history`, and the handle clients subscribe
+    /// with. With `track_interaction` (the stimulus is the left-elbow command) the statuses carry
+    /// `interaction`.
+    pub(crate) fn new(
+        period_ms: u64,
+        track_interaction: bool,
+        history: History,
+    ) -> (Hub, HubHandle) {
         let (tx, _) = broadcast::channel(HUB_CAPACITY);
+        let history = Arc::new(history);
+        let period = period_ms as f64;
         (
             Hub {
-                metrics: RunCounters::new(period_ms),
+                metrics: RunCounters::new(period),
                 interaction: track_interaction.then(|| {
                     (
-                        LiveInteraction::with_period(period_ms),
-                        LiveAligned::new(period_ms),
+                        LiveInteraction::with_period(period),
+                        LiveAligned::new(period),
                     )
                 }),
+                history: history.clone(),
+                period_ms,
                 tx: tx.clone(),
             },
-            HubHandle { tx },
+            HubHandle { tx, history },
         )
+    }
+
+    /// Handles one event: keeps it in the history and broadcasts it.
+    pub(crate) fn on_event(&mut self, event: &Arc<Event>) {
+        self.history.on_event(event);
+        let text = |watcher| Utf8Bytes::from(event_json(event, self.period_ms, watcher));
+        // An error only means no client is connected.
+        let _ = self.tx.send(Outgoing::Event {
+            id: event.id,
+            operator: text(false),
+            watcher: text(true),
+        });
     }
 
     /// Handles one record: updates the counters and broadcasts its messages.
@@ -105,6 +156,8 @@ impl Hub {
             aligned.observe(record);
         }
         let text = Utf8Bytes::from(TickMessage::new(record).to_json());
+        // Kept before it is sent: see `HubHandle::join`.
+        self.history.push(record);
         // An error only means no client is connected.
         let _ = self.tx.send(Outgoing::Tick {
             seq: record.seq,
@@ -128,17 +181,47 @@ impl Hub {
     }
 }
 
+/// Where the hub reads from: every tick record, the events made before it started, and every later one.
+pub(crate) struct HubInputs {
+    /// The tick feed.
+    pub(crate) feed: broadcast::Receiver<Arc<TickRecord>>,
+    /// Events made before the hub started (the event log's recent ones).
+    pub(crate) earlier_events: Vec<Arc<Event>>,
+    /// Every later event.
+    pub(crate) events: broadcast::Receiver<Arc<Event>>,
+}
+
 /// Runs the hub until `cancel` fires or the feed closes.
 pub(crate) async fn run(
     mut hub: Hub,
-    mut feed: broadcast::Receiver<Arc<TickRecord>>,
+    inputs: HubInputs,
     health: Health,
     counters: Arc<HubCounters>,
     cancel: CancellationToken,
 ) {
+    let HubInputs {
+        mut feed,
+        earlier_events,
+        mut events,
+    } = inputs;
+    for event in &earlier_events {
+        hub.on_event(event);
+    }
+    let mut events_open = true;
     loop {
         let next = tokio::select! {
             _ = cancel.cancelled() => break,
+            event = events.recv(), if events_open => {
+                match event {
+                    Ok(event) => hub.on_event(&event),
+                    Err(broadcast::error::RecvError::Lagged(n)) => {
+                        // Only a hub starved of CPU for 256 events; the log has every one of them.
+                        tracing::warn!(missed = n, "the dashboard hub fell behind the event log");
+                    }
+                    Err(broadcast::error::RecvError::Closed) => events_open = false,
+                }
+                continue;
+            }
             next = feed.recv() => next,
         };
         match next {
@@ -161,6 +244,10 @@ mod tests {
     use pavlov::control::Mode;
     use pavlov::record::SensorReadings;
 
+    fn test_history() -> History {
+        History::new(60, 20, Mode::Reactive, Vec::new())
+    }
+
     fn record(seq: u64) -> TickRecord {
         TickRecord {
             sensors: SensorReadings {
@@ -174,7 +261,7 @@ mod tests {
 
     #[test]
     fn every_record_becomes_a_tick_and_every_tenth_a_status_with_counters() {
-        let (mut hub, handle) = Hub::new(20.0, false);
+        let (mut hub, handle) = Hub::new(20, false, test_history());
         let mut rx = handle.subscribe();
         for seq in 0..21 {
             hub.on_record(&record(seq), StatusHealth::default, 3);
@@ -191,6 +278,7 @@ mod tests {
                 Outgoing::Status(text) => {
                     statuses.push(serde_json::from_str::<serde_json::Value>(&text).unwrap())
                 }
+                Outgoing::Event { .. } => panic!("no event was made"),
             }
         }
         assert_eq!(ticks, (0..21).collect::<Vec<_>>());
@@ -207,7 +295,7 @@ mod tests {
 
     #[test]
     fn an_interaction_hub_reports_commands_and_leads_in_its_statuses() {
-        let (mut hub, handle) = Hub::new(20.0, true);
+        let (mut hub, handle) = Hub::new(20, true, test_history());
         let mut rx = handle.subscribe();
         for seq in 0..121 {
             let mut r = record(seq);
@@ -236,7 +324,7 @@ mod tests {
 
     #[test]
     fn statuses_carry_the_aligned_averages_once_a_second() {
-        let (mut hub, handle) = Hub::new(20.0, true);
+        let (mut hub, handle) = Hub::new(20, true, test_history());
         let mut rx = handle.subscribe();
         for seq in 0..=200 {
             let mut r = record(seq);
@@ -268,5 +356,56 @@ mod tests {
         assert_eq!(a["pavlovian"]["current_ma"][20], -600.0, "{a}");
         assert_eq!(a["pavlovian"]["current_ma"][19], -150.0, "{a}");
         assert!(a["reactive"]["current_ma"][0].is_null(), "{a}");
+    }
+
+    #[test]
+    fn a_joining_client_gets_every_tick_and_event_once_in_its_history_or_live() {
+        use pavlov::event::EventKind;
+        let (mut hub, handle) = Hub::new(20, false, test_history());
+        for seq in 0..30 {
+            hub.on_record(&record(seq), StatusHealth::default, 1);
+        }
+        let saved = |id, after| {
+            Arc::new(Event {
+                id,
+                after: Some(after),
+                kind: EventKind::WeightsSaved {
+                    path: "/lab/saved/w.json".into(),
+                },
+            })
+        };
+        hub.on_event(&saved(1, 29));
+        let (mut rx, snapshot) = handle.join();
+        for seq in 30..40 {
+            hub.on_record(&record(seq), StatusHealth::default, 1);
+        }
+        hub.on_event(&saved(2, 39));
+        assert_eq!(snapshot.last_seq, Some(29));
+        assert_eq!(snapshot.rows().count(), 30);
+        assert_eq!(snapshot.last_event_id, 1);
+        let mut live_ticks = Vec::new();
+        let mut live_events = Vec::new();
+        while let Ok(m) = rx.try_recv() {
+            match m {
+                Outgoing::Tick { seq, .. } => live_ticks.push(seq),
+                Outgoing::Event {
+                    id,
+                    operator,
+                    watcher,
+                } => {
+                    assert!(
+                        operator.as_str().contains("/lab/saved/w.json"),
+                        "{operator}"
+                    );
+                    assert!(!watcher.as_str().contains("/lab"), "{watcher}");
+                    assert!(watcher.as_str().contains(r#""t":0.8"#), "{watcher}");
+                    live_events.push(id);
+                }
+                Outgoing::Status(_) => {}
+            }
+        }
+        assert_eq!(live_ticks, (30..40).collect::<Vec<_>>());
+        assert_eq!(live_events, [2]);
+        assert_eq!(handle.history().snapshot().rows().count(), 40);
     }
 }

@@ -11,6 +11,7 @@ use pavlov::record::{
 use serde::Serialize;
 use serde_json::Value;
 
+use super::history::InForce;
 use super::protocol::{PROTOCOL_VERSION, STATUS_EVERY_TICKS, known_commands};
 use crate::telemetry::HealthFigures;
 use crate::telemetry::counters::ActuationStats;
@@ -278,6 +279,52 @@ pub(crate) struct Hello {
     /// What of the configuration this connection may see ([`super::hello_config`]): all of it with the
     /// token redacted for an operator, what the page draws for a watcher.
     pub(crate) config: Value,
+    /// This server run (a page that reconnects to another run starts afresh).
+    pub(crate) run: String,
+    /// The robot this server drives.
+    pub(crate) robot: RobotInfo,
+    /// Seconds of history sent after `hello` (at most; `[dashboard] history_s`).
+    pub(crate) history_s: u64,
+    /// What is in force as of the history that follows (mode, learning parameters, recording).
+    pub(crate) in_force: Option<InForce>,
+}
+
+/// `hello.robot`: which robot, and how it is reached.
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct RobotInfo {
+    /// `create1` or `create2`.
+    pub(crate) model: pavlov::oi::model::Model,
+    /// `simulated`, `serial` or `external` (a link a test opened).
+    pub(crate) link: &'static str,
+    /// The serial device, for `serial`.
+    pub(crate) port: Option<String>,
+}
+
+impl RobotInfo {
+    /// What the dashboard shows of `kind`.
+    pub(crate) fn new(
+        model: pavlov::oi::model::Model,
+        kind: &crate::server::RobotLinkKind,
+    ) -> Self {
+        use crate::server::RobotLinkKind;
+        let (link, port) = match kind {
+            RobotLinkKind::Simulated => ("simulated", None),
+            RobotLinkKind::Serial(path) => ("serial", Some(path.clone())),
+            RobotLinkKind::External => ("external", None),
+        };
+        RobotInfo { model, link, port }
+    }
+}
+
+/// What every `hello` of one server run says of the run.
+#[derive(Debug, Clone)]
+pub(crate) struct HelloRun {
+    /// An id of this run.
+    pub(crate) run: String,
+    /// The robot.
+    pub(crate) robot: RobotInfo,
+    /// `[dashboard] history_s`.
+    pub(crate) history_s: u64,
 }
 
 /// Limits announced in `hello`.
@@ -292,13 +339,14 @@ pub(crate) struct Limits {
 }
 
 impl Hello {
-    /// A hello for a connection.
+    /// A hello for a connection (its run, robot and history are set apart, see [`HelloRun`]).
     pub(crate) fn new(
         tick_period_ms: u64,
         can_command: bool,
         signals: Signals,
         limits: Limits,
         config: Value,
+        run: &HelloRun,
     ) -> Self {
         Hello {
             kind: "hello",
@@ -312,7 +360,17 @@ impl Hello {
             commands: known_commands(),
             limits,
             config,
+            run: run.run.clone(),
+            robot: run.robot.clone(),
+            history_s: run.history_s,
+            in_force: None,
         }
+    }
+
+    /// The same hello with what is in force now.
+    pub(crate) fn with_in_force(mut self, in_force: InForce) -> Self {
+        self.in_force = Some(in_force);
+        self
     }
 
     /// The JSON text.

@@ -4,7 +4,8 @@
 //!
 //! - [`protocol`]: the client commands (see `web/PROTOCOL.md`), parsed with precise errors, and the replies;
 //! - [`messages`]: the server's `hello`, `tick` and `status` messages;
-//! - [`hub`]: serialises each tick once and fans it out, and keeps the run counters;
+//! - [`hub`]: serialises each tick and event once and fans them out, and keeps the run counters and the
+//!   [`history`] (sent to a new client as [`history_messages`]);
 //! - [`client`]: each client's bounded, drop-oldest queue and its tick-rate decimation;
 //! - [`session`]: one connection's reader, writer and forwarder;
 //! - [`rate`]: the per-connection message rate limit;
@@ -17,7 +18,7 @@
 //!   [`source`] address, evicting the oldest of the busiest address) and their deadline to become one;
 //! - [`strict_json`]: client messages parsed with duplicate keys refused;
 //! - [`hello_config`]: what of the configuration operators and watchers see;
-//! - [`http`]: routes, static files and the handshake;
+//! - [`http`]: routes, static files and the handshake; [`download`]: the recording being written;
 //! - [`load`]: the websocket load behind `pavlov bench --ws-clients`, and [`abuse`], its abusive clients.
 //!
 //! Nothing here can delay the tick: the hub reads the tick feed's lossy broadcast, every client reads the
@@ -26,8 +27,11 @@
 
 pub(crate) mod admission;
 pub(crate) mod auth;
+pub(crate) mod download;
 pub mod guard;
 pub(crate) mod hello_config;
+pub(crate) mod history;
+pub(crate) mod history_messages;
 pub(crate) mod http;
 pub(crate) mod hub;
 pub(crate) mod messages;
@@ -55,8 +59,9 @@ use tokio_util::sync::CancellationToken;
 use crate::server::Server;
 pub(crate) use crate::telemetry::counters::DashboardStats;
 use auth::AccessPolicy;
-use hub::{Hub, HubCounters};
-use messages::{LearningBounds, Signals};
+use history::History;
+use hub::{Hub, HubCounters, HubInputs};
+use messages::{HelloRun, LearningBounds, RobotInfo, Signals};
 use session::SessionCounters;
 
 /// Kernel send buffer of each client socket. Kept small so that a slow client's backlog sits in its
@@ -92,6 +97,15 @@ fn bind_message(addr: &str, source: &std::io::Error) -> String {
         ),
         _ => format!("cannot listen on {addr} for the dashboard: {source}"),
     }
+}
+
+/// An id of this server run for `hello.run`: the start time and the process, enough to tell a page that
+/// the server it reconnected to is not the one it knew.
+fn run_id() -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    format!("{nanos:x}-{:x}", std::process::id())
 }
 
 /// The running endpoint. It runs on its own single-worker tokio runtime (thread `dashboard`), so that
@@ -196,7 +210,13 @@ impl Dashboard {
             server.config.control.stimulus,
             pavlov::config::StimulusSpec::LeftElbow { .. }
         );
-        let (hub, hub_handle) = Hub::new(period_ms as f64, gesture_commands);
+        let history = History::new(
+            cfg.history_s,
+            period_ms,
+            server.config.control.mode,
+            server.params_at_start.iter().map(Into::into).collect(),
+        );
+        let (hub, hub_handle) = Hub::new(period_ms, gesture_commands, history);
         let hub_counters = Arc::new(HubCounters::default());
         let guard_counters = Arc::new(guard::GuardCounters::default());
         let pending = Arc::new(Mutex::new(pending::PendingPool::new(
@@ -221,6 +241,11 @@ impl Dashboard {
             },
             operator_config: hello_config::for_operator(&server.config),
             watcher_config: hello_config::for_watcher(&server.config),
+            hello_run: HelloRun {
+                run: run_id(),
+                robot: RobotInfo::new(server.config.robot.model, &server.robot),
+                history_s: cfg.history_s,
+            },
             max_message_bytes: cfg.max_message_bytes,
             client_queue: cfg.client_queue,
             admission: Arc::new(admission::Admission::new(cfg, hub_counters.clients.clone())),
@@ -238,9 +263,14 @@ impl Dashboard {
             token_throttled: AtomicU64::new(0),
             cancel: cancel.clone(),
         });
+        let (earlier_events, events) = server.events.subscribe_with_recent();
         let hub = runtime.spawn(hub::run(
             hub,
-            server.feed.subscribe(),
+            HubInputs {
+                feed: server.feed.subscribe(),
+                earlier_events,
+                events,
+            },
             server.health(),
             hub_counters,
             cancel.clone(),

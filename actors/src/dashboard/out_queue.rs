@@ -151,6 +151,20 @@ impl<T> OutQueue<T> {
         self.pop_now()
     }
 
+    /// Takes the next reply, if one is waiting.
+    pub(crate) fn try_pop_control(&self) -> Option<T> {
+        let reply = self.with_state(|s| s.control.pop_front());
+        if reply.is_some() {
+            self.room.notify_one();
+        }
+        reply
+    }
+
+    /// Whether [`OutQueue::close`] was called.
+    pub(crate) fn is_closed(&self) -> bool {
+        self.with_state(|s| s.closed)
+    }
+
     /// Waits for the next message; `None` once the queue is closed and empty of replies.
     pub(crate) async fn pop(&self) -> Option<T> {
         loop {
@@ -346,6 +360,19 @@ mod tests {
         );
         assert_eq!(got.last(), Some(&3));
         assert!(!got.contains(&4));
+    }
+
+    #[test]
+    fn replies_can_be_taken_alone_leaving_the_telemetry() {
+        let q = OutQueue::new(8);
+        q.push_telemetry("tick");
+        assert_eq!(q.try_pop_control(), None);
+        q.push_control("ack").unwrap();
+        assert_eq!(q.try_pop_control(), Some("ack"));
+        assert_eq!(q.try_pop(), Some("tick"));
+        assert!(!q.is_closed());
+        q.close();
+        assert!(q.is_closed());
     }
 
     #[test]

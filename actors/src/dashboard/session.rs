@@ -1,6 +1,10 @@
 //! One websocket connection: a forwarder (hub → the client's queue, at the client's rate), a writer (queue →
 //! socket) and a reader (socket → parsed commands → the server's command router → ack or error).
 //!
+//! On connect the client gets `hello`, then the history (the hub's snapshot, made into messages by the
+//! writer one at a time, replies going first), then live telemetry from where the history ends: the
+//! forwarder skips what the history already held.
+//!
 //! The forwarder never waits on the socket: when the client falls behind, its queue drops the oldest
 //! telemetry. The writer gives up on a client whose socket accepts nothing for [`WRITE_STALL`]. Bad
 //! messages get an error reply and the connection stays open; only what the websocket layer cannot
@@ -23,7 +27,9 @@ use tokio::sync::{broadcast, mpsc};
 use tokio_util::sync::CancellationToken;
 
 use super::auth::Access;
+use super::history_messages::{HistoryMessages, REDACTED};
 use super::hub::{HubHandle, Outgoing};
+use super::messages::Hello;
 use super::out_queue::{Decimator, OutQueue};
 use super::protocol::{
     ClientCommand, ClientRequest, SessionCommand, ack_json, error_json, parse_request, peek_id,
@@ -84,8 +90,12 @@ pub(crate) struct Session {
     pub(crate) commands: mpsc::Sender<ControlRequest>,
     /// What this client may do.
     pub(crate) access: Access,
-    /// The `hello` text.
-    pub(crate) hello: String,
+    /// The `hello`, but for what is in force (taken with the history when the session starts).
+    pub(crate) hello: Hello,
+    /// The largest `history` message, bytes.
+    pub(crate) history_message_bytes: usize,
+    /// The tick period, ms.
+    pub(crate) period_ms: u64,
     /// Telemetry queued before the oldest is dropped.
     pub(crate) queue: usize,
     /// The tick rate, Hz.
@@ -110,14 +120,35 @@ impl Session {
         let (sink, stream) = socket.split();
         let queue = Arc::new(OutQueue::new(self.queue));
         let stride = Arc::new(AtomicU64::new(1));
-        let _ = queue.push_control(Out::Text(self.hello.clone().into()));
+        let watcher = self.access == Access::Watch;
+        let (rx, snapshot) = self.hub.join();
+        let mut in_force = snapshot.in_force.clone();
+        if watcher && in_force.recording.is_some() {
+            in_force.recording = Some(REDACTED.into());
+        }
+        let hello = self.hello.clone().with_in_force(in_force).to_json();
+        let _ = queue.push_control(Out::Text(hello.into()));
+        let seen = Seen {
+            through_seq: snapshot.last_seq,
+            through_event: snapshot.last_event_id,
+        };
+        let history = HistoryMessages::new(
+            snapshot,
+            self.history_message_bytes,
+            self.period_ms,
+            watcher,
+        );
         let forwarder = tokio::spawn(forward(
-            self.hub.subscribe(),
-            queue.clone(),
-            stride.clone(),
-            self.counters.clone(),
+            rx,
+            Forwarding {
+                queue: queue.clone(),
+                stride: stride.clone(),
+                counters: self.counters.clone(),
+                watcher,
+                seen,
+            },
         ));
-        let writer = write(sink, queue.clone(), self.counters.clone());
+        let writer = write(sink, queue.clone(), self.counters.clone(), history);
         tokio::pin!(writer);
         tokio::select! {
             _ = &mut writer => {}
@@ -345,15 +376,36 @@ fn classify_read_error(e: &axum::Error) -> ReadError {
     }
 }
 
-async fn forward(
-    mut rx: broadcast::Receiver<Outgoing>,
+/// What the client's history already held: live telemetry up to here is skipped.
+#[derive(Debug, Clone, Copy)]
+struct Seen {
+    through_seq: Option<u64>,
+    through_event: u64,
+}
+
+/// Where the forwarder puts what it passes, and how it chooses.
+struct Forwarding {
     queue: Arc<OutQueue<Out>>,
     stride: Arc<AtomicU64>,
     counters: Arc<SessionCounters>,
-) {
+    watcher: bool,
+    seen: Seen,
+}
+
+async fn forward(mut rx: broadcast::Receiver<Outgoing>, f: Forwarding) {
+    let Forwarding {
+        queue,
+        stride,
+        counters,
+        watcher,
+        seen,
+    } = f;
     let mut decimator = Decimator::all();
     loop {
         let dropped = match rx.recv().await {
+            Ok(Outgoing::Tick { seq, .. }) if seen.through_seq.is_some_and(|s| seq <= s) => {
+                continue;
+            }
             Ok(Outgoing::Tick { seq, text }) => {
                 let every = stride.load(Ordering::Relaxed);
                 if every != decimator.every() {
@@ -365,6 +417,12 @@ async fn forward(
                 queue.push_telemetry(Out::Text(text))
             }
             Ok(Outgoing::Status(text)) => queue.push_telemetry(Out::Text(text)),
+            Ok(Outgoing::Event { id, .. }) if id <= seen.through_event => continue,
+            Ok(Outgoing::Event {
+                operator,
+                watcher: w,
+                ..
+            }) => queue.push_telemetry(Out::Text(if watcher { w } else { operator })),
             Err(broadcast::error::RecvError::Lagged(n)) => {
                 queue.count_dropped(n);
                 n
@@ -379,12 +437,29 @@ async fn forward(
     }
 }
 
+/// The next message to write: a reply first, then the history's next message (while the connection is
+/// open), then telemetry; `None` once the queue is closed and drained.
+async fn next_out(queue: &OutQueue<Out>, history: &mut Option<HistoryMessages>) -> Option<Out> {
+    if let Some(reply) = queue.try_pop_control() {
+        return Some(reply);
+    }
+    if let Some(h) = history {
+        match h.next() {
+            Some(text) if !queue.is_closed() => return Some(Out::Text(text.into())),
+            _ => *history = None,
+        }
+    }
+    queue.pop().await
+}
+
 async fn write(
     mut sink: futures_util::stream::SplitSink<WebSocket, Message>,
     queue: Arc<OutQueue<Out>>,
     counters: Arc<SessionCounters>,
+    history: HistoryMessages,
 ) {
-    while let Some(out) = queue.pop().await {
+    let mut history = Some(history);
+    while let Some(out) = next_out(&queue, &mut history).await {
         let (msg, last) = match out {
             Out::Text(text) => (Message::Text(text), false),
             Out::Close(code, reason) => (

@@ -1,9 +1,12 @@
 //! The event log: every change made at run time (see [`pavlov::event`]) goes out from here, numbered, to
 //! the log (once, at INFO with its arguments; teleop at DEBUG), to live subscribers (the dashboard hub,
-//! tests) and to the recorder, without ever blocking the actor that made it.
+//! tests) and to the recorder, without ever blocking the actor that made it. It also keeps the last
+//! [`RECENT_CAPACITY`] events (teleop aside), so that a subscriber that starts late (the dashboard hub starts
+//! after a recording begun with `--record`) still learns what happened before it.
 
-use std::sync::Arc;
+use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
 
 use pavlov::event::{Event, EventKind};
 use tokio::sync::{broadcast, mpsc};
@@ -12,12 +15,17 @@ use crate::storage::recorder::RecorderInput;
 
 /// Capacity of the live broadcast, in events.
 pub(crate) const LIVE_CAPACITY: usize = 256;
+/// Events kept for late subscribers ([`EventLog::subscribe_with_recent`]); frequent ones (teleop) are not.
+pub(crate) const RECENT_CAPACITY: usize = 256;
 
 /// The publishing side of the event log; cheap to clone, one per emitting actor.
 #[derive(Clone)]
 pub struct EventLog {
     next_id: Arc<AtomicU64>,
     live: broadcast::Sender<Arc<Event>>,
+    /// The newest events but frequent ones; locked while an event is kept and sent, so that a late
+    /// subscriber sees each event exactly once, in the list or on its receiver.
+    recent: Arc<Mutex<VecDeque<Arc<Event>>>>,
     recorder: Option<mpsc::Sender<RecorderInput>>,
     dropped: Arc<AtomicU64>,
 }
@@ -29,6 +37,7 @@ impl EventLog {
         EventLog {
             next_id: Arc::new(AtomicU64::new(1)),
             live,
+            recent: Arc::default(),
             recorder: None,
             dropped: Arc::new(AtomicU64::new(0)),
         }
@@ -62,8 +71,16 @@ impl EventLog {
         {
             self.dropped.fetch_add(1, Ordering::Relaxed);
         }
+        let mut recent = self.recent.lock().unwrap_or_else(PoisonError::into_inner);
+        if !event.kind.is_frequent() {
+            if recent.len() == RECENT_CAPACITY {
+                recent.pop_front();
+            }
+            recent.push_back(event.clone());
+        }
         // An error only means nobody is subscribed right now.
         let _ = self.live.send(event.clone());
+        drop(recent);
         event
     }
 
@@ -84,6 +101,15 @@ impl EventLog {
     /// A new live subscription, starting with the next event.
     pub fn subscribe(&self) -> broadcast::Receiver<Arc<Event>> {
         self.live.subscribe()
+    }
+
+    /// The events kept so far (at most [`RECENT_CAPACITY`], oldest first, teleop left out) and a live
+    /// subscription starting with the next event: together, every event once.
+    pub(crate) fn subscribe_with_recent(
+        &self,
+    ) -> (Vec<Arc<Event>>, broadcast::Receiver<Arc<Event>>) {
+        let recent = self.recent.lock().unwrap_or_else(PoisonError::into_inner);
+        (recent.iter().cloned().collect(), self.live.subscribe())
     }
 
     /// Events the recorder's queue could not take.
@@ -121,5 +147,26 @@ mod tests {
         // The recorder's queue holds one: the second event was dropped and counted, never waited for.
         assert!(matches!(rx.try_recv(), Ok(RecorderInput::Event(e)) if e.id == 1));
         assert_eq!(log.dropped(), 1);
+    }
+
+    #[test]
+    fn a_late_subscriber_gets_the_recent_events_then_the_live_ones_without_teleop() {
+        let log = EventLog::new();
+        for _ in 0..RECENT_CAPACITY + 5 {
+            log.emit(Some(1), EventKind::WeightsReset);
+        }
+        log.emit(
+            Some(2),
+            EventKind::Teleop {
+                action: pavlov::control::Action::STOP,
+            },
+        );
+        let (recent, mut live) = log.subscribe_with_recent();
+        assert_eq!(recent.len(), RECENT_CAPACITY);
+        assert_eq!(recent[0].id, 6, "the oldest were let go");
+        assert_eq!(recent.last().unwrap().id, RECENT_CAPACITY as u64 + 5);
+        assert!(live.try_recv().is_err(), "nothing emitted since");
+        let next = log.emit(Some(3), EventKind::ModeSet { mode: Mode::Manual });
+        assert_eq!(live.try_recv().unwrap().id, next.id);
     }
 }

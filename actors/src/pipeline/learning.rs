@@ -337,6 +337,15 @@ impl Learning {
         }
     }
 
+    /// Every prediction's learning parameters in force now (after any checkpoint resumed), in order.
+    pub(crate) fn params_in_force(&self) -> Vec<pavlov::agent::learning::ParamsInForce> {
+        self.stage
+            .predictions()
+            .specs()
+            .filter_map(|s| self.stage.params(Some(&s.name)))
+            .collect()
+    }
+
     /// Names of the observation vector's dimensions.
     pub(crate) fn obs_names(&self) -> Vec<String> {
         self.stage.layout().names().map(str::to_string).collect()

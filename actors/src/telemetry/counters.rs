@@ -126,6 +126,10 @@ pub struct DashboardStats {
     pub(crate) closed_write_stall: u64,
     /// Tick records the hub missed.
     pub records_missed: u64,
+    /// Ticks the dashboard's history holds now.
+    pub history_ticks: usize,
+    /// Bytes the dashboard's history holds now (its rows and predictions).
+    pub history_bytes: usize,
     /// TCP connections closed on arrival: their address was opening connections faster than they were
     /// served (past `max_pending_per_address`, all younger than `dashboard::pending::GRACE`).
     pub tcp_refused: u64,

@@ -192,6 +192,16 @@ fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
         ws.watchers as f64,
     );
     e.gauge(
+        "pavlov_ws_history_ticks",
+        "Ticks the dashboard keeps to send a newly connected page ([dashboard] history_s).",
+        ws.history_ticks as f64,
+    );
+    e.gauge(
+        "pavlov_ws_history_bytes",
+        "Bytes the dashboard's history of ticks holds (rows and predictions).",
+        ws.history_bytes as f64,
+    );
+    e.gauge(
         "pavlov_ws_pending_connections",
         "TCP connections to the dashboard port that are not (yet) websockets, now.",
         ws.pending as f64,

@@ -88,7 +88,8 @@ async fn good_client(addr: SocketAddr, mut stop: watch::Receiver<bool>) -> GoodL
                 let v: Value = serde_json::from_str(&t).expect("JSON");
                 match v["type"].as_str() {
                     Some("tick") => log.seqs.push(v["seq"].as_u64().expect("seq")),
-                    Some("status") => {}
+                    // The run's own messages: statuses, the history after hello, every client's events.
+                    Some("status" | "history" | "event") => {}
                     Some("ack") => match v["id"].as_u64().and_then(|id| pending.remove(&id)) {
                         Some(control) => {
                             log.acked += 1;

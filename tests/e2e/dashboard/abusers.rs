@@ -143,7 +143,8 @@ pub async fn flood(
                 let msg = msg.expect("a reply within the patience").expect("the connection ended").expect("a websocket error");
                 let Message::Text(t) = msg else { continue };
                 let v: Value = serde_json::from_str(&t).expect("JSON");
-                if v["type"] == "tick" || v["type"] == "status" {
+                // Only acks and errors answer a shot; ticks, statuses, history and events are the run's.
+                if v["type"] != "ack" && v["type"] != "error" {
                     continue;
                 }
                 let (i, shot): (u64, Shot) = expected.pop_front().expect("a reply to something sent");

@@ -25,18 +25,18 @@ use futures_util::StreamExt;
 use serde_json::Value;
 use tokio_tungstenite::tungstenite::Message;
 
-fn repo() -> PathBuf {
+pub(super) fn repo() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
 }
 
-fn target_dir() -> PathBuf {
+pub(super) fn target_dir() -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| repo().join("target"))
 }
 
 /// The server process; stopped with SIGTERM (then SIGKILL) when dropped.
-struct Serve(Child);
+pub(super) struct Serve(Child);
 
 impl Drop for Serve {
     fn drop(&mut self) {
@@ -57,7 +57,7 @@ impl Drop for Serve {
     }
 }
 
-fn preflight() {
+pub(super) fn preflight() {
     let web = repo().join("web");
     for pkg in ["playwright-core", "uplot"] {
         assert!(
@@ -87,8 +87,13 @@ fn start_server() -> (Serve, String) {
 
 /// [`start_server`] with extra arguments.
 fn start_server_with(extra: &[&str]) -> (Serve, String) {
+    start_server_at("127.0.0.1:0", extra)
+}
+
+/// `pavlov serve --bind bind` with extra arguments, and the dashboard URL it printed.
+pub(super) fn start_server_at(bind: &str, extra: &[&str]) -> (Serve, String) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_pavlov"))
-        .args(["serve", "--bind", "127.0.0.1:0", "--web-dir"])
+        .args(["serve", "--bind", bind, "--web-dir"])
         .arg(repo().join("web"))
         .args(extra)
         .env("RUST_LOG", "warn")

@@ -20,7 +20,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
 
 /// Every family `/metrics` serves once the first tick is out (the README lists the same).
-const FAMILIES: [(&str, &str); 42] = [
+const FAMILIES: [(&str, &str); 44] = [
     ("pavlov_tick_lateness_seconds", "histogram"),
     ("pavlov_ticks_fired_total", "counter"),
     ("pavlov_tick_timer", "gauge"),
@@ -41,6 +41,8 @@ const FAMILIES: [(&str, &str); 42] = [
     ("pavlov_ws_clients", "gauge"),
     ("pavlov_ws_watchers", "gauge"),
     ("pavlov_ws_pending_connections", "gauge"),
+    ("pavlov_ws_history_ticks", "gauge"),
+    ("pavlov_ws_history_bytes", "gauge"),
     ("pavlov_ws_connections_total", "counter"),
     ("pavlov_ws_handshakes_rejected_total", "counter"),
     ("pavlov_ws_telemetry_dropped_total", "counter"),
@@ -141,6 +143,11 @@ async fn metrics_are_served_complete_valid_and_consistent() {
 
     // The lateness histogram counts every fired tick; the simulated link is up, in Safe mode.
     let fired = value(&first, "pavlov_ticks_fired_total");
+    // The history holds the ticks so far (the hub may be a tick or two behind the feed), in compact rows.
+    let history = value(&first, "pavlov_ws_history_ticks");
+    assert!((40.0..=fired).contains(&history), "{history} of {fired}");
+    let bytes = value(&first, "pavlov_ws_history_bytes");
+    assert!(bytes > 0.0 && bytes < 250.0 * 128.0, "{bytes}");
     assert!(fired >= 50.0, "{fired}");
     assert_eq!(value(&first, "pavlov_tick_lateness_seconds_count"), fired);
     // In real time the tick runs on its own timer thread.

@@ -3,7 +3,9 @@
 
 mod abuse;
 mod abusers;
+mod analysis;
 mod browser;
+mod browser_analysis;
 mod learning_bounds;
 mod metrics;
 mod operator;

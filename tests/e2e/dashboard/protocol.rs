@@ -178,7 +178,7 @@ async fn reply_to(ws: &mut Ws, id: &Value) -> Value {
             return v;
         }
         assert!(
-            v["type"] == "tick" || v["type"] == "status",
+            ["tick", "status", "event", "history"].contains(&v["type"].as_str().unwrap_or("")),
             "unexpected reply {v}"
         );
     }
