@@ -4,7 +4,9 @@
 # the 24-simulated-hour soak (tests/soak.rs) in release.
 #
 # It installs Debian's chromium (the dashboard's browser test drives it with playwright-core) when it is
-# missing, and the dashboard's npm packages from web/package-lock.json. Nothing downloads a browser of its own.
+# missing, the dashboard's npm packages from web/package-lock.json, and the independent MCAP reader (the
+# `mcap` Python packages pinned in tests/python/requirements.txt) into the venv target/py-mcap. Nothing
+# downloads a browser of its own.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -24,6 +26,11 @@ if [ -f web/package-lock.json ]; then
   step "dashboard JavaScript unit tests (node --test)"
   npm test --prefix web
 fi
+
+PY_VENV="${CARGO_TARGET_DIR:-target}/py-mcap"
+step "installing the independent MCAP reader (tests/python/requirements.txt) into $PY_VENV"
+[ -x "$PY_VENV/bin/python" ] || python3 -m venv "$PY_VENV"
+"$PY_VENV/bin/python" -m pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
 
 step "cargo fmt --check"
 cargo fmt --all -- --check
