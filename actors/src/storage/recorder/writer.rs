@@ -25,6 +25,8 @@ use crate::storage::utc;
 
 /// The longest nap while the queue is dry and a chunk waits to be finished.
 pub(super) const POLL: Duration = Duration::from_millis(10);
+/// While the queue never runs dry, how many items pass between two looks at the clock.
+const CLOCK_EVERY: u32 = 64;
 
 /// What opening a recording does to one already there.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -381,6 +383,7 @@ impl Writer {
         mut input: mpsc::Receiver<RecorderInput>,
         mut commands: Inbox<RecorderCommand>,
     ) -> RecorderReport {
+        let mut items = 0u32;
         loop {
             let next = match input.try_recv() {
                 Ok(item) => item,
@@ -401,7 +404,10 @@ impl Writer {
             };
             self.take(next);
             self.commands(&mut input, &mut commands);
-            self.flush_due();
+            items = items.wrapping_add(1);
+            if items % CLOCK_EVERY == 0 {
+                self.flush_due();
+            }
         }
         while let Ok(Envelope { command, reply }) = commands.try_recv() {
             let _ = reply.send(self.command(command));

@@ -16,10 +16,9 @@ use mcap::records::{MessageHeader, Metadata};
 use mcap::{Compression, WriteOptions};
 use pavlov::event::Event;
 use pavlov::record::TickRecord;
-use prost::Message as _;
 
 use super::schema::{self, CONFIG, EVENTS, LEARNER, TICKS};
-use super::tick_pb;
+use super::tick_encode::TickEncoder;
 use super::{Recording, RecordingHeader, StartState, Step, in_order};
 
 /// The uncompressed size at which a chunk is finished (about 6 700 ticks).
@@ -56,14 +55,13 @@ struct Channels {
 }
 
 /// An MCAP recording being written.
-pub(crate) struct McapSink<W: Write + Seek> {
+pub struct McapSink<W: Write + Seek> {
     out: mcap::Writer<W>,
     channels: Channels,
     /// Nanoseconds per tick, for an event's log time.
     period_ns: u64,
-    /// The tick message, reused so that encoding allocates nothing.
-    tick: tick_pb::Tick,
-    buf: Vec<u8>,
+    /// Encodes the tick messages (allocating nothing once warm).
+    encoder: TickEncoder,
     ticks_written: u32,
     events_written: u32,
     /// Messages written since the last finished chunk.
@@ -102,7 +100,7 @@ fn provenance(header: &RecordingHeader, start: &StartState) -> BTreeMap<String, 
 impl<W: Write + Seek> McapSink<W> {
     /// Opens a recording on `out` for `header` (which must carry its start state), and writes and
     /// flushes its opening.
-    pub(crate) fn create(out: W, header: &RecordingHeader) -> Result<Self, McapWriteError> {
+    pub fn create(out: W, header: &RecordingHeader) -> Result<Self, McapWriteError> {
         let start = header.start.as_ref().ok_or(McapWriteError::NoStart)?;
         let options = WriteOptions::new()
             .compression(Some(Compression::Zstd))
@@ -168,8 +166,7 @@ impl<W: Write + Seek> McapSink<W> {
             out,
             channels: Channels { ticks, events },
             period_ns,
-            tick: tick_pb::Tick::default(),
-            buf: Vec::with_capacity(512),
+            encoder: TickEncoder::default(),
             ticks_written: 0,
             events_written: 0,
             pending: false,
@@ -177,11 +174,8 @@ impl<W: Write + Seek> McapSink<W> {
     }
 
     /// Appends a tick.
-    pub(crate) fn tick(&mut self, record: &TickRecord) -> Result<(), McapWriteError> {
-        tick_pb::fill(&mut self.tick, record);
-        self.buf.clear();
-        // Encoding into a Vec cannot run out of room.
-        let _ = self.tick.encode(&mut self.buf);
+    pub fn tick(&mut self, record: &TickRecord) -> Result<(), McapWriteError> {
+        let data = self.encoder.encode(record);
         let t = tick_time_ns(record.t_ms);
         self.out.write_to_known_channel(
             &MessageHeader {
@@ -190,7 +184,7 @@ impl<W: Write + Seek> McapSink<W> {
                 log_time: t,
                 publish_time: t,
             },
-            &self.buf,
+            data,
         )?;
         self.ticks_written = self.ticks_written.wrapping_add(1);
         self.pending = true;

@@ -28,7 +28,16 @@ pub mod jsonl;
 mod mcap_read;
 pub(crate) mod mcap_write;
 pub mod schema;
+mod tick_encode;
 pub(crate) mod tick_pb;
+
+/// What the recording benchmark (`cargo bench -p pavlov-actors --bench recording`) measures: a tick's
+/// protobuf encoding alone, and a whole MCAP tick write (encoding, framing, zstd, CRC).
+#[cfg(feature = "test-support")]
+pub mod bench_support {
+    pub use super::mcap_write::McapSink;
+    pub use super::tick_encode::TickEncoder;
+}
 
 pub use jsonl::parse;
 pub use mcap_read::parse_mcap;

@@ -228,7 +228,7 @@ pub enum TickDecodeError {
     },
 }
 
-fn mode_to_pb(m: Mode) -> PbMode {
+pub(super) fn mode_to_pb(m: Mode) -> PbMode {
     match m {
         Mode::Reactive => PbMode::Reactive,
         Mode::Pavlovian => PbMode::Pavlovian,
@@ -236,7 +236,7 @@ fn mode_to_pb(m: Mode) -> PbMode {
     }
 }
 
-fn stop_to_pb(s: Option<SafetyStop>) -> PbSafetyStop {
+pub(super) fn stop_to_pb(s: Option<SafetyStop>) -> PbSafetyStop {
     match s {
         None => PbSafetyStop::None,
         Some(SafetyStop::EStop) => PbSafetyStop::EStop,
@@ -246,7 +246,7 @@ fn stop_to_pb(s: Option<SafetyStop>) -> PbSafetyStop {
     }
 }
 
-fn state_to_pb(s: LinkState) -> PbLinkState {
+pub(super) fn state_to_pb(s: LinkState) -> PbLinkState {
     match s {
         LinkState::Up => PbLinkState::Up,
         LinkState::Stale => PbLinkState::Stale,
@@ -256,7 +256,7 @@ fn state_to_pb(s: LinkState) -> PbLinkState {
     }
 }
 
-fn trip_to_pb(t: Option<TripCause>) -> PbTripCause {
+pub(super) fn trip_to_pb(t: Option<TripCause>) -> PbTripCause {
     match t {
         None => PbTripCause::None,
         Some(TripCause::WheelDrop) => PbTripCause::WheelDrop,
@@ -266,6 +266,7 @@ fn trip_to_pb(t: Option<TripCause>) -> PbTripCause {
     }
 }
 
+#[cfg(test)]
 fn wheels(a: Action) -> Wheels {
     Wheels {
         left_mm_s: i32::from(a.left_mm_s),
@@ -273,6 +274,7 @@ fn wheels(a: Action) -> Wheels {
     }
 }
 
+#[cfg(test)]
 fn fill_raw(out: &mut RawSensors, v: &SensorValues) {
     out.values.clear();
     out.present = 0;
@@ -294,8 +296,9 @@ pub(crate) fn from_record(r: &TickRecord) -> Tick {
     msg
 }
 
-/// Makes `msg` the message for `r`, reusing its allocations (the recorder keeps one `Tick` for a whole
-/// recording, so encoding a tick allocates nothing).
+/// Makes `msg` the message for `r`, reusing its allocations (the recorder encodes with
+/// [`super::tick_encode`], which must write the same bytes as this struct's derived encoder).
+#[cfg(test)]
 pub(crate) fn fill(msg: &mut Tick, r: &TickRecord) {
     let s = &r.sensors;
     msg.seq = r.seq;
@@ -520,7 +523,7 @@ pub(crate) fn decode(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use pavlov::obs::ObsLayout;
     use pavlov::oi::Model;
@@ -553,7 +556,7 @@ mod tests {
     }
 
     /// Records that between them use every variant and every option both ways.
-    fn records() -> Vec<TickRecord> {
+    pub(crate) fn records() -> Vec<TickRecord> {
         let stops = [
             None,
             Some(SafetyStop::EStop),
