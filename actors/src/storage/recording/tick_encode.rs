@@ -19,7 +19,6 @@ pub struct TickEncoder {
     outer: Vec<u8>,
     inner: Vec<u8>,
     raw: Vec<u8>,
-    values: Vec<i32>,
 }
 
 /// Writes `body` (already encoded into `scratch`) as field `tag` of `buf`.
@@ -79,7 +78,6 @@ impl TickEncoder {
             outer: buf,
             inner: scratch,
             raw,
-            values,
         } = self;
         buf.clear();
         varint_field(buf, 1, r.seq);
@@ -148,19 +146,12 @@ impl TickEncoder {
             Some(inputs) => {
                 scratch.clear();
                 if let Some(v) = &inputs.values {
-                    values.clear();
-                    let mut present = 0u64;
-                    for (id, value) in v.iter() {
-                        let i = usize::from(id);
-                        if values.len() <= i {
-                            values.resize(i + 1, 0);
-                        }
-                        values[i] = value;
-                        present |= 1 << id;
-                    }
+                    // Absent slots are 0; the ones after the last present packet are left out.
+                    let (slots, present) = v.slots();
+                    let used = (64 - present.leading_zeros() as usize).min(slots.len());
                     raw.clear();
-                    if !values.is_empty() {
-                        encoding::sint32::encode_packed(1, values, raw);
+                    if used > 0 {
+                        encoding::sint32::encode_packed(1, &slots[..used], raw);
                     }
                     if present != 0 {
                         encoding::fixed64::encode(2, &present, raw);
