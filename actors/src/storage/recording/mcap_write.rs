@@ -21,8 +21,10 @@ use super::schema::{self, CONFIG, EVENTS, LEARNER, TICKS};
 use super::tick_encode::TickEncoder;
 use super::{Recording, RecordingHeader, StartState, Step, in_order};
 
-/// The uncompressed size at which a chunk is finished (about 6 700 ticks).
-pub(crate) const CHUNK_SIZE: u64 = 1 << 20;
+/// The uncompressed size at which a chunk is finished (about 1 700 ticks). Measured on the stall study:
+/// against 1 MiB, files 0.3 % larger and about 3 % less CPU for the whole study (zstd's working set
+/// stays small beside the runs it shares the cores with).
+pub(crate) const CHUNK_SIZE: u64 = 1 << 18;
 /// zstd's fastest level: the recorder shares the cores with the runs it records.
 pub(crate) const ZSTD_LEVEL: u32 = 1;
 
