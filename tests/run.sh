@@ -4,8 +4,9 @@
 # the 24-simulated-hour soak (tests/soak.rs) in release.
 #
 # It installs Debian's chromium (the dashboard's browser test drives it with playwright-core) when it is
-# missing, the dashboard's npm packages from web/package-lock.json, and the Foxglove test client's from
-# tests/foxglove/package-lock.json. Nothing downloads a browser of its own.
+# missing, the dashboard's npm packages from web/package-lock.json, the Foxglove test client's from
+# tests/foxglove/package-lock.json, and the independent MCAP reader (the `mcap` Python packages pinned in
+# tests/python/requirements.txt) into the venv target/py-mcap. Nothing downloads a browser of its own.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -30,6 +31,17 @@ step "installing the Foxglove test client's npm packages (npm ci)"
 # tests/e2e/foxglove.rs connects with Foxglove's own client library (@foxglove/ws-protocol), pinned in
 # tests/foxglove/package-lock.json; the test fails, saying so, when they are missing.
 npm ci --prefix tests/foxglove --no-audit --no-fund --loglevel=error
+PY_VENV="${CARGO_TARGET_DIR:-target}/py-mcap"
+step "installing the independent MCAP reader (tests/python/requirements.txt) into $PY_VENV"
+if ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then
+  # Debian splits venv's pip bootstrap into its own package.
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-venv >/dev/null
+fi
+[ -x "$PY_VENV/bin/python" ] || python3 -m venv "$PY_VENV"
+"$PY_VENV/bin/python" -m pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
 
 step "cargo fmt --check"
 cargo fmt --all -- --check

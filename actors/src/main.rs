@@ -34,6 +34,7 @@ fn main() -> Result<()> {
             Command::Serve(args) => cli::serve::run(args).await,
             Command::Experiment(args) => cli::experiment::run(args),
             Command::Replay(args) => cli::replay::run(args),
+            Command::Convert(args) => cli::convert::run(args),
             Command::Sim(args) => cli::sim::run(args).await,
             Command::Human(args) => cli::human::run(args).await,
             Command::Bench(args) => cli::bench::run(args).await,

@@ -67,6 +67,12 @@ impl SensorValues {
         (0..PACKET_SLOTS as u8).filter_map(move |id| self.get(id).map(|v| (id, v)))
     }
 
+    /// The snapshot as stored: slot `id` holds packet `id`'s value when bit `id` of the mask is set, and 0
+    /// otherwise. For writers that copy it whole (the recorder's protobuf encoding).
+    pub fn slots(&self) -> (&[i32], u64) {
+        (&self.values, self.present)
+    }
+
     /// True when no packet is present.
     pub fn is_empty(&self) -> bool {
         self.present == 0
@@ -91,5 +97,8 @@ mod tests {
         b.set(23, 5);
         b.merge(&a);
         assert_eq!(b.iter().collect::<Vec<_>>(), vec![(22, 15_000), (23, -300)]);
+        let (slots, present) = b.slots();
+        assert_eq!(present, 1 << 22 | 1 << 23);
+        assert_eq!((slots[22], slots[23], slots[24]), (15_000, -300, 0));
     }
 }

@@ -2,6 +2,7 @@
 
 pub mod args;
 pub mod bench;
+pub mod convert;
 pub mod experiment;
 pub mod human;
 pub mod replay;
@@ -37,6 +38,8 @@ pub enum Command {
     Experiment(experiment::ExperimentArgs),
     /// Run a recording back through the learning and gating stages and check that it reproduces exactly.
     Replay(replay::ReplayArgs),
+    /// Rewrite a recording in the other format: `--to jsonl` (for jq and pandas) or `--to mcap`.
+    Convert(convert::ConvertArgs),
     /// Run the simulated Create on its own, on a pseudo-terminal that any OI client can open.
     Sim(sim::SimArgs),
     /// Run the simulated human operator and stream its skeleton as OSC over UDP (what a depth sensor with

@@ -8,7 +8,7 @@ use pavlov_actors::storage::{recording, replay};
 /// `pavlov replay`'s arguments.
 #[derive(clap::Args, Debug, Clone)]
 pub struct ReplayArgs {
-    /// A recording directory (with ticks.jsonl) or a .jsonl file.
+    /// A recording directory (with recording.mcap, or ticks.jsonl) or a recording file (.mcap or .jsonl).
     #[arg(value_name = "DIR")]
     pub path: PathBuf,
 }
@@ -17,7 +17,10 @@ pub struct ReplayArgs {
 pub fn run(args: ReplayArgs) -> Result<()> {
     let rec = recording::load(&args.path)?;
     if rec.torn_tail {
-        tracing::warn!("note: the recording's last line was incomplete and was skipped");
+        tracing::warn!(
+            "note: the recording ends early (the recorder was killed); replaying the {} ticks it holds",
+            rec.records.len()
+        );
     }
     let report = replay::replay(&rec)?;
     say!("{}", replay::describe(&report));

@@ -23,7 +23,7 @@ pub struct ServeArgs {
     robot: Option<String>,
     #[command(flatten)]
     dashboard: DashboardArgs,
-    /// Record every tick into DIR/ticks.jsonl (JSON Lines, replayable with `pavlov replay DIR`); refused
+    /// Record every tick and event into DIR/recording.mcap (MCAP, replayable with `pavlov replay DIR`); refused
     /// if DIR already holds a recording. Recordings started from the dashboard go into ./recordings.
     #[arg(long, value_name = "DIR")]
     record: Option<PathBuf>,
@@ -115,7 +115,7 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     if let Some(dir) = &record {
         say!(
             "recording every tick into {}",
-            dir.join(recording::TICKS_FILE).display()
+            dir.join(recording::MCAP_FILE).display()
         );
     }
     let server = Server::builder(cfg, target)

@@ -50,7 +50,7 @@ pub struct ReplayReport {
     /// Commands compared (every tick but manual-mode ticks without a safety stop).
     pub commands_compared: usize,
     /// Ticks where `seq` jumped (records missing from the recording).
-    pub(crate) seq_gaps: usize,
+    pub seq_gaps: usize,
     /// Recorded events applied to learning or gating.
     pub events_applied: usize,
     /// Total mismatching fields.

@@ -156,3 +156,75 @@ pub fn serve(cwd: &Path, args: &[&str], until: &str) -> Output {
         stderr: err_reader.join().unwrap(),
     }
 }
+
+/// Records `ticks` ticks of the stall configuration (seed 12) from the run's start into `dir` under the
+/// paused clock, with changes made while it runs: learning parameters, a weight reset, a mode switch,
+/// and an e-stop latched and released. Returns the recorder's report.
+pub fn record_with_changes(
+    dir: &Path,
+    ticks: usize,
+) -> pavlov_actors::storage::recorder::RecorderReport {
+    use pavlov::control::Mode;
+    use pavlov_actors::command::{
+        ControlCommand, ControlRequest, GatingCommand, LatchCommand, LearningCommand,
+    };
+    use pavlov_actors::server::{RobotTarget, Server};
+    use pavlov_actors::storage::recorder::Recorder;
+    use pavlov_actors::storage::recording::RecordingHeader;
+
+    async fn send(server: &Server, command: impl Into<ControlCommand>) {
+        let (req, reply) = ControlRequest::new(command);
+        server.commands.send(req).await.expect("router up");
+        let outcome = reply.await.expect("a reply");
+        assert!(outcome.is_ok(), "{outcome:?}");
+    }
+    let mut cfg = stall_config();
+    cfg.sim.seed = 12;
+    let recorder = Recorder::spawn(
+        RecordingHeader::new(&cfg, "with changes"),
+        Some(dir.to_path_buf()),
+        dir.to_path_buf(),
+        ticks + 64,
+    )
+    .expect("recorder");
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .start_paused(true)
+        .build()
+        .unwrap();
+    let link = recorder.link.clone();
+    rt.block_on(async move {
+        let server = Server::builder(cfg, RobotTarget::Simulated)
+            .recorder(link)
+            .start()
+            .await
+            .expect("server");
+        let mut rx = server.feed.subscribe();
+        let step = ticks / 6;
+        crate::common::collect(&mut rx, step).await;
+        let params = LearningCommand::SetParams {
+            prediction: None,
+            alpha: Some(0.01),
+            lambda: Some(0.9),
+            threshold: Some(0.3),
+        };
+        send(&server, params).await;
+        crate::common::collect(&mut rx, step).await;
+        send(&server, LearningCommand::ResetWeights {}).await;
+        crate::common::collect(&mut rx, step).await;
+        let reactive = GatingCommand::SetMode {
+            mode: Mode::Reactive,
+        };
+        send(&server, reactive).await;
+        crate::common::collect(&mut rx, step).await;
+        send(&server, LatchCommand::Estop {}).await;
+        crate::common::collect(&mut rx, step).await;
+        send(&server, LatchCommand::Release {}).await;
+        crate::common::collect(&mut rx, ticks - 5 * step).await;
+        server.shutdown().await;
+    });
+    drop(rt);
+    let report = recorder.join();
+    assert!(report.errors.is_empty(), "{:?}", report.errors);
+    report
+}

@@ -1,11 +1,14 @@
 //! What the server keeps on disk: recordings (round trip, replay, a kill mid-write, names a client may
-//! give), checkpoints (periodic, per run, resumed with fallback) and saves.
+//! give, conversion between MCAP and JSON Lines, an independent MCAP reader), checkpoints (periodic, per
+//! run, resumed with fallback) and saves.
 
 mod checkpoint;
 mod checkpoint_runs;
 mod fixtures;
+mod recording_convert;
 mod recording_crash;
 mod recording_names;
+mod recording_python;
 mod recording_roundtrip;
 mod replay_cases;
 mod saves;

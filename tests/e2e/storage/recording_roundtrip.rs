@@ -122,14 +122,28 @@ fn a_run_with_link_faults_replays_exactly() {
 fn a_torn_recording_still_loads_and_a_tampered_one_fails_replay() {
     let dir = std::env::temp_dir().join(format!("pavlov-rt-torn-{}", std::process::id()));
     record_run(Mode::Pavlovian, 600, &dir);
-    let path = dir.join(recording::TICKS_FILE);
-    let text = std::fs::read_to_string(&path).unwrap();
-    // A kill mid-line: cut the file in the middle of its last record.
-    let torn = &text[..text.len() - 40];
-    let rec = recording::parse(torn).expect("torn recording loads");
+    let bytes = std::fs::read(dir.join(recording::MCAP_FILE)).unwrap();
+    let whole = recording::load(&dir).unwrap();
+    assert!(!whole.torn_tail);
+    // A kill after the last chunk was written, before the summary and footer: every tick is there.
+    let summary = mcap::Summary::read(&bytes)
+        .unwrap()
+        .expect("a finished file has a summary");
+    let last = summary.chunk_indexes.last().expect("chunks");
+    let end = usize::try_from(last.chunk_start_offset + last.chunk_length).unwrap();
+    let rec = recording::from_bytes(&bytes[..end]).expect("torn recording loads");
     assert!(rec.torn_tail);
-    assert!(rec.records.len() >= 599);
+    assert_eq!(rec.records.len(), whole.records.len());
+    assert!(rec.records.len() >= 600);
     assert!(replay::replay(&rec).unwrap().exact());
+    // A kill inside the last chunk loses that chunk, and only it.
+    let start = usize::try_from(last.chunk_start_offset).unwrap();
+    let cut = recording::from_bytes(&bytes[..(start + end) / 2]).expect("a cut chunk loads");
+    assert!(cut.torn_tail);
+    assert_eq!(
+        cut.records.len(),
+        whole.records.len() - ticks_in_last_chunk(&bytes, last)
+    );
     // Change one recorded prediction: replay must notice.
     let mut bad = rec.clone();
     if let Some(p) = bad.records[300].predictions.first_mut() {
@@ -139,6 +153,22 @@ fn a_torn_recording_still_loads_and_a_tampered_one_fails_replay() {
     assert_eq!(report.mismatch_count, 1);
     assert_eq!(report.mismatches[0].seq, bad.records[300].seq);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The tick messages in a chunk, read through the crate's own chunk reader.
+fn ticks_in_last_chunk(bytes: &[u8], index: &mcap::records::ChunkIndex) -> usize {
+    let summary = mcap::Summary::read(bytes).unwrap().unwrap();
+    let ticks = summary
+        .channels
+        .values()
+        .find(|c| c.topic == recording::schema::TICKS)
+        .unwrap()
+        .id;
+    summary
+        .stream_chunk(bytes, index)
+        .unwrap()
+        .filter(|m| m.as_ref().unwrap().channel.id == ticks)
+        .count()
 }
 
 const PAVLOV: &str = env!("CARGO_BIN_EXE_pavlov");
@@ -154,10 +184,10 @@ fn pavlov_serve_record_then_pavlov_replay() {
         .stderr(std::process::Stdio::null())
         .spawn()
         .expect("pavlov serve");
-    // About a second of real-time ticks.
-    let file = dir.join(recording::TICKS_FILE);
+    // At least a second of real-time ticks on disk (the recorder finishes a chunk every second; the file
+    // is read while it is being written, as a killed one would be).
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
-    while std::fs::read_to_string(&file).map_or(0, |t| t.lines().count()) < 60
+    while recording::load(&dir).map_or(0, |r| r.records.len()) < 60
         && std::time::Instant::now() < deadline
     {
         std::thread::sleep(std::time::Duration::from_millis(100));

@@ -2,9 +2,10 @@
 //!
 //! The tick feed and the event log hand everything to the recorder's one bounded queue with `try_send` (a
 //! full queue drops the item and counts it; the tick never waits). The recorder's own OS thread takes them
-//! off the queue and writes them ([`writer`]), flushing whenever the queue runs dry and at least every
-//! [`FLUSH_EVERY`], so a killed process loses at most about a second (a torn last line is skipped by the
-//! reader). It also takes `start_recording` / `stop_recording` commands from the command router.
+//! off the queue and writes them as MCAP ([`writer`]; serialising and compressing happen here, never on
+//! the tick path), finishing a chunk when it is full and at least every [`FLUSH_EVERY`], so a killed
+//! process loses at most about a second (the reader reads every complete chunk of a cut file). It also
+//! takes `start_recording` / `stop_recording` commands from the command router.
 //!
 //! A recording opens with the run's state at that moment ([`crate::storage::recording::StartState`]):
 //! the recorder asks the learning actor for a snapshot of the learner between two ticks, and then writes
@@ -35,7 +36,7 @@ use crate::pipeline::events::EventLog;
 use crate::storage::recording::{RecordingHeader, StartState};
 use writer::{Existing, Writer};
 
-/// The longest time written records may stay in the buffer.
+/// The longest time a written record may wait in the open chunk before it is on disk.
 pub(crate) const FLUSH_EVERY: Duration = Duration::from_secs(1);
 
 /// The default queue length: 10 s of ticks at 50 Hz.
@@ -94,7 +95,7 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    /// Starts the recorder thread. With `dir`, recording into `dir/ticks.jsonl` starts as soon as the
+    /// Starts the recorder thread. With `dir`, recording into `dir/recording.mcap` starts as soon as the
     /// server is attached, replacing a recording already there (for experiments, which regenerate their
     /// own results); `root` is the folder `start_recording` creates its recordings in.
     pub fn spawn(

@@ -1,10 +1,15 @@
-//! The recorder thread's writer: one recording open at a time, written as JSON Lines (the format is in
-//! [`crate::storage::recording`]).
+//! The recorder thread's writer: one recording open at a time, written as MCAP
+//! ([`crate::storage::recording::mcap_write`]; the format is in [`crate::storage::recording`]).
+//!
+//! Flushing: a chunk is finished when it is full (by size, in the MCAP writer) and when the oldest
+//! message not yet on disk has waited [`FLUSH_EVERY`]; while the queue is dry and something waits, the
+//! thread naps at most [`POLL`] (and never past that deadline) instead of blocking, so a tick handed to
+//! the queue never has to wake it. A kill therefore loses at most about a second.
 
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::BufWriter;
 use std::path::{Path, PathBuf};
-use std::time::{Instant, SystemTime};
+use std::time::{Duration, Instant, SystemTime};
 
 use pavlov::event::{Event, EventKind};
 use pavlov::record::TickRecord;
@@ -14,8 +19,14 @@ use super::{FLUSH_EVERY, RecorderInput, RecorderReport, SnapshotSource};
 use crate::command::{Applied, CommandError, Envelope, Inbox, Outcome, RecorderCommand};
 use crate::pipeline::events::EventLog;
 use crate::storage::names::{NAME_RULES, check_plain_name};
-use crate::storage::recording::{EventLine, RecordingHeader, StartState, TICKS_FILE};
+use crate::storage::recording::mcap_write::McapSink;
+use crate::storage::recording::{MCAP_FILE, RecordingHeader, StartState, TICKS_FILE};
 use crate::storage::utc;
+
+/// The longest nap while the queue is dry and a chunk waits to be finished.
+pub(super) const POLL: Duration = Duration::from_millis(10);
+/// While the queue never runs dry, how many items pass between two looks at the clock.
+const CLOCK_EVERY: u32 = 64;
 
 /// What opening a recording does to one already there.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -40,13 +51,24 @@ impl StartSource for SnapshotSource {
     }
 }
 
+/// A recording that has begun.
+struct Begun {
+    sink: McapSink<BufWriter<File>>,
+    /// The last tick before the recording.
+    after: Option<u64>,
+    /// Events with a smaller id are from before the recording.
+    events_before: u64,
+    /// When the oldest message not yet in a finished chunk was written.
+    unflushed_since: Option<Instant>,
+    /// The last tick written (where `recording_stopped` takes effect).
+    last_tick: Option<u64>,
+}
+
 struct OpenFile {
-    out: BufWriter<File>,
     path: PathBuf,
-    /// Where the run stood when the recording began (`None`: reserved, not begun yet).
-    start: Option<(Option<u64>, u64)>,
-    dirty: bool,
-    last_flush: Instant,
+    /// The file, from when it is created until the recording begins.
+    reserved: Option<File>,
+    begun: Option<Begun>,
 }
 
 pub(super) struct Writer {
@@ -61,21 +83,32 @@ pub(super) struct Writer {
 
 fn create(dir: &Path, existing: Existing) -> std::io::Result<(File, PathBuf)> {
     std::fs::create_dir_all(dir)?;
-    let path = dir.join(TICKS_FILE);
+    let path = dir.join(MCAP_FILE);
+    // A recording of an earlier version, in JSON Lines.
+    let older = dir.join(TICKS_FILE);
+    let never_overwritten = |p: &Path| {
+        std::io::Error::new(
+            std::io::ErrorKind::AlreadyExists,
+            format!(
+                "{} already holds a recording, and a recording is never overwritten",
+                p.display()
+            ),
+        )
+    };
     let file = match existing {
-        Existing::Replace => File::create(&path),
+        Existing::Replace => {
+            if older.exists() {
+                std::fs::remove_file(&older)?;
+            }
+            File::create(&path)
+        }
+        Existing::Refuse if older.exists() => Err(never_overwritten(&older)),
         Existing::Refuse => File::options()
             .write(true)
             .create_new(true)
             .open(&path)
             .map_err(|e| match e.kind() {
-                std::io::ErrorKind::AlreadyExists => std::io::Error::new(
-                    e.kind(),
-                    format!(
-                        "{} already holds a recording, and a recording is never overwritten",
-                        path.display()
-                    ),
-                ),
+                std::io::ErrorKind::AlreadyExists => never_overwritten(&path),
                 _ => e,
             }),
     }?;
@@ -99,19 +132,21 @@ impl Writer {
         let (file, path) = create(dir, existing)?;
         self.report.files.push(path.clone());
         self.file = Some(OpenFile {
-            out: BufWriter::with_capacity(256 * 1024, file),
             path,
-            start: None,
-            dirty: false,
-            last_flush: Instant::now(),
+            reserved: Some(file),
+            begun: None,
         });
         Ok(())
     }
 
-    /// Writes the header of the reserved recording, with the run's state now (or `known`).
+    /// Opens the reserved recording with the run's state now (or `known`): writes its provenance,
+    /// configuration and start state, and flushes them.
     fn begin(&mut self, known: Option<StartState>) -> Result<(), String> {
-        let Some(f) = self.file.as_mut().filter(|f| f.start.is_none()) else {
+        let Some(f) = self.file.as_mut().filter(|f| f.begun.is_none()) else {
             return Ok(());
+        };
+        let Some(file) = f.reserved.take() else {
+            return Err(format!("{}: the file is not open", f.path.display()));
         };
         let start = match known {
             Some(start) => start,
@@ -125,13 +160,15 @@ impl Writer {
         let mut header = self.header.clone();
         header.started_utc = utc::stamp(SystemTime::now());
         header.start = Some(start);
-        let text = serde_json::to_string(&header).map_err(|e| e.to_string())?;
-        f.out
-            .write_all(text.as_bytes())
-            .and_then(|()| f.out.write_all(b"\n"))
-            .and_then(|()| f.out.flush())
+        let sink = McapSink::create(BufWriter::with_capacity(64 * 1024, file), &header)
             .map_err(|e| format!("{}: {e}", f.path.display()))?;
-        f.start = Some((after, events_before));
+        f.begun = Some(Begun {
+            sink,
+            after,
+            events_before,
+            unflushed_since: None,
+            last_tick: after,
+        });
         let path = f.path.display().to_string();
         self.announce(after, EventKind::RecordingStarted { path });
         Ok(())
@@ -147,12 +184,13 @@ impl Writer {
 
     fn close(&mut self) {
         let Some(f) = self.file.as_ref() else { return };
-        if let Some((after, _)) = f.start {
+        if let Some(b) = &f.begun {
             let path = f.path.display().to_string();
-            self.announce(after, EventKind::RecordingStopped { path });
+            self.announce(b.last_tick, EventKind::RecordingStopped { path });
         }
-        if let Some(mut f) = self.file.take()
-            && let Err(e) = f.out.flush()
+        if let Some(f) = self.file.take()
+            && let Some(b) = f.begun
+            && let Err(e) = b.sink.finish()
         {
             self.report
                 .errors
@@ -160,7 +198,7 @@ impl Writer {
         }
     }
 
-    fn fail(&mut self, e: std::io::Error) {
+    fn fail(&mut self, e: impl std::fmt::Display) {
         let path = self
             .file
             .as_ref()
@@ -172,62 +210,63 @@ impl Writer {
         self.file = None;
     }
 
+    /// The open recording, if it has begun.
+    fn begun(&mut self) -> Option<&mut Begun> {
+        self.file.as_mut().and_then(|f| f.begun.as_mut())
+    }
+
     fn write(&mut self, record: &TickRecord) {
-        let Some(f) = self.file.as_mut() else {
+        let Some(b) = self.begun() else {
             self.report.discarded += 1;
             return;
         };
-        match f.start {
-            Some((after, _)) if after.is_none_or(|a| record.seq > a) => {}
-            _ => {
-                self.report.discarded += 1;
-                return;
-            }
+        if b.after.is_some_and(|a| record.seq <= a) {
+            self.report.discarded += 1;
+            return;
         }
-        let result = serde_json::to_writer(&mut f.out, record)
-            .map_err(std::io::Error::other)
-            .and_then(|()| f.out.write_all(b"\n"));
-        match result {
+        match b.sink.tick(record) {
             Ok(()) => {
+                b.unflushed_since.get_or_insert_with(Instant::now);
+                b.last_tick = Some(record.seq);
                 self.report.written += 1;
-                f.dirty = true;
             }
             Err(e) => self.fail(e),
         }
     }
 
     fn write_event(&mut self, event: &Event) {
-        let Some(f) = self.file.as_mut() else { return };
-        match f.start {
-            Some((_, before)) if event.id >= before => {}
-            _ => return,
+        let Some(b) = self.begun() else { return };
+        if event.id < b.events_before {
+            return;
         }
-        let line = EventLine {
-            event: event.clone(),
-        };
-        let result = serde_json::to_writer(&mut f.out, &line)
-            .map_err(std::io::Error::other)
-            .and_then(|()| f.out.write_all(b"\n"));
-        match result {
+        match b.sink.event(event) {
             Ok(()) => {
+                b.unflushed_since.get_or_insert_with(Instant::now);
                 self.report.events += 1;
-                f.dirty = true;
             }
             Err(e) => self.fail(e),
         }
     }
 
-    fn flush(&mut self, force: bool) {
-        let Some(f) = self.file.as_mut() else { return };
-        if f.dirty && (force || f.last_flush.elapsed() >= FLUSH_EVERY) {
-            if let Err(e) = f.out.flush() {
-                self.report
-                    .errors
-                    .push(format!("{}: {e}", f.path.display()));
-            }
-            f.dirty = false;
-            f.last_flush = Instant::now();
+    /// Finishes the open chunk if its oldest message has waited [`FLUSH_EVERY`]. Returns how long until
+    /// that is due when something still waits (`None`: nothing does).
+    fn flush_due(&mut self) -> Option<Duration> {
+        let b = self.begun()?;
+        if !b.sink.pending() {
+            b.unflushed_since = None;
+            return None;
         }
+        let since = *b.unflushed_since.get_or_insert_with(Instant::now);
+        let waited = since.elapsed();
+        if waited < FLUSH_EVERY {
+            return Some(FLUSH_EVERY - waited);
+        }
+        let result = b.sink.flush();
+        b.unflushed_since = None;
+        if let Err(e) = result {
+            self.fail(e);
+        }
+        None
     }
 
     /// Connects the running server; a recording reserved at spawn begins with the run (`initial`).
@@ -267,11 +306,9 @@ impl Writer {
                 self.close();
                 self.report.files.push(path.clone());
                 self.file = Some(OpenFile {
-                    out: BufWriter::with_capacity(256 * 1024, file),
                     path: path.clone(),
-                    start: None,
-                    dirty: false,
-                    last_flush: Instant::now(),
+                    reserved: Some(file),
+                    begun: None,
                 });
                 self.begin(None).map_err(|e| {
                     self.file = None;
@@ -317,33 +354,60 @@ impl Writer {
         }
     }
 
+    /// Applies the commands waiting, after every item queued before them: those were sent earlier (a
+    /// tick in the queue is older than a snapshot the learner gives now, so it belongs to the recording
+    /// open until then, and a stopped recording keeps every tick made before the stop).
+    fn commands(
+        &mut self,
+        input: &mut mpsc::Receiver<RecorderInput>,
+        commands: &mut Inbox<RecorderCommand>,
+    ) {
+        if commands.is_empty() {
+            return;
+        }
+        for _ in 0..input.len() {
+            match input.try_recv() {
+                Ok(item) => self.take(item),
+                Err(_) => break,
+            }
+        }
+        for _ in 0..commands.len() {
+            if let Ok(Envelope { command, reply }) = commands.try_recv() {
+                let _ = reply.send(self.command(command));
+            }
+        }
+    }
+
     pub(super) fn run(
         mut self,
         mut input: mpsc::Receiver<RecorderInput>,
         mut commands: Inbox<RecorderCommand>,
     ) -> RecorderReport {
+        let mut items = 0u32;
         loop {
             let next = match input.try_recv() {
-                Ok(r) => r,
-                Err(mpsc::error::TryRecvError::Empty) => {
-                    // The queue ran dry: flush before waiting, so a kill loses nothing already taken.
-                    self.flush(true);
-                    match input.blocking_recv() {
-                        Some(r) => r,
-                        None => break,
+                Ok(item) => item,
+                Err(mpsc::error::TryRecvError::Empty) => match self.flush_due() {
+                    // Something waits to be flushed: nap, then look again.
+                    Some(due) => {
+                        std::thread::sleep(due.min(POLL));
+                        self.commands(&mut input, &mut commands);
+                        continue;
                     }
-                }
+                    // Nothing waits: sleep until the next item (a command waits for it too).
+                    None => match input.blocking_recv() {
+                        Some(item) => item,
+                        None => break,
+                    },
+                },
                 Err(mpsc::error::TryRecvError::Disconnected) => break,
             };
-            // A command sent before this item arrived applies to it; one that arrives while these are being
-            // applied waits for the next item.
-            for _ in 0..commands.len() {
-                if let Ok(Envelope { command, reply }) = commands.try_recv() {
-                    let _ = reply.send(self.command(command));
-                }
-            }
             self.take(next);
-            self.flush(false);
+            self.commands(&mut input, &mut commands);
+            items = items.wrapping_add(1);
+            if items % CLOCK_EVERY == 0 {
+                self.flush_due();
+            }
         }
         while let Ok(Envelope { command, reply }) = commands.try_recv() {
             let _ = reply.send(self.command(command));

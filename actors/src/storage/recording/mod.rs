@@ -1,0 +1,247 @@
+//! Recordings: what they hold, and reading them back from either of their two formats.
+//!
+//! A recording is a run's header ([`RecordingHeader`]: the program's version, a free label, the
+//! configuration in force, the observation names, when it began and where the run stood then —
+//! [`StartState`]: the last tick before it and the learner's complete state), its tick records
+//! ([`TickRecord`]) and the changes made at run time ([`Event`]). So a recording replays from its first
+//! tick wherever it was started from.
+//!
+//! - **MCAP** (`recording.mcap`, what the recorder writes): zstd-compressed chunks, one channel per kind
+//!   of message (`ticks` in protobuf, `events`, `config`, `learner` in JSON), the provenance in a metadata
+//!   record ([`schema`], [`mcap_write`]). Foxglove, the `mcap` CLI and the `mcap` Python package open it.
+//!   A file cut by a kill is read up to its last complete chunk and reported torn ([`mcap_read`]).
+//! - **JSON Lines** (`ticks.jsonl`, what earlier versions wrote, and what `pavlov convert --to jsonl`
+//!   makes for `jq` and `pandas`): a header line, then one tick or `{"event": …}` per line ([`jsonl`]).
+//!
+//! [`load`] tells the two apart by content (MCAP files begin with its magic bytes). Reading is
+//! synchronous and pure apart from the file read.
+
+use std::path::{Path, PathBuf};
+
+use pavlov::agent::StageSnapshot;
+use pavlov::config::Config;
+use pavlov::event::Event;
+use pavlov::record::TickRecord;
+use serde::{Deserialize, Serialize};
+
+pub mod jsonl;
+mod mcap_read;
+pub(crate) mod mcap_write;
+pub mod schema;
+mod tick_encode;
+pub(crate) mod tick_pb;
+
+/// What the recording benchmark (`cargo bench -p pavlov-actors --bench recording`) measures: a tick's
+/// protobuf encoding alone, and a whole MCAP tick write (encoding, framing, zstd, CRC).
+#[cfg(feature = "test-support")]
+pub mod bench_support {
+    pub use super::mcap_write::McapSink;
+    pub use super::tick_encode::TickEncoder;
+}
+
+pub use jsonl::parse;
+pub use mcap_read::parse_mcap;
+pub use mcap_write::{McapWriteError, write_recording};
+pub use tick_pb::TickDecodeError;
+
+/// The format tag of a JSON Lines header line.
+pub(crate) const FORMAT: &str = "pavlov-recording/2";
+
+/// Where the run stood when a recording began.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StartState {
+    /// The last tick the learner had handled (`None`: the recording begins with the run); the recording
+    /// holds the ticks after it.
+    pub after: Option<u64>,
+    /// Events with a smaller id happened before the recording (the learner's state includes them).
+    pub events_before: u64,
+    /// The learner's complete state: weights, traces, parameters in force, previous step, stall level.
+    pub learner: StageSnapshot,
+}
+
+/// The file the recorder writes inside a recording's directory.
+pub const MCAP_FILE: &str = "recording.mcap";
+/// The JSON Lines file inside a recording's directory (older recordings, `pavlov convert --to jsonl`).
+pub const TICKS_FILE: &str = "ticks.jsonl";
+
+/// What a recording says about itself (in MCAP: the metadata record and the `config` and `learner`
+/// messages; in JSON Lines: the first line).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RecordingHeader {
+    /// The format tag ([`FORMAT`] in JSON Lines).
+    pub(crate) format: String,
+    /// The program that wrote it (`pavlov <version>`).
+    #[serde(default)]
+    pub program: String,
+    /// A free label (e.g. the experiment run), empty if none.
+    #[serde(default)]
+    pub label: String,
+    /// The configuration in force (its `[sim] seed` is the run's seed).
+    pub config: Config,
+    /// Names of the `obs` vector's dimensions, in order.
+    pub(crate) obs_names: Vec<String>,
+    /// When the recording began, UTC (`20261124T013000Z`).
+    #[serde(default)]
+    pub started_utc: String,
+    /// Where the run stood when the recording began.
+    #[serde(default)]
+    pub start: Option<StartState>,
+}
+
+impl RecordingHeader {
+    /// A header for a run of `config`, with the observation names of its robot model; the recorder
+    /// fills in when and from what state the recording starts.
+    pub fn new(config: &Config, label: impl Into<String>) -> Self {
+        let layout = pavlov::obs::ObsLayout::for_model(config.robot.model);
+        RecordingHeader {
+            format: FORMAT.to_string(),
+            program: concat!("pavlov ", env!("CARGO_PKG_VERSION")).to_string(),
+            label: label.into(),
+            config: config.clone(),
+            obs_names: layout.names().map(str::to_string).collect(),
+            started_utc: String::new(),
+            start: None,
+        }
+    }
+}
+
+/// A recording read back.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recording {
+    /// What the recording says about itself.
+    pub header: RecordingHeader,
+    /// Every complete tick record, in file order.
+    pub records: Vec<TickRecord>,
+    /// Every event, in file order.
+    pub events: Vec<Event>,
+    /// True when the file ends early (the writer was killed): a torn last line of JSON Lines, or an
+    /// MCAP file without its footer, of which every complete chunk was read.
+    pub torn_tail: bool,
+}
+
+/// Why a recording could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordingError {
+    /// The file could not be read.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The file has no header line.
+    #[error("empty recording: no header line")]
+    Empty,
+    /// The header line is not a recording header.
+    #[error("line 1 is not a {FORMAT} header: {0}")]
+    BadHeader(String),
+    /// A line before the last one is not a tick record or an event.
+    #[error("line {line}: not a tick record or an event: {message}")]
+    BadRecord {
+        /// 1-based line number.
+        line: usize,
+        /// The parser's message.
+        message: String,
+    },
+    /// The MCAP container is damaged before its end (not merely cut short).
+    #[error("not a readable MCAP file: {0}")]
+    BadMcap(String),
+    /// A message does not decode as its channel's schema.
+    #[error("message {index} on channel `{topic}`: {message}")]
+    BadMessage {
+        /// The channel.
+        topic: String,
+        /// 0-based position among that channel's messages.
+        index: usize,
+        /// The decoder's message.
+        message: String,
+    },
+    /// The MCAP file lacks a part every recording has.
+    #[error("the MCAP file has no {0} (is it a pavlov recording, cut before its first second?)")]
+    Missing(&'static str),
+}
+
+/// The recording file for `path`: the path itself if it is a file; in a directory, `recording.mcap`, or
+/// `ticks.jsonl` when there is no MCAP file.
+pub fn recording_file(path: &Path) -> PathBuf {
+    if path.is_dir() {
+        let mcap = path.join(MCAP_FILE);
+        let jsonl = path.join(TICKS_FILE);
+        if !mcap.exists() && jsonl.exists() {
+            jsonl
+        } else {
+            mcap
+        }
+    } else {
+        path.to_path_buf()
+    }
+}
+
+/// Whether `bytes` begin like an MCAP file.
+pub fn is_mcap(bytes: &[u8]) -> bool {
+    bytes.starts_with(mcap::MAGIC)
+}
+
+/// Reads a recording from its bytes, MCAP or JSON Lines.
+pub fn from_bytes(bytes: &[u8]) -> Result<Recording, RecordingError> {
+    if is_mcap(bytes) {
+        parse_mcap(bytes)
+    } else {
+        // A torn multi-byte character can only be at the very end: keep the valid prefix, and the
+        // parser reports the torn line.
+        let text = match std::str::from_utf8(bytes) {
+            Ok(t) => t,
+            Err(e) if e.error_len().is_none() => {
+                std::str::from_utf8(&bytes[..e.valid_up_to()]).unwrap_or_default()
+            }
+            Err(e) => {
+                return Err(RecordingError::BadRecord {
+                    line: bytes[..e.valid_up_to()]
+                        .iter()
+                        .filter(|&&b| b == b'\n')
+                        .count()
+                        + 1,
+                    message: e.to_string(),
+                });
+            }
+        };
+        parse(text)
+    }
+}
+
+/// Reads a recording from a file or a recording directory, in either format.
+pub fn load(path: &Path) -> Result<Recording, RecordingError> {
+    let file = recording_file(path);
+    let bytes = std::fs::read(&file).map_err(|source| RecordingError::Io {
+        path: file.clone(),
+        source,
+    })?;
+    from_bytes(&bytes)
+}
+
+/// One step of a recording in the order it happened.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Step<'a> {
+    /// A tick.
+    Tick(&'a TickRecord),
+    /// An event.
+    Event(&'a Event),
+}
+
+/// The ticks and events of `rec` in the order they happened: each event (in id order) just before the
+/// first tick it applies to.
+pub(crate) fn in_order(rec: &Recording) -> impl Iterator<Item = Step<'_>> {
+    let mut events: Vec<&Event> = rec.events.iter().collect();
+    events.sort_by_key(|e| e.id);
+    let mut events = events.into_iter().peekable();
+    let mut out = Vec::with_capacity(rec.records.len() + rec.events.len());
+    for r in &rec.records {
+        while let Some(e) = events.next_if(|e| e.after.is_none_or(|a| a < r.seq)) {
+            out.push(Step::Event(e));
+        }
+        out.push(Step::Tick(r));
+    }
+    out.extend(events.map(Step::Event));
+    out.into_iter()
+}
