@@ -56,6 +56,24 @@ pub struct WelchTest {
     pub p: f64,
 }
 
+impl WelchTest {
+    /// The p-value as a table prints it: three decimals, and `< 0.001` below that (never `0.000`).
+    pub fn p_text(&self) -> String {
+        format_p(self.p)
+    }
+}
+
+/// A p-value to three decimals, `< 0.001` below that (a p-value is never zero), `–` when not finite.
+pub fn format_p(p: f64) -> String {
+    if !p.is_finite() {
+        "–".into()
+    } else if p < 0.001 {
+        "< 0.001".into()
+    } else {
+        format!("{p:.3}")
+    }
+}
+
 /// Welch's t-test comparing sample `b` with sample `a`; `None` when either has fewer than two values or
 /// both have zero variance.
 pub fn welch(a: &[f64], b: &[f64]) -> Option<WelchTest> {
@@ -285,5 +303,14 @@ mod tests {
         assert!(close(d.se, 2.0 / 3f64.sqrt(), 1e-15));
         assert_eq!(relative_change(0.0, 1.0), None);
         assert!(close(relative_change(10.0, 5.9).unwrap(), -0.41, 1e-12));
+    }
+
+    #[test]
+    fn p_values_below_a_thousandth_never_print_as_zero() {
+        assert_eq!(format_p(3.2e-12), "< 0.001");
+        assert_eq!(format_p(0.000_999), "< 0.001");
+        assert_eq!(format_p(0.001), "0.001");
+        assert_eq!(format_p(0.0456), "0.046");
+        assert_eq!(format_p(f64::NAN), "–");
     }
 }

@@ -104,3 +104,38 @@ fn help_explains_every_command() {
         assert!(text.contains(flag), "serve --help lacks {flag}:\n{text}");
     }
 }
+
+#[test]
+fn studies_that_would_run_nothing_or_forever_are_refused_by_name() {
+    let cases: [(&[&str], &str); 6] = [
+        (
+            &["stall", "--runs", "0"],
+            "--runs must be from 1 to 1000, got 0",
+        ),
+        (&["stall", "--minutes", "0"], "--minutes must be above 0"),
+        (&["stall", "--minutes", "NaN"], "--minutes must be above 0"),
+        (&["stall", "--minutes", "100000"], "at most 1440"),
+        (
+            &["interaction", "--runs", "0"],
+            "--runs must be from 1 to 100, got 0",
+        ),
+        (
+            &["interaction", "--commands", "0"],
+            "--commands must be at least 1",
+        ),
+    ];
+    let out_dir = std::env::temp_dir().join(format!("pavlov-refused-{}", std::process::id()));
+    for (args, expected) in cases {
+        let out = std::process::Command::new(PAVLOV)
+            .arg("experiment")
+            .args(args)
+            .arg("--out")
+            .arg(&out_dir)
+            .output()
+            .expect("run pavlov");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} was accepted");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(!out_dir.exists(), "{args:?} wrote {}", out_dir.display());
+    }
+}

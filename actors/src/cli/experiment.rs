@@ -110,6 +110,7 @@ fn load_config(path: Option<&PathBuf>, builtin: &str) -> Result<Config> {
 pub fn run(args: ExperimentArgs) -> Result<()> {
     match args.which {
         Experiment::Stall(a) => {
+            check_study(a.runs, a.minutes, MAX_STALL_RUNS)?;
             let config = load_config(a.config.as_ref(), STALL_CONFIG)?;
             let threads = a.threads.unwrap_or_else(default_threads);
             let opts = stall::StallOptions {
@@ -146,6 +147,11 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
                 a.minutes.unwrap_or(minutes),
                 out,
             );
+            check_study(opts.runs_per_policy, opts.minutes, MAX_INTERACTION_RUNS)?;
+            anyhow::ensure!(
+                a.commands >= 1,
+                "--commands must be at least 1 (the aligned averages need a command), got 0"
+            );
             opts.aligned_commands = a.commands;
             opts.record = !a.no_record && !long;
             opts.threads = default_threads();
@@ -180,6 +186,27 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// The most runs per policy a stall study takes from the command line (each is a few seconds of CPU).
+const MAX_STALL_RUNS: usize = 1000;
+/// The most run pairs an interaction study takes from the command line.
+const MAX_INTERACTION_RUNS: usize = 100;
+/// The longest run, minutes (a day).
+const MAX_MINUTES: f64 = 24.0 * 60.0;
+
+/// Refuses a study that would run nothing or forever: `--runs` from 1 to `max_runs`, `--minutes` above
+/// 0 and at most a day.
+fn check_study(runs: usize, minutes: f64, max_runs: usize) -> Result<()> {
+    anyhow::ensure!(
+        (1..=max_runs).contains(&runs),
+        "--runs must be from 1 to {max_runs}, got {runs}"
+    );
+    anyhow::ensure!(
+        minutes.is_finite() && minutes > 0.0 && minutes <= MAX_MINUTES,
+        "--minutes must be above 0 and at most {MAX_MINUTES} (a day), got {minutes}"
+    );
+    Ok(())
 }
 
 fn default_threads() -> usize {

@@ -8,6 +8,7 @@
 //! - [`interaction`]: "Reducing Lag By Predicting the Next Command" (Figures 3 and 4).
 
 pub mod interaction;
+pub(crate) mod plot_style;
 pub(crate) mod runner;
 pub mod stall;
 

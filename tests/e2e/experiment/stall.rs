@@ -118,6 +118,18 @@ fn a_short_study_is_deterministic_recorded_and_shows_the_effect() {
     assert_eq!(runs_csv.lines().count(), 5);
     let table = report::table(&a);
     assert!(table.contains("over-current observations"));
+    // Every row of the comparison table starts its numbers in the same column as the header's "reactive".
+    let mut lines = table.lines().skip(1);
+    let header = lines.next().expect("header");
+    let at = header.find("reactive").expect("reactive column");
+    let end = header[..at].chars().count() + "reactive".len();
+    for row in lines.take_while(|l| !l.starts_with("spread")) {
+        let cells: Vec<char> = row.chars().collect();
+        assert!(
+            cells[end - 1].is_ascii_digit() && cells[end] == ' ',
+            "misaligned row (column {end} of the header {header:?}): {row:?}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&out);
 }
 

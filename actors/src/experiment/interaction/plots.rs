@@ -10,6 +10,8 @@ use pavlov::control::Mode;
 use pavlov::record::TickRecord;
 use plotters::prelude::*;
 
+use crate::experiment::plot_style::{draw_legend, tick_label, with_legend_room};
+
 use super::InteractionStudy;
 use super::analysis::AlignedPoint;
 use super::run::{self as interaction, InteractionRun};
@@ -44,14 +46,20 @@ fn panel(
         });
     let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
     let pad = ((hi - lo) * 0.08).max(1e-6);
+    let top = with_legend_room(lo - pad, hi + pad, series.len(), area.dim_in_pixel().1);
     let mut ch = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 14))
         .margin(6)
-        .x_label_area_size(28)
+        .x_label_area_size(40)
         .y_label_area_size(50)
-        .build_cartesian_2d(x, (lo - pad)..(hi + pad))
+        .build_cartesian_2d(x, (lo - pad)..top)
         .map_err(err)?;
-    ch.configure_mesh().x_desc(x_desc).draw().map_err(err)?;
+    ch.configure_mesh()
+        .x_desc(x_desc)
+        .y_label_formatter(&tick_label)
+        .x_label_formatter(&tick_label)
+        .draw()
+        .map_err(err)?;
     for (color, pts) in bands {
         let outline: Vec<(f64, f64)> = pts
             .iter()
@@ -71,11 +79,7 @@ fn panel(
             .label(label.as_str())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
     }
-    ch.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
+    draw_legend(&mut ch).map_err(err)?;
     Ok(())
 }
 

@@ -110,8 +110,10 @@ pub fn table(s: &InteractionStudy) -> String {
     if let Some(w) = s.latency_welch {
         let _ = writeln!(
             t,
-            "  decision latency, Welch t = {:.2}, df = {:.1}, p = {:.3}",
-            w.t, w.df, w.p
+            "  decision latency, Welch t = {:.2}, df = {:.1}, p {}",
+            w.t,
+            w.df,
+            p_phrase(&w)
         );
     }
     let _ = writeln!(
@@ -162,11 +164,10 @@ pub fn table(s: &InteractionStudy) -> String {
             num(p.current_reactive.mean),
             num(p.current_pavlovian.mean),
             p.current_pavlovian.mean - p.current_reactive.mean,
-            p.current_welch
-                .map_or("–".into(), |w| format!("{:.3}", w.p)),
+            p.current_welch.map_or("–".into(), |w| w.p_text()),
             p.angle_reactive.mean,
             p.angle_pavlovian.mean,
-            p.angle_welch.map_or("–".into(), |w| format!("{:.3}", w.p)),
+            p.angle_welch.map_or("–".into(), |w| w.p_text()),
         );
     }
     let _ = writeln!(
@@ -280,4 +281,14 @@ pub(crate) fn curve_csv(s: &InteractionStudy) -> String {
         );
     }
     c
+}
+
+/// `= 0.012` or `< 0.001`, to follow a "p" in a sentence.
+fn p_phrase(w: &pavlov::analysis::stats::WelchTest) -> String {
+    let p = w.p_text();
+    if p.starts_with('<') {
+        p
+    } else {
+        format!("= {p}")
+    }
 }

@@ -11,6 +11,8 @@ use pavlov::control::Mode;
 use pavlov::record::TickRecord;
 use plotters::prelude::*;
 
+use crate::experiment::plot_style::{draw_legend, tick_label, with_legend_room};
+
 use super::WINDOW_S;
 use super::analysis::Analysis;
 use crate::experiment::mode_name;
@@ -86,6 +88,7 @@ pub(crate) fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
         let (v_lo, v_hi) = values.fold((-0.1f64, 1.1f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
         let (v_lo, v_hi) = (v_lo - 0.05, v_hi + 0.05);
         if let Some(area) = rows.first() {
+            let v_hi = with_legend_room(v_lo, v_hi, 2, area.dim_in_pixel().1);
             let mut ch = ChartBuilder::on(area)
                 .caption(
                     format!("{}: prediction and threshold", mode_name(*mode)),
@@ -96,7 +99,11 @@ pub(crate) fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
                 .y_label_area_size(40)
                 .build_cartesian_2d(span.clone(), v_lo..v_hi)
                 .map_err(err)?;
-            ch.configure_mesh().draw().map_err(err)?;
+            ch.configure_mesh()
+                .y_label_formatter(&tick_label)
+                .x_label_formatter(&tick_label)
+                .draw()
+                .map_err(err)?;
             ch.draw_series(LineSeries::new(
                 recs.iter()
                     .map(|r| (t(r), r.predictions.first().map_or(0.0, |p| p.value))),
@@ -113,11 +120,7 @@ pub(crate) fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
             .map_err(err)?
             .label("threshold")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK));
-            ch.configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()
-                .map_err(err)?;
+            draw_legend(&mut ch).map_err(err)?;
         }
         if let Some(area) = rows.get(1) {
             let mut ch = ChartBuilder::on(area)
@@ -127,7 +130,11 @@ pub(crate) fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
                 .y_label_area_size(40)
                 .build_cartesian_2d(span.clone(), -0.1f64..1.1f64)
                 .map_err(err)?;
-            ch.configure_mesh().draw().map_err(err)?;
+            ch.configure_mesh()
+                .y_label_formatter(&tick_label)
+                .x_label_formatter(&tick_label)
+                .draw()
+                .map_err(err)?;
             ch.draw_series(LineSeries::new(
                 recs.iter().map(|r| {
                     let oc = r.sensors.overcurrent_left || r.sensors.overcurrent_right;
@@ -138,14 +145,20 @@ pub(crate) fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
             .map_err(err)?;
         }
         if let Some(area) = rows.get(2) {
+            let w_top = with_legend_room(-300.0, 300.0, 2, area.dim_in_pixel().1);
             let mut ch = ChartBuilder::on(area)
                 .caption("wheel commands, mm/s", ("sans-serif", 14))
                 .margin(6)
                 .x_label_area_size(30)
                 .y_label_area_size(40)
-                .build_cartesian_2d(span.clone(), -300f64..300f64)
+                .build_cartesian_2d(span.clone(), -300f64..w_top)
                 .map_err(err)?;
-            ch.configure_mesh().x_desc("time, s").draw().map_err(err)?;
+            ch.configure_mesh()
+                .x_desc("time, s")
+                .y_label_formatter(&tick_label)
+                .x_label_formatter(&tick_label)
+                .draw()
+                .map_err(err)?;
             ch.draw_series(LineSeries::new(
                 recs.iter().map(|r| (t(r), f64::from(r.command.left_mm_s))),
                 c.stroke_width(2),
@@ -161,11 +174,7 @@ pub(crate) fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
             .map_err(err)?
             .label("right")
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], grey));
-            ch.configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()
-                .map_err(err)?;
+            draw_legend(&mut ch).map_err(err)?;
         }
     }
     root.present().map_err(err)
@@ -190,6 +199,7 @@ fn bar_panel(
         .build_cartesian_2d(-0.5f64..1.5f64, 0f64..top)
         .map_err(err)?;
     ch.configure_mesh()
+        .y_label_formatter(&tick_label)
         .disable_x_mesh()
         .x_labels(3)
         .x_label_formatter(&|x| match x.round() as i64 {
@@ -260,7 +270,8 @@ pub(crate) fn learning_curve(path: &Path, a: &Analysis) -> Io {
         })
         .filter(|v| v.is_finite())
         .fold(1.0f64, f64::max)
-        * 1.15;
+        * 1.05;
+    let top = with_legend_room(0.0, top, 2, root.dim_in_pixel().1);
     let mut ch = ChartBuilder::on(&root)
         .caption(
             format!("Over-current observations per {WINDOW_S} s window (mean ± SE over runs)"),
@@ -273,6 +284,8 @@ pub(crate) fn learning_curve(path: &Path, a: &Analysis) -> Io {
         .map_err(err)?;
     ch.configure_mesh()
         .x_desc("time, min (window centres)")
+        .y_label_formatter(&tick_label)
+        .x_label_formatter(&tick_label)
         .y_desc("over-current observations")
         .draw()
         .map_err(err)?;
@@ -304,11 +317,7 @@ pub(crate) fn learning_curve(path: &Path, a: &Analysis) -> Io {
         )
         .map_err(err)?;
     }
-    ch.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
+    draw_legend(&mut ch).map_err(err)?;
     root.present().map_err(err)
 }
 

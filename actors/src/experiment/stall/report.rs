@@ -174,22 +174,27 @@ pub fn table(study: &StallStudy) -> String {
          change with its 95 % bootstrap interval",
         o.seed, o.runs_per_policy, o.minutes
     );
+    // The metric column is as wide as its longest label, so every row's numbers line up.
+    let labels: Vec<String> = study
+        .analysis
+        .comparisons
+        .iter()
+        .map(|c| format!("{} ({})", c.label, c.unit))
+        .collect();
+    let w = labels
+        .iter()
+        .map(|l| l.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max(6);
     let _ = writeln!(
         s,
-        "{:<28} {:>24} {:>24} {:>9} {:>18} {:>8} {:>6} {:>8}",
+        "{:<w$} {:>24} {:>24} {:>9} {:>18} {:>8} {:>6} {:>8}",
         "metric", "reactive", "Pavlovian", "change", "95 % CI", "t", "df", "p"
     );
-    for c in &study.analysis.comparisons {
+    for (c, label) in study.analysis.comparisons.iter().zip(&labels) {
         let (t, df, p) = c.welch.map_or(("–".into(), "–".into(), "–".into()), |w| {
-            (
-                format!("{:.2}", w.t),
-                format!("{:.1}", w.df),
-                if w.p < 0.001 {
-                    format!("{:.0e}", w.p)
-                } else {
-                    format!("{:.3}", w.p)
-                },
-            )
+            (format!("{:.2}", w.t), format!("{:.1}", w.df), w.p_text())
         });
         let change = c
             .relative_change
@@ -199,8 +204,8 @@ pub fn table(study: &StallStudy) -> String {
         });
         let _ = writeln!(
             s,
-            "{:<28} {:>24} {:>24} {:>9} {:>18} {:>8} {:>6} {:>8}",
-            format!("{} ({})", c.label, c.unit),
+            "{:<w$} {:>24} {:>24} {:>9} {:>18} {:>8} {:>6} {:>8}",
+            label,
             pm(&c.reactive),
             pm(&c.pavlovian),
             change,
