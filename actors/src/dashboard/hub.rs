@@ -14,12 +14,14 @@ use pavlov::analysis::interaction::live::LiveInteraction;
 use pavlov::analysis::interaction::live_aligned::LiveAligned;
 use pavlov::analysis::run_counters::RunCounters;
 use pavlov::event::Event;
+use pavlov::learn::PredictionSpec;
 use pavlov::record::TickRecord;
 use tokio::sync::broadcast;
 use tokio_util::sync::CancellationToken;
 
 use super::history::{History, Snapshot};
 use super::history_messages::event_json;
+use super::learning::LearningTracks;
 use super::messages::{StatusHealth, StatusMessage, TickMessage};
 use super::protocol::STATUS_EVERY_TICKS;
 use crate::telemetry::Health;
@@ -43,6 +45,8 @@ pub(crate) enum Outgoing {
     },
     /// A `status` message (every client gets every one).
     Status(Utf8Bytes),
+    /// A `learning` message (every client gets every one, like a status).
+    Learning(Utf8Bytes),
     /// An `event` message (every client gets every one): as an operator and as a watcher sees it.
     Event {
         /// The event's id.
@@ -97,6 +101,7 @@ impl HubHandle {
 pub(crate) struct Hub {
     metrics: RunCounters,
     interaction: Option<(LiveInteraction, LiveAligned)>,
+    learning: LearningTracks,
     history: Arc<History>,
     period_ms: u64,
     tx: broadcast::Sender<Outgoing>,
@@ -123,12 +128,19 @@ impl Hub {
                         LiveAligned::new(period),
                     )
                 }),
+                learning: LearningTracks::new(&[]),
                 history: history.clone(),
                 period_ms,
                 tx: tx.clone(),
             },
             HubHandle { tx, history },
         )
+    }
+
+    /// Tracks the learning of the control predictions `specs` (the `learning` message).
+    pub(crate) fn with_learning(mut self, specs: &[PredictionSpec]) -> Self {
+        self.learning = LearningTracks::new(specs);
+        self
     }
 
     /// Handles one event: keeps it in the history and broadcasts it.
@@ -151,6 +163,7 @@ impl Hub {
         clients: usize,
     ) {
         self.metrics.observe(record);
+        self.learning.observe(record);
         if let Some((live, aligned)) = &mut self.interaction {
             live.observe(record);
             aligned.observe(record);
@@ -177,6 +190,9 @@ impl Hub {
                 .with_aligned(aligned.as_ref())
                 .to_json();
             let _ = self.tx.send(Outgoing::Status(Utf8Bytes::from(status)));
+            if let Some(learning) = self.learning.take_message(record.seq) {
+                let _ = self.tx.send(Outgoing::Learning(Utf8Bytes::from(learning)));
+            }
         }
     }
 }
@@ -279,6 +295,7 @@ mod tests {
                     statuses.push(serde_json::from_str::<serde_json::Value>(&text).unwrap())
                 }
                 Outgoing::Event { .. } => panic!("no event was made"),
+                Outgoing::Learning(_) => panic!("no prediction is tracked"),
             }
         }
         assert_eq!(ticks, (0..21).collect::<Vec<_>>());
@@ -401,7 +418,7 @@ mod tests {
                     assert!(watcher.as_str().contains(r#""t":0.8"#), "{watcher}");
                     live_events.push(id);
                 }
-                Outgoing::Status(_) => {}
+                Outgoing::Status(_) | Outgoing::Learning(_) => {}
             }
         }
         assert_eq!(live_ticks, (30..40).collect::<Vec<_>>());

@@ -34,6 +34,7 @@ pub(crate) mod history;
 pub(crate) mod history_messages;
 pub(crate) mod http;
 pub(crate) mod hub;
+pub(crate) mod learning;
 pub(crate) mod messages;
 pub(crate) mod out_queue;
 pub(crate) mod pending;
@@ -217,6 +218,7 @@ impl Dashboard {
             server.params_at_start.iter().map(Into::into).collect(),
         );
         let (hub, hub_handle) = Hub::new(period_ms, gesture_commands, history);
+        let hub = hub.with_learning(&server.config.predictions);
         let hub_counters = Arc::new(HubCounters::default());
         let guard_counters = Arc::new(guard::GuardCounters::default());
         let pending = Arc::new(Mutex::new(pending::PendingPool::new(

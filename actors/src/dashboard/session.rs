@@ -416,7 +416,9 @@ async fn forward(mut rx: broadcast::Receiver<Outgoing>, f: Forwarding) {
                 }
                 queue.push_telemetry(Out::Text(text))
             }
-            Ok(Outgoing::Status(text)) => queue.push_telemetry(Out::Text(text)),
+            Ok(Outgoing::Status(text) | Outgoing::Learning(text)) => {
+                queue.push_telemetry(Out::Text(text))
+            }
             Ok(Outgoing::Event { id, .. }) if id <= seen.through_event => continue,
             Ok(Outgoing::Event {
                 operator,
