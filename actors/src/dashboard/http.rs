@@ -107,6 +107,8 @@ pub(crate) struct AppState {
     pub(crate) token_throttled: AtomicU64,
     /// Fires on shut-down.
     pub(crate) cancel: CancellationToken,
+    /// The Horde's names and values for the clients that watch it (`None`: no `[horde]`).
+    pub(crate) horde: Option<Arc<super::horde_feed::HordeFeed>>,
 }
 
 impl AppState {
@@ -397,6 +399,7 @@ async fn ws_handler(
         rate: state.rate,
         counters: state.session_counters.clone(),
         cancel: state.cancel.clone(),
+        horde: state.horde.clone(),
     };
     ws.protocols([SUBPROTOCOL])
         .max_message_size(state.max_message_bytes)

@@ -32,6 +32,7 @@ pub mod guard;
 pub(crate) mod hello_config;
 pub(crate) mod history;
 pub(crate) mod history_messages;
+pub(crate) mod horde_feed;
 pub(crate) mod http;
 pub(crate) mod hub;
 pub(crate) mod learning;
@@ -264,6 +265,10 @@ impl Dashboard {
             token_failures: AtomicU64::new(0),
             token_throttled: AtomicU64::new(0),
             cancel: cancel.clone(),
+            horde: server
+                .horde
+                .as_ref()
+                .map(|view| Arc::new(horde_feed::HordeFeed::new(view))),
         });
         let (earlier_events, events) = server.events.subscribe_with_recent();
         let hub = runtime.spawn(hub::run(
