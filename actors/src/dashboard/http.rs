@@ -146,6 +146,14 @@ impl AppState {
             closed_no_upgrade: load(&self.guard_counters.timed_out),
             token_failures: load(&self.token_failures),
             token_throttled: load(&self.token_throttled),
+            horde_values: self
+                .horde
+                .as_ref()
+                .map_or(0, |h| load(&h.counters.frames_sent)),
+            horde_values_skipped: self
+                .horde
+                .as_ref()
+                .map_or(0, |h| load(&h.counters.frames_skipped)),
         }
     }
 

@@ -7,6 +7,7 @@ mod analysis;
 mod browser;
 mod browser_analysis;
 mod learning_bounds;
+mod learning_view;
 mod metrics;
 mod operator;
 mod protocol;
