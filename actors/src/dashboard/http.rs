@@ -38,7 +38,7 @@ use crate::telemetry::prometheus::MetricsSnapshot;
 const INDEX_HTML: &str = include_str!("../../../web/index.html");
 const STYLE_CSS: &str = include_str!("../../../web/style.css");
 /// The page's modules, by path.
-const SCRIPTS: [(&str, &str); 7] = [
+const SCRIPTS: [(&str, &str); 9] = [
     ("/app.js", include_str!("../../../web/app.js")),
     ("/lib.js", include_str!("../../../web/lib.js")),
     ("/timeline.js", include_str!("../../../web/timeline.js")),
@@ -46,6 +46,8 @@ const SCRIPTS: [(&str, &str); 7] = [
     ("/controls.js", include_str!("../../../web/controls.js")),
     ("/panels.js", include_str!("../../../web/panels.js")),
     ("/elbow.js", include_str!("../../../web/elbow.js")),
+    ("/learning.js", include_str!("../../../web/learning.js")),
+    ("/learnlib.js", include_str!("../../../web/learnlib.js")),
 ];
 
 /// The files of the uPlot package the page loads, relative to the web directory.

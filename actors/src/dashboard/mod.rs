@@ -241,6 +241,7 @@ impl Dashboard {
                     .collect(),
                 gate_prediction: server.config.control.gate_prediction.clone(),
                 bounds: LearningBounds::for_config(&server.config),
+                horde_predictions: server.horde.as_ref().map_or(0, |h| h.names.len()),
             },
             operator_config: hello_config::for_operator(&server.config),
             watcher_config: hello_config::for_watcher(&server.config),

@@ -6,6 +6,7 @@ mod abusers;
 mod analysis;
 mod browser;
 mod browser_analysis;
+mod browser_learning;
 mod learning_bounds;
 mod learning_view;
 mod metrics;
