@@ -59,7 +59,7 @@ state.learning = new LearningView({
 });
 state.horde = new HordeView({
   none: $('horde-none'), body: $('horde-body'), info: $('horde-info'), grid: $('horde-grid'), gridBox: $('horde-grid-box'),
-  hover: $('horde-hover'), scale: $('horde-scale'), chart: $('chart-horde'), chartCard: $('horde-chart-card'),
+  hover: $('horde-hover'), scale: $('horde-scale'), colourBy: $('horde-colour'), chart: $('chart-horde'), chartCard: $('horde-chart-card'),
 }, (cmd, args) => send(cmd, args));
 const charts = new Charts(timeline, renderView);
 const aligned = new AlignedCharts();

@@ -6,7 +6,7 @@
 // parts are in learnlib.js.
 
 import {
-  HordeSeries, LearningStore, cellAt, colourOf, colourRange, decodeHordeValues, gridLayout, hordeName,
+  HordeSeries, LearningStore, OwnRanges, cellAt, colourOf, colourRange, decodeHordeValues, gridLayout, hordeName, sig,
 } from './learnlib.js';
 import { fmt, fmtParam } from './lib.js';
 
@@ -156,6 +156,12 @@ export class HordeView {
     this.figures = null;
     this.hover = -1;
     this.messages = 0;
+    this.ranges = new OwnRanges();
+    this.colourBy = els.colourBy.value;
+    els.colourBy.addEventListener('change', () => {
+      this.colourBy = els.colourBy.value;
+      this.dirty = true;
+    });
     els.grid.addEventListener('mousemove', (ev) => this.onHover(ev));
     els.grid.addEventListener('mouseleave', () => {
       this.hover = -1;
@@ -205,6 +211,7 @@ export class HordeView {
     this.seq = msg.seq;
     this.figures = msg.horde || null;
     this.messages += 1;
+    this.ranges.update(msg.from, values);
     this.series.push(msg.seq * this.periodS, msg.from, values);
     this.dirty = true;
   }
@@ -233,7 +240,8 @@ export class HordeView {
     const name = this.names[index] || `#${index}`;
     const parts = hordeName(name);
     const detail = parts.tau != null ? ` (cumulant ${parts.cumulant}, τ ${parts.tau})` : '';
-    this.els.hover.textContent = `${name}${detail}: ${fmt(this.values[this.hover], 4)}`;
+    const own = `range seen ${sig(this.ranges.lo[this.hover])} … ${sig(this.ranges.hi[this.hover])}`;
+    this.els.hover.textContent = `${name}${detail}: ${sig(this.values[this.hover])} (${own})`;
   }
 
   /** The chart's series follow the predictions picked. */
@@ -242,7 +250,7 @@ export class HordeView {
     while (this.chart.series.length > 1) this.chart.delSeries(1);
     this.series.picked.forEach((index, k) => {
       this.chart.addSeries({
-        label: this.names[index] || `#${index}`, stroke: COLORS[k % COLORS.length], width: 2, value: readout(4),
+        label: this.names[index] || `#${index}`, stroke: COLORS[k % COLORS.length], width: 2, value: (u, v) => (v == null ? '—' : sig(v)),
       }, k + 1);
     });
     this.els.chartCard.hidden = this.series.picked.length === 0;
@@ -262,14 +270,20 @@ export class HordeView {
     if (!n) return;
     const width = Math.max(200, Math.floor(this.els.gridBox.getBoundingClientRect().width));
     this.layout = gridLayout(n, width);
-    const { lo, hi } = colourRange(this.values);
-    this.drawGrid(lo, hi);
-    this.els.scale.textContent = `colour: ${fmt(lo, 3)} … ${fmt(hi, 3)} (2nd–98th percentile)`;
+    if (this.colourBy === 'own') {
+      this.drawGrid((i) => colourOf(this.ranges.fraction(i, this.values[i]), 0, 1));
+      this.els.scale.textContent = 'colour: each prediction against the range of its own values seen (dark: its lowest, yellow: its highest)';
+    } else {
+      const { lo, hi } = colourRange(this.values);
+      this.drawGrid((i) => colourOf(this.values[i], lo, hi));
+      this.els.scale.textContent = `colour: one scale for all, ${sig(lo)} … ${sig(hi)} (2nd–98th percentile)`;
+    }
     this.showHover();
     if (this.chart && this.series.picked.length) this.chart.setData([this.series.t, ...this.series.columns]);
   }
 
-  drawGrid(lo, hi) {
+  /** Draws the grid, cell `i` in `colourAt(i)`. */
+  drawGrid(colourAt) {
     const { cols, rows, cell } = this.layout;
     const canvas = this.els.grid;
     const dpr = window.devicePixelRatio || 1;
@@ -280,7 +294,7 @@ export class HordeView {
     // One pixel a cell, then scaled up without smoothing: 10⁴ cells are one small image.
     const img = new ImageData(cols, rows);
     for (let i = 0; i < this.values.length; i += 1) {
-      const [r, g, b] = colourOf(this.values[i], lo, hi);
+      const [r, g, b] = colourAt(i);
       img.data.set([r, g, b, 255], i * 4);
     }
     const off = document.createElement('canvas');

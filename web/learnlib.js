@@ -202,6 +202,48 @@ export function colourRange(values) {
   return { lo, hi };
 }
 
+/**
+ * Each prediction's own range of values seen (for colouring each cell against itself, when the predictions'
+ * scales differ by orders of magnitude, as a cumulant in mAh and one in [0, 1] do).
+ */
+export class OwnRanges {
+  constructor() {
+    this.from = -1;
+    this.lo = new Float32Array(0);
+    this.hi = new Float32Array(0);
+  }
+
+  /** One sample of predictions `from … from + values.length − 1`; a new window starts afresh. */
+  update(from, values) {
+    if (from !== this.from || values.length !== this.lo.length) {
+      this.from = from;
+      this.lo = new Float32Array(values.length).fill(Infinity);
+      this.hi = new Float32Array(values.length).fill(-Infinity);
+    }
+    for (let i = 0; i < values.length; i += 1) {
+      const v = values[i];
+      if (!Number.isFinite(v)) continue;
+      if (v < this.lo[i]) this.lo[i] = v;
+      if (v > this.hi[i]) this.hi[i] = v;
+    }
+  }
+
+  /** `values[i]` as a fraction of its own range seen (0.5 while the range is a point; NaN stays NaN). */
+  fraction(i, v) {
+    if (!Number.isFinite(v)) return NaN;
+    const span = this.hi[i] - this.lo[i];
+    return span > 0 ? (v - this.lo[i]) / span : 0.5;
+  }
+}
+
+/** A number with `digits` significant digits (no thousands separators, exponent when very large or small). */
+export function sig(v, digits = 4) {
+  if (typeof v !== 'number' || Number.isNaN(v)) return '—';
+  if (v === 0 || !Number.isFinite(v)) return String(v);
+  const a = Math.abs(v);
+  return a >= 1e6 || a < 1e-4 ? v.toExponential(digits - 1) : String(Number(v.toPrecision(digits)));
+}
+
 // A perceptual sequential scale (viridis, 9 stops).
 const VIRIDIS = [
   [68, 1, 84], [72, 40, 120], [62, 74, 137], [49, 104, 142], [38, 130, 142],

@@ -3,7 +3,7 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  HordeSeries, LearningStore, base64Bytes, cellAt, colourOf, colourRange, decodeHordeValues, gridLayout, hordeName,
+  HordeSeries, LearningStore, OwnRanges, base64Bytes, cellAt, colourOf, colourRange, decodeHordeValues, gridLayout, hordeName, sig,
 } from '../learnlib.js';
 
 test('the store pairs tick values with TD errors and returns that arrive later', () => {
@@ -116,4 +116,28 @@ test('clicked predictions are charted from their next sample, at most six', () =
   // A second click takes it off.
   assert.equal(h.toggle(2), false);
   assert.deepEqual(h.picked, [0]);
+});
+
+test('each cell can be coloured against its own range', () => {
+  const r = new OwnRanges();
+  r.update(10, [1, 100, 5]);
+  assert.equal(r.fraction(0, 1), 0.5);
+  r.update(10, [3, 300, NaN]);
+  assert.equal(r.fraction(0, 2), 0.5);
+  assert.equal(r.fraction(1, 300), 1);
+  assert.equal(r.fraction(1, 100), 0);
+  assert.equal(r.fraction(2, 5), 0.5);
+  assert.ok(Number.isNaN(r.fraction(0, NaN)));
+  // Another window starts afresh.
+  r.update(0, [7, 7, 7]);
+  assert.equal(r.fraction(1, 7), 0.5);
+});
+
+test('numbers are shown with significant digits', () => {
+  assert.equal(sig(135168), '135200');
+  assert.equal(sig(0.0227272), '0.02273');
+  assert.equal(sig(-1568), '-1568');
+  assert.equal(sig(2.5e7), '2.500e+7');
+  assert.equal(sig(NaN), '—');
+  assert.equal(sig(0), '0');
 });
