@@ -157,9 +157,12 @@ impl Session {
         }
         let hello = self.hello.clone().with_in_force(in_force).to_json();
         let _ = queue.push_control(Out::Text(hello.into()));
+        // The recent `learning` messages go out after the history, before the live telemetry.
+        let recent_learning = self.hub.recent_learning();
         let seen = Seen {
             through_seq: snapshot.last_seq,
             through_event: snapshot.last_event_id,
+            through_learning: recent_learning.last().map(|(seq, _)| *seq),
         };
         let history = HistoryMessages::new(
             snapshot,
@@ -177,7 +180,11 @@ impl Session {
                 seen,
             },
         ));
-        let writer = write(sink, queue.clone(), self.counters.clone(), history);
+        let past = Past {
+            history: Some(history),
+            learning: recent_learning.into_iter().map(|(_, text)| text).collect(),
+        };
+        let writer = write(sink, queue.clone(), self.counters.clone(), past);
         tokio::pin!(writer);
         tokio::select! {
             _ = &mut writer => {}
@@ -488,6 +495,7 @@ fn classify_read_error(e: &axum::Error) -> ReadError {
 struct Seen {
     through_seq: Option<u64>,
     through_event: u64,
+    through_learning: Option<u64>,
 }
 
 /// Where the forwarder puts what it passes, and how it chooses.
@@ -523,9 +531,13 @@ async fn forward(mut rx: broadcast::Receiver<Outgoing>, f: Forwarding) {
                 }
                 queue.push_telemetry(Out::Text(text))
             }
-            Ok(Outgoing::Status(text) | Outgoing::Learning(text)) => {
-                queue.push_telemetry(Out::Text(text))
+            Ok(Outgoing::Status(text)) => queue.push_telemetry(Out::Text(text)),
+            Ok(Outgoing::Learning { seq, .. })
+                if seen.through_learning.is_some_and(|s| seq <= s) =>
+            {
+                continue;
             }
+            Ok(Outgoing::Learning { text, .. }) => queue.push_telemetry(Out::Text(text)),
             Ok(Outgoing::Event { id, .. }) if id <= seen.through_event => continue,
             Ok(Outgoing::Event {
                 operator,
@@ -546,17 +558,28 @@ async fn forward(mut rx: broadcast::Receiver<Outgoing>, f: Forwarding) {
     }
 }
 
-/// The next message to write: a reply first, then the history's next message (while the connection is
-/// open), then telemetry; `None` once the queue is closed and drained.
-async fn next_out(queue: &OutQueue<Out>, history: &mut Option<HistoryMessages>) -> Option<Out> {
+/// What a new client is sent before its live telemetry: the history, then the recent `learning` messages.
+struct Past {
+    history: Option<HistoryMessages>,
+    learning: std::collections::VecDeque<Utf8Bytes>,
+}
+
+/// The next message to write: a reply first, then the past (while the connection is open), then
+/// telemetry; `None` once the queue is closed and drained.
+async fn next_out(queue: &OutQueue<Out>, past: &mut Past) -> Option<Out> {
     if let Some(reply) = queue.try_pop_control() {
         return Some(reply);
     }
-    if let Some(h) = history {
+    if let Some(h) = &mut past.history {
         match h.next() {
             Some(text) if !queue.is_closed() => return Some(Out::Text(text.into())),
-            _ => *history = None,
+            _ => past.history = None,
         }
+    }
+    if !queue.is_closed()
+        && let Some(text) = past.learning.pop_front()
+    {
+        return Some(Out::Text(text));
     }
     queue.pop().await
 }
@@ -565,10 +588,9 @@ async fn write(
     mut sink: futures_util::stream::SplitSink<WebSocket, Message>,
     queue: Arc<OutQueue<Out>>,
     counters: Arc<SessionCounters>,
-    history: HistoryMessages,
+    mut past: Past,
 ) {
-    let mut history = Some(history);
-    while let Some(out) = next_out(&queue, &mut history).await {
+    while let Some(out) = next_out(&queue, &mut past).await {
         let (msg, last) = match out {
             Out::Text(text) => (Message::Text(text), false),
             Out::Close(code, reason) => (

@@ -144,6 +144,38 @@ async fn learning_messages_carry_td_errors_and_returns_that_the_ticks_confirm() 
         "{last}"
     );
     assert!(last["rmse"].as_f64().unwrap() >= last["mean_abs"].as_f64().unwrap() - 1e-6);
+
+    // A client joining now gets the recent `learning` messages after its history, before the live ticks,
+    // oldest first, and then the live ones without a repeat.
+    let (mut late, _) = ws_from(loopback(3), lab.addr(), None).await.unwrap();
+    let mut recent = Vec::new();
+    let first_tick = loop {
+        let v = next_json(&mut late).await;
+        match v["type"].as_str() {
+            Some("learning") => recent.push(v["seq"].as_u64().unwrap()),
+            Some("tick") => break v["seq"].as_u64().unwrap(),
+            _ => {}
+        }
+    };
+    assert!(recent.len() >= 20, "{recent:?}");
+    assert!(
+        recent.windows(2).all(|w| w[1] > w[0] && w[1] % 10 == 0),
+        "{recent:?}"
+    );
+    assert!(
+        *recent.last().unwrap() + 20 >= first_tick,
+        "{recent:?} then tick {first_tick}"
+    );
+    let next_live = loop {
+        let v = next_json(&mut late).await;
+        if v["type"] == "learning" {
+            break v["seq"].as_u64().unwrap();
+        }
+    };
+    assert!(
+        next_live > *recent.last().unwrap(),
+        "{next_live} after {recent:?}"
+    );
     lab.stop().await;
 }
 
