@@ -240,7 +240,9 @@ function onHello(h) {
 }
 
 function onHistory(msg) {
-  timeline.merge(samplesFromHistory(msg));
+  const samples = samplesFromHistory(msg);
+  timeline.merge(samples);
+  state.learning.history(samples, state.hello ? state.hello.signals.predictions : []);
   for (const e of Array.isArray(msg.events) ? msg.events : []) onEvent(e, true);
   charts.touch();
   if (msg.more === false) {

@@ -96,6 +96,18 @@ export class LearningView {
     for (const p of Array.isArray(t.predictions) ? t.predictions : []) this.store.addValue(p.name, t.seq, p.value);
   }
 
+  /** Samples of the `history` (timeline.js): the predictions' values, in the order of `names`. */
+  history(samples, names) {
+    for (const sample of samples) {
+      names.forEach((name, i) => {
+        const p = sample.preds[i];
+        if (p) this.store.addValue(name, sample.seq, p[0]);
+      });
+    }
+    for (const e of this.store.byName.values()) this.store.prune(e);
+    this.dirty = true;
+  }
+
   /** A `learning` message. */
   message(msg) {
     this.store.addMessage(msg);

@@ -4,8 +4,9 @@
 //!
 //! - [`protocol`]: the client commands (see `web/PROTOCOL.md`), parsed with precise errors, and the replies;
 //! - [`messages`]: the server's `hello`, `tick` and `status` messages;
-//! - [`hub`]: serialises each tick and event once and fans them out, and keeps the run counters and the
-//!   [`history`] (sent to a new client as [`history_messages`]);
+//! - [`hub`]: serialises each tick and event once and fans them out, and keeps the run counters, the
+//!   [`history`] (sent to a new client as [`history_messages`]) and the [`learning`] figures;
+//! - [`horde_feed`]: the Horde's names and values for the clients that ask (`horde_watch`);
 //! - [`client`]: each client's bounded, drop-oldest queue and its tick-rate decimation;
 //! - [`session`]: one connection's reader, writer and forwarder;
 //! - [`rate`]: the per-connection message rate limit;
