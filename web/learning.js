@@ -80,7 +80,10 @@ export class LearningView {
       this.charts = {
         ret: timeChart(this.els.returnChart, 'value / return', [
           { label: 'value v', stroke: '#2563eb', width: 2, value: readout(3) },
-          { label: 'realised return G', stroke: '#d97706', width: 2, dash: [6, 3], value: readout(3) },
+          // Spanning gaps: a message may carry every k-th return only (`thinned`).
+          {
+            label: 'realised return G', stroke: '#d97706', width: 2, dash: [6, 3], spanGaps: true, value: readout(3),
+          },
         ]),
         td: timeChart(this.els.tdChart, 'δ / error', [
           { label: 'TD error δ', stroke: '#7c3aed', width: 1, value: readout(4) },

@@ -15,6 +15,11 @@ use serde::Serialize;
 
 use super::protocol::STATUS_EVERY_TICKS;
 
+/// The most `[seq, value, return, complete]` pairs of one prediction in one message. A stimulus completes
+/// every waiting return at once, up to a horizon of them (15,000 at most): past this many, the message
+/// carries every `thinned`-th one, evenly spread (the running error still counts them all).
+pub(crate) const MAX_PAIRS_PER_MESSAGE: usize = 1024;
+
 /// One prediction's tracker and what it found since the last message.
 struct Track {
     spec: PredictionSpec,
@@ -46,6 +51,8 @@ struct PredictionFigures<'a> {
     td: &'a [(u64, Option<f32>)],
     /// `[seq, value, return, complete]` for every return that became known since the last message.
     realised: Vec<(u64, f32, f32, u8)>,
+    /// 1, or k when only every k-th pair is in `realised` (see [`MAX_PAIRS_PER_MESSAGE`]).
+    thinned: usize,
     error: ErrorJson,
     /// Values whose returns were lost to a gap in the ticks the hub saw, since the start.
     dropped: u64,
@@ -122,19 +129,24 @@ impl LearningTracks {
         let predictions = self
             .tracks
             .iter()
-            .map(|t| PredictionFigures {
-                name: &t.spec.name,
-                tau: t.spec.tau,
-                horizon: t.tracker.horizon(),
-                tail_bound: t.tracker.tail_bound() as f32,
-                td: &t.td,
-                realised: t
-                    .realised
-                    .iter()
-                    .map(|r| (r.seq, r.value as f32, r.ret as f32, u8::from(r.complete)))
-                    .collect(),
-                error: t.tracker.error().into(),
-                dropped: t.tracker.dropped(),
+            .map(|t| {
+                let thinned = t.realised.len().div_ceil(MAX_PAIRS_PER_MESSAGE).max(1);
+                PredictionFigures {
+                    name: &t.spec.name,
+                    tau: t.spec.tau,
+                    horizon: t.tracker.horizon(),
+                    tail_bound: t.tracker.tail_bound() as f32,
+                    td: &t.td,
+                    realised: t
+                        .realised
+                        .iter()
+                        .step_by(thinned)
+                        .map(|r| (r.seq, r.value as f32, r.ret as f32, u8::from(r.complete)))
+                        .collect(),
+                    thinned,
+                    error: t.tracker.error().into(),
+                    dropped: t.tracker.dropped(),
+                }
             })
             .collect();
         let text = serde_json::to_string(&LearningMessage {
@@ -205,6 +217,28 @@ mod tests {
         assert_eq!(v["predictions"][0]["td"].as_array().unwrap().len(), 1);
         assert_eq!(v["predictions"][0]["realised"].as_array().unwrap().len(), 0);
         assert_eq!(v["predictions"][0]["error"]["pairs"], 3);
+    }
+
+    #[test]
+    fn a_stimulus_after_a_long_horizon_sends_a_bounded_number_of_pairs() {
+        // τ = 2000: a horizon of 9,209 ticks; a stimulus after 3,000 quiet ticks completes 3,000 returns.
+        let mut config = pavlov::config::Config::from_toml(STALL).unwrap();
+        config.predictions[0].tau = 2000.0;
+        let mut tracks = LearningTracks::new(&config.predictions);
+        for seq in 0..3_000 {
+            tracks.observe(&record(seq, 0.5, false));
+        }
+        tracks.take_message(2_999);
+        tracks.observe(&record(3_000, 0.5, true));
+        let text = tracks.take_message(3_000).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let p = &v["predictions"][0];
+        assert_eq!(p["thinned"], 3, "{}", &text[..200]);
+        let realised = p["realised"].as_array().unwrap();
+        assert_eq!(realised.len(), 1_000);
+        assert_eq!(realised[1][0], 3);
+        assert_eq!(p["error"]["pairs"], 3_000);
+        assert!(text.len() < 64 * 1024, "{} bytes", text.len());
     }
 
     #[test]
