@@ -377,3 +377,55 @@ async fn a_client_watches_the_horde_at_a_bounded_rate_and_bad_requests_are_refus
     assert!(lab.dash.stats().horde_values >= 6);
     lab.stop().await;
 }
+
+/// A Horde of 880 predictions (every observation dimension at 20 timescales): 2.3 kB `horde_values`.
+fn with_a_bigger_horde(cfg: &mut Config) {
+    let stall = include_str!("../../../config/stall.toml");
+    let taus: Vec<String> = (0..20).map(|i| format!("{}.0", 2 + 3 * i)).collect();
+    let horde = HORDE.replace("[2.0, 10.0, 50.0]", &format!("[{}]", taus.join(", ")));
+    cfg.horde = Config::from_toml(&format!("{stall}\n{horde}"))
+        .unwrap()
+        .horde;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_watcher_that_stops_reading_holds_no_backlog_of_horde_values() {
+    use futures_util::SinkExt;
+    use tokio_tungstenite::tungstenite::Message;
+    let lab = Lab::start(with_a_bigger_horde).await;
+    assert_eq!(lab.server.horde.as_ref().unwrap().names.len(), 880);
+    // A client with a 4 kB receive buffer, so that the server's socket fills within a second or two.
+    let sock = tokio::net::TcpSocket::new_v4().unwrap();
+    sock.set_recv_buffer_size(4096).unwrap();
+    sock.bind(std::net::SocketAddr::new(loopback(4), 0))
+        .unwrap();
+    let tcp = sock.connect(lab.addr()).await.unwrap();
+    let (mut ws, _) = tokio_tungstenite::client_async(
+        format!("ws://{}/ws", lab.addr()),
+        tokio_tungstenite::MaybeTlsStream::Plain(tcp),
+    )
+    .await
+    .unwrap();
+    ws.send(Message::text(
+        json!({"cmd": "horde_watch", "hz": 10, "id": 1}).to_string(),
+    ))
+    .await
+    .unwrap();
+    // Not reading for 4 s: 40 samples asked for, most of them while the socket is full.
+    tokio::time::sleep(Duration::from_secs(4)).await;
+    let stats = lab.dash.stats();
+    assert!(
+        stats.horde_values_skipped >= 10,
+        "the server kept queueing Horde values for a client that reads nothing: {stats:?}"
+    );
+    assert!(stats.horde_values <= 40, "{stats:?}");
+    // Reading again: the connection is still open and fresh values keep coming, newest first, no stale run.
+    let (_, got) = gather(&mut ws, Duration::from_secs(3), &["horde_values"]).await;
+    let seqs: Vec<u64> = got.iter().map(|m| m["seq"].as_u64().unwrap()).collect();
+    assert!(seqs.len() >= 5, "{seqs:?}");
+    assert!(seqs.windows(2).all(|w| w[1] > w[0]), "{seqs:?}");
+    for m in &got {
+        assert_eq!(decode(m).len(), 880);
+    }
+    lab.stop().await;
+}
