@@ -10,6 +10,7 @@ import {
 import { ElbowPanel } from './elbow.js';
 import { AlignedCharts, Charts } from './charts.js';
 import { wireControls } from './controls.js';
+import { HordeView, LearningView } from './learning.js';
 import {
   applyLimits, labelRequest, renderInForce, renderNow, renderRecording, renderStatus, robotText, showParamsError,
 } from './panels.js';
@@ -50,6 +51,16 @@ const state = {
 state.elbow = new ElbowPanel({
   card: $('elbow-card'), chart: $('chart-elbow'), status: $('now-skeleton'), banner: $('skeleton-banner'),
 });
+// The learning view (learning.js): value against realised return, δ, running error; the Horde's grid.
+state.learning = new LearningView({
+  pick: $('learn-pick'), params: $('learn-params'), empty: $('learn-empty'), rmse: $('learn-rmse'), mae: $('learn-mae'),
+  bias: $('learn-bias'), pairs: $('learn-pairs'), td: $('learn-td'), horizon: $('learn-horizon'),
+  returnChart: $('chart-learn-return'), tdChart: $('chart-learn-td'),
+});
+state.horde = new HordeView({
+  none: $('horde-none'), body: $('horde-body'), info: $('horde-info'), grid: $('horde-grid'), gridBox: $('horde-grid-box'),
+  hover: $('horde-hover'), scale: $('horde-scale'), colourBy: $('horde-colour'), chart: $('chart-horde'), chartCard: $('horde-chart-card'),
+}, (cmd, args) => send(cmd, args));
 const charts = new Charts(timeline, renderView);
 const aligned = new AlignedCharts();
 state.view = charts.view;
@@ -178,6 +189,9 @@ function onMessage(msg) {
     case 'event': return onEvent(msg, false);
     case 'tick': return onTick(msg);
     case 'status': return renderStatus(state, msg, aligned);
+    case 'learning': return state.learning.message(msg);
+    case 'horde_names': return state.horde.onNames(msg);
+    case 'horde_values': return state.horde.onValues(msg);
     case 'ack': return onAck(msg);
     case 'error': return onError(msg);
     default: return undefined;
@@ -219,11 +233,16 @@ function onHello(h) {
   setLive(true);
   charts.build(h.signals.predictions, h.tick_period_ms / 1000);
   state.elbow.configure(h);
+  state.learning.configure(h);
+  state.learning.setParams(state.params);
+  state.horde.configure(h);
   log(`connected to ${h.server} (protocol ${h.protocol})`);
 }
 
 function onHistory(msg) {
-  timeline.merge(samplesFromHistory(msg));
+  const samples = samplesFromHistory(msg);
+  timeline.merge(samples);
+  state.learning.history(samples, state.hello ? state.hello.signals.predictions : []);
   for (const e of Array.isArray(msg.events) ? msg.events : []) onEvent(e, true);
   charts.touch();
   if (msg.more === false) {
@@ -244,7 +263,10 @@ function onEvent(e, fromHistory) {
   if (!timeline.addEvent({ ...e, label })) return;
   charts.touch();
   if (fromHistory) return;
-  if (e.kind === 'params_set') renderInForce(state);
+  if (e.kind === 'params_set') {
+    renderInForce(state);
+    state.learning.setParams(state.params);
+  }
   if (e.kind === 'recording_started') state.recording = e.path;
   if (e.kind === 'recording_stopped') state.recording = null;
   if (e.kind.startsWith('recording_')) renderRecording(state);
@@ -258,6 +280,7 @@ function onTick(t) {
   state.dirty = true;
   if (timeline.push(sampleFromTick(t))) charts.touch();
   state.elbow.push(t);
+  state.learning.tick(t);
   if (state.mode !== t.mode) {
     state.mode = t.mode;
     for (const b of document.querySelectorAll('.mode')) {
@@ -326,6 +349,8 @@ function downloadCsv() {
 
 function frame() {
   charts.draw();
+  state.learning.render();
+  state.horde.render();
   if (state.dirty) {
     state.dirty = false;
     state.elbow.render();

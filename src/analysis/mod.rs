@@ -6,8 +6,11 @@
 //! - [`interaction`]: response timing against a human's commands, live and after the run.
 //! - [`stats`]: descriptive statistics, Welch's t-test and the small numerical helpers they need.
 //! - [`bootstrap`]: a difference of two means with a percentile-bootstrap confidence interval.
+//! - [`realised_return`]: a prediction's values against the returns they predicted, its running error and
+//!   TD error (the dashboard's learning view).
 
 pub mod bootstrap;
 pub mod interaction;
+pub mod realised_return;
 pub mod run_counters;
 pub mod stats;

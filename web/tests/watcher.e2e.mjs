@@ -23,8 +23,11 @@ try {
   summary.robot_name = name;
   const stallsLabel = await page.locator('#c-stalls-label').textContent();
   if (stallsLabel !== 'Stall events') fail(`stall counter labelled "${stallsLabel}"`);
-  const charts = await page.locator('.uplot').count();
-  if (charts !== 4) fail(`expected 4 charts, found ${charts}`);
+  // The four strip charts, and the learning view's two (value vs return, δ).
+  const charts = await page.locator('.chart-card:not(.learn-card):not(.horde-card) .uplot').count();
+  if (charts !== 4) fail(`expected 4 strip charts, found ${charts}`);
+  const learningCharts = await page.locator('#learn-card .uplot').count();
+  if (learningCharts !== 2) fail(`expected the learning view's 2 charts, found ${learningCharts}`);
   const before = await page.evaluate(() => window.pavlov.charts.map((c) => c.u.data[0].length));
   await page.waitForTimeout(600);
   const after = await page.evaluate(() => window.pavlov.charts.map((c) => c.u.data[0].length));

@@ -232,7 +232,10 @@ async fn flood(
             _ = stop.changed() => break,
             msg = rx.next() => match msg {
                 Some(Ok(Message::Text(t))) => {
-                    if !t.as_str().starts_with(r#"{"type":"tick""#) && !t.as_str().starts_with(r#"{"type":"status""#) {
+                    if ![r#"{"type":"tick""#, r#"{"type":"status""#, r#"{"type":"learning""#]
+                        .iter()
+                        .any(|kind| t.as_str().starts_with(kind))
+                    {
                         replies += 1;
                         tally.reply(&t);
                     }

@@ -38,7 +38,7 @@ use crate::telemetry::prometheus::MetricsSnapshot;
 const INDEX_HTML: &str = include_str!("../../../web/index.html");
 const STYLE_CSS: &str = include_str!("../../../web/style.css");
 /// The page's modules, by path.
-const SCRIPTS: [(&str, &str); 7] = [
+const SCRIPTS: [(&str, &str); 9] = [
     ("/app.js", include_str!("../../../web/app.js")),
     ("/lib.js", include_str!("../../../web/lib.js")),
     ("/timeline.js", include_str!("../../../web/timeline.js")),
@@ -46,6 +46,8 @@ const SCRIPTS: [(&str, &str); 7] = [
     ("/controls.js", include_str!("../../../web/controls.js")),
     ("/panels.js", include_str!("../../../web/panels.js")),
     ("/elbow.js", include_str!("../../../web/elbow.js")),
+    ("/learning.js", include_str!("../../../web/learning.js")),
+    ("/learnlib.js", include_str!("../../../web/learnlib.js")),
 ];
 
 /// The files of the uPlot package the page loads, relative to the web directory.
@@ -107,6 +109,8 @@ pub(crate) struct AppState {
     pub(crate) token_throttled: AtomicU64,
     /// Fires on shut-down.
     pub(crate) cancel: CancellationToken,
+    /// The Horde's names and values for the clients that watch it (`None`: no `[horde]`).
+    pub(crate) horde: Option<Arc<super::horde_feed::HordeFeed>>,
 }
 
 impl AppState {
@@ -144,6 +148,14 @@ impl AppState {
             closed_no_upgrade: load(&self.guard_counters.timed_out),
             token_failures: load(&self.token_failures),
             token_throttled: load(&self.token_throttled),
+            horde_values: self
+                .horde
+                .as_ref()
+                .map_or(0, |h| load(&h.counters.frames_sent)),
+            horde_values_skipped: self
+                .horde
+                .as_ref()
+                .map_or(0, |h| load(&h.counters.frames_skipped)),
         }
     }
 
@@ -397,6 +409,7 @@ async fn ws_handler(
         rate: state.rate,
         counters: state.session_counters.clone(),
         cancel: state.cancel.clone(),
+        horde: state.horde.clone(),
     };
     ws.protocols([SUBPROTOCOL])
         .max_message_size(state.max_message_bytes)

@@ -6,26 +6,32 @@
 //! tick either; if it ever lagged, the records it missed are counted and logged. Per tick it only pushes a
 //! compact row into the history; what a new client is sent of it is made by that client's own writer.
 
-use std::sync::Arc;
+use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 
 use axum::extract::ws::Utf8Bytes;
 use pavlov::analysis::interaction::live::LiveInteraction;
 use pavlov::analysis::interaction::live_aligned::LiveAligned;
 use pavlov::analysis::run_counters::RunCounters;
 use pavlov::event::Event;
+use pavlov::learn::PredictionSpec;
 use pavlov::record::TickRecord;
 use tokio::sync::broadcast;
 use tokio_util::sync::CancellationToken;
 
 use super::history::{History, Snapshot};
 use super::history_messages::event_json;
+use super::learning::LearningTracks;
 use super::messages::{StatusHealth, StatusMessage, TickMessage};
 use super::protocol::STATUS_EVERY_TICKS;
 use crate::telemetry::Health;
 
 /// Capacity of the hub's broadcast to the clients' forwarders, in messages (about 4 s of ticks).
 pub(crate) const HUB_CAPACITY: usize = 256;
+
+/// `learning` messages kept for a client that joins (30 s at 50 Hz): its learning view starts with them.
+pub(crate) const RECENT_LEARNING: usize = 150;
 
 /// Statuses carry `interaction.aligned` every this many ticks (a multiple of [`STATUS_EVERY_TICKS`]; once a
 /// second at 50 Hz): the curves are about 76 points × 2 series × 2 modes, too many for every status.
@@ -43,6 +49,13 @@ pub(crate) enum Outgoing {
     },
     /// A `status` message (every client gets every one).
     Status(Utf8Bytes),
+    /// A `learning` message (every client gets every one, like a status).
+    Learning {
+        /// The tick it was made on.
+        seq: u64,
+        /// The JSON text.
+        text: Utf8Bytes,
+    },
     /// An `event` message (every client gets every one): as an operator and as a watcher sees it.
     Event {
         /// The event's id.
@@ -68,6 +81,7 @@ pub(crate) struct HubCounters {
 pub(crate) struct HubHandle {
     tx: broadcast::Sender<Outgoing>,
     history: Arc<History>,
+    learning: Arc<Mutex<VecDeque<(u64, Utf8Bytes)>>>,
 }
 
 impl HubHandle {
@@ -86,6 +100,12 @@ impl HubHandle {
         (rx, self.history.snapshot())
     }
 
+    /// The recent `learning` messages, oldest first (taken after [`HubHandle::join`], every later one comes
+    /// on the subscription, which may repeat some: skip those up to the last one's `seq`).
+    pub(crate) fn recent_learning(&self) -> Vec<(u64, Utf8Bytes)> {
+        lock(&self.learning).iter().cloned().collect()
+    }
+
     /// The history.
     pub(crate) fn history(&self) -> &History {
         &self.history
@@ -95,8 +115,10 @@ impl HubHandle {
 /// The hub's state: the run counters over every record seen, and the live interaction metrics (with the
 /// aligned averages) when the stimulus is the gesture command.
 pub(crate) struct Hub {
+    recent_learning: Arc<Mutex<VecDeque<(u64, Utf8Bytes)>>>,
     metrics: RunCounters,
     interaction: Option<(LiveInteraction, LiveAligned)>,
+    learning: LearningTracks,
     history: Arc<History>,
     period_ms: u64,
     tx: broadcast::Sender<Outgoing>,
@@ -114,8 +136,10 @@ impl Hub {
         let (tx, _) = broadcast::channel(HUB_CAPACITY);
         let history = Arc::new(history);
         let period = period_ms as f64;
+        let recent_learning = Arc::new(Mutex::new(VecDeque::with_capacity(RECENT_LEARNING)));
         (
             Hub {
+                recent_learning: recent_learning.clone(),
                 metrics: RunCounters::new(period),
                 interaction: track_interaction.then(|| {
                     (
@@ -123,12 +147,23 @@ impl Hub {
                         LiveAligned::new(period),
                     )
                 }),
+                learning: LearningTracks::new(&[]),
                 history: history.clone(),
                 period_ms,
                 tx: tx.clone(),
             },
-            HubHandle { tx, history },
+            HubHandle {
+                tx,
+                history,
+                learning: recent_learning,
+            },
         )
+    }
+
+    /// Tracks the learning of the control predictions `specs` (the `learning` message).
+    pub(crate) fn with_learning(mut self, specs: &[PredictionSpec]) -> Self {
+        self.learning = LearningTracks::new(specs);
+        self
     }
 
     /// Handles one event: keeps it in the history and broadcasts it.
@@ -151,6 +186,7 @@ impl Hub {
         clients: usize,
     ) {
         self.metrics.observe(record);
+        self.learning.observe(record);
         if let Some((live, aligned)) = &mut self.interaction {
             live.observe(record);
             aligned.observe(record);
@@ -177,8 +213,28 @@ impl Hub {
                 .with_aligned(aligned.as_ref())
                 .to_json();
             let _ = self.tx.send(Outgoing::Status(Utf8Bytes::from(status)));
+            if let Some(learning) = self.learning.take_message(record.seq) {
+                let text = Utf8Bytes::from(learning);
+                // Kept before it is sent, as the ticks are.
+                {
+                    let mut recent = lock(&self.recent_learning);
+                    if recent.len() >= RECENT_LEARNING {
+                        recent.pop_front();
+                    }
+                    recent.push_back((record.seq, text.clone()));
+                }
+                let _ = self.tx.send(Outgoing::Learning {
+                    seq: record.seq,
+                    text,
+                });
+            }
         }
     }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    // A poisoned lock only means another thread panicked while holding it; the data is still valid.
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// Where the hub reads from: every tick record, the events made before it started, and every later one.
@@ -279,6 +335,7 @@ mod tests {
                     statuses.push(serde_json::from_str::<serde_json::Value>(&text).unwrap())
                 }
                 Outgoing::Event { .. } => panic!("no event was made"),
+                Outgoing::Learning { .. } => panic!("no prediction is tracked"),
             }
         }
         assert_eq!(ticks, (0..21).collect::<Vec<_>>());
@@ -401,11 +458,36 @@ mod tests {
                     assert!(watcher.as_str().contains(r#""t":0.8"#), "{watcher}");
                     live_events.push(id);
                 }
-                Outgoing::Status(_) => {}
+                Outgoing::Status(_) | Outgoing::Learning { .. } => {}
             }
         }
         assert_eq!(live_ticks, (30..40).collect::<Vec<_>>());
         assert_eq!(live_events, [2]);
         assert_eq!(handle.history().snapshot().rows().count(), 40);
+    }
+
+    #[test]
+    fn the_hub_keeps_the_recent_learning_messages_for_a_joining_client_and_no_more() {
+        let config =
+            pavlov::config::Config::from_toml(include_str!("../../../config/stall.toml")).unwrap();
+        let (hub, handle) = Hub::new(20, false, test_history());
+        let mut hub = hub.with_learning(&config.predictions);
+        let mut rx = handle.subscribe();
+        let ticks = (RECENT_LEARNING as u64 + 20) * STATUS_EVERY_TICKS;
+        let mut live = Vec::new();
+        for seq in 0..ticks {
+            hub.on_record(&record(seq), StatusHealth::default, 1);
+            while let Ok(m) = rx.try_recv() {
+                if let Outgoing::Learning { seq, text } = m {
+                    assert!(text.as_str().starts_with(r#"{"type":"learning""#), "{text}");
+                    live.push(seq);
+                }
+            }
+        }
+        // One per status (every tenth tick); the newest RECENT_LEARNING of them kept.
+        assert_eq!(live.len() as u64, ticks / STATUS_EVERY_TICKS);
+        let recent: Vec<u64> = handle.recent_learning().iter().map(|(s, _)| *s).collect();
+        assert_eq!(recent.len(), RECENT_LEARNING);
+        assert_eq!(recent[..], live[live.len() - RECENT_LEARNING..]);
     }
 }

@@ -201,6 +201,8 @@ pub(crate) struct Signals {
     pub(crate) gate_prediction: String,
     /// What `set_params` and `human_request` accept, for a client's form.
     pub(crate) bounds: LearningBounds,
+    /// Predictions in the Horde (`[horde]`; 0 without one): what `horde_watch` serves.
+    pub(crate) horde_predictions: usize,
 }
 
 /// The bounds of the learning commands, announced in `hello` (`signals.bounds`): the same bounds the

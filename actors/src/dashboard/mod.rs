@@ -4,8 +4,9 @@
 //!
 //! - [`protocol`]: the client commands (see `web/PROTOCOL.md`), parsed with precise errors, and the replies;
 //! - [`messages`]: the server's `hello`, `tick` and `status` messages;
-//! - [`hub`]: serialises each tick and event once and fans them out, and keeps the run counters and the
-//!   [`history`] (sent to a new client as [`history_messages`]);
+//! - [`hub`]: serialises each tick and event once and fans them out, and keeps the run counters, the
+//!   [`history`] (sent to a new client as [`history_messages`]) and the [`learning`] figures;
+//! - [`horde_feed`]: the Horde's names and values for the clients that ask (`horde_watch`);
 //! - [`client`]: each client's bounded, drop-oldest queue and its tick-rate decimation;
 //! - [`session`]: one connection's reader, writer and forwarder;
 //! - [`rate`]: the per-connection message rate limit;
@@ -32,8 +33,10 @@ pub mod guard;
 pub(crate) mod hello_config;
 pub(crate) mod history;
 pub(crate) mod history_messages;
+pub(crate) mod horde_feed;
 pub(crate) mod http;
 pub(crate) mod hub;
+pub(crate) mod learning;
 pub(crate) mod messages;
 pub(crate) mod out_queue;
 pub(crate) mod pending;
@@ -217,6 +220,7 @@ impl Dashboard {
             server.params_at_start.iter().map(Into::into).collect(),
         );
         let (hub, hub_handle) = Hub::new(period_ms, gesture_commands, history);
+        let hub = hub.with_learning(&server.config.predictions);
         let hub_counters = Arc::new(HubCounters::default());
         let guard_counters = Arc::new(guard::GuardCounters::default());
         let pending = Arc::new(Mutex::new(pending::PendingPool::new(
@@ -238,6 +242,7 @@ impl Dashboard {
                     .collect(),
                 gate_prediction: server.config.control.gate_prediction.clone(),
                 bounds: LearningBounds::for_config(&server.config),
+                horde_predictions: server.horde.as_ref().map_or(0, |h| h.names.len()),
             },
             operator_config: hello_config::for_operator(&server.config),
             watcher_config: hello_config::for_watcher(&server.config),
@@ -262,6 +267,10 @@ impl Dashboard {
             token_failures: AtomicU64::new(0),
             token_throttled: AtomicU64::new(0),
             cancel: cancel.clone(),
+            horde: server
+                .horde
+                .as_ref()
+                .map(|view| Arc::new(horde_feed::HordeFeed::new(view))),
         });
         let (earlier_events, events) = server.events.subscribe_with_recent();
         let hub = runtime.spawn(hub::run(

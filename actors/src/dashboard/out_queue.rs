@@ -7,6 +7,11 @@
 //! is reached, the connection's reader waits for room ([`OutQueue::push_control_waiting`]), which stops it
 //! reading the socket and so pushes back on the client; a client that leaves its replies unread for the
 //! whole wait is disconnected (see [`QueueFull`]).
+//!
+//! A third lane, the *slot*, holds at most one bulky opt-in message (the Horde's values and names): it goes
+//! out after the replies and before the telemetry, and its producer puts the next one only once the last
+//! was taken ([`OutQueue::try_put_slot`], [`OutQueue::put_slot_waiting`]), so a slow client holds one
+//! such message, never a queue of them, and the ticks behind it are not pushed out by it.
 
 use std::collections::VecDeque;
 use std::sync::Mutex;
@@ -26,7 +31,15 @@ pub(crate) struct QueueFull;
 struct QueueState<T> {
     control: VecDeque<T>,
     telemetry: VecDeque<T>,
+    slot: Option<T>,
     closed: bool,
+}
+
+#[derive(Clone, Copy)]
+enum Lane {
+    Control,
+    Slot,
+    Telemetry,
 }
 
 /// A bounded, drop-oldest queue of outgoing messages for one client, with one consumer.
@@ -34,6 +47,7 @@ pub(crate) struct OutQueue<T> {
     state: Mutex<QueueState<T>>,
     ready: Notify,
     room: Notify,
+    slot_free: Notify,
     telemetry_capacity: usize,
     dropped: AtomicU64,
 }
@@ -45,10 +59,12 @@ impl<T> OutQueue<T> {
             state: Mutex::new(QueueState {
                 control: VecDeque::new(),
                 telemetry: VecDeque::new(),
+                slot: None,
                 closed: false,
             }),
             ready: Notify::new(),
             room: Notify::new(),
+            slot_free: Notify::new(),
             telemetry_capacity: telemetry_capacity.max(1),
             dropped: AtomicU64::new(0),
         }
@@ -135,14 +151,55 @@ impl<T> OutQueue<T> {
 
     #[cfg(test)]
     fn pop_now(&self) -> Option<T> {
-        let (next, was_reply) = self.with_state(|s| match s.control.pop_front() {
-            Some(reply) => (Some(reply), true),
-            None => (s.telemetry.pop_front(), false),
+        let (next, lane) = self.with_state(|s| match s.control.pop_front() {
+            Some(reply) => (Some(reply), Lane::Control),
+            None => match s.slot.take() {
+                Some(m) => (Some(m), Lane::Slot),
+                None => (s.telemetry.pop_front(), Lane::Telemetry),
+            },
         });
-        if was_reply {
-            self.room.notify_one();
-        }
+        self.taken(lane);
         next
+    }
+
+    fn taken(&self, lane: Lane) {
+        match lane {
+            Lane::Control => self.room.notify_one(),
+            Lane::Slot => self.slot_free.notify_one(),
+            Lane::Telemetry => {}
+        }
+    }
+
+    /// Puts `msg` in the slot if it is free (and the queue open); gives it back otherwise.
+    pub(crate) fn try_put_slot(&self, msg: T) -> Result<(), T> {
+        let put = self.with_state(|s| {
+            if s.closed || s.slot.is_some() {
+                Err(msg)
+            } else {
+                s.slot = Some(msg);
+                Ok(())
+            }
+        });
+        if put.is_ok() {
+            self.ready.notify_one();
+        }
+        put
+    }
+
+    /// Puts `msg` in the slot once it is free; gives up (`false`) when the queue closes.
+    pub(crate) async fn put_slot_waiting(&self, msg: T) -> bool {
+        let mut msg = msg;
+        loop {
+            match self.try_put_slot(msg) {
+                Ok(()) => return true,
+                Err(back) => msg = back,
+            }
+            if self.is_closed() {
+                return false;
+            }
+            // `notify_one` leaves a permit when nobody waits, so a take between the try and here is not lost.
+            self.slot_free.notified().await;
+        }
     }
 
     /// Takes the next message without waiting: replies first, then telemetry, oldest first.
@@ -168,14 +225,15 @@ impl<T> OutQueue<T> {
     /// Waits for the next message; `None` once the queue is closed and empty of replies.
     pub(crate) async fn pop(&self) -> Option<T> {
         loop {
-            let (next, was_reply, closed) = self.with_state(|s| match s.control.pop_front() {
-                Some(reply) => (Some(reply), true, s.closed),
-                None if s.closed => (None, false, true),
-                None => (s.telemetry.pop_front(), false, false),
+            let (next, lane, closed) = self.with_state(|s| match s.control.pop_front() {
+                Some(reply) => (Some(reply), Lane::Control, s.closed),
+                None if s.closed => (None, Lane::Telemetry, true),
+                None => match s.slot.take() {
+                    Some(m) => (Some(m), Lane::Slot, false),
+                    None => (s.telemetry.pop_front(), Lane::Telemetry, false),
+                },
             });
-            if was_reply {
-                self.room.notify_one();
-            }
+            self.taken(lane);
             if next.is_some() {
                 return next;
             }
@@ -192,8 +250,10 @@ impl<T> OutQueue<T> {
         self.with_state(|s| {
             s.closed = true;
             s.telemetry.clear();
+            s.slot = None;
         });
         self.ready.notify_one();
+        self.slot_free.notify_one();
     }
 
     /// Telemetry dropped so far.
@@ -205,7 +265,7 @@ impl<T> OutQueue<T> {
     /// Messages waiting (replies + telemetry).
     #[cfg(test)]
     pub(crate) fn len(&self) -> usize {
-        self.with_state(|s| s.control.len() + s.telemetry.len())
+        self.with_state(|s| s.control.len() + s.telemetry.len() + usize::from(s.slot.is_some()))
     }
 }
 
@@ -383,6 +443,35 @@ mod tests {
         q.close();
         assert_eq!(q.try_pop(), Some("bye"));
         assert_eq!(q.try_pop(), None);
+    }
+
+    #[tokio::test]
+    async fn the_slot_holds_one_message_between_the_replies_and_the_telemetry() {
+        let q = OutQueue::new(4);
+        q.push_telemetry("tick");
+        assert!(q.try_put_slot("horde 1").is_ok());
+        // Full: the producer gets its message back, and nothing else moves.
+        assert_eq!(q.try_put_slot("horde 2"), Err("horde 2"));
+        q.push_control("ack").unwrap();
+        assert_eq!(q.len(), 3);
+        assert_eq!(q.pop().await, Some("ack"));
+        assert_eq!(q.pop().await, Some("horde 1"));
+        // Taken: a waiting producer gets in.
+        assert!(q.put_slot_waiting("horde 2").await);
+        assert_eq!(q.pop().await, Some("horde 2"));
+        assert_eq!(q.pop().await, Some("tick"));
+        // A producer waiting on a full slot gives up when the queue closes.
+        assert!(q.try_put_slot("horde 3").is_ok());
+        let waiting = q.put_slot_waiting("horde 4");
+        tokio::pin!(waiting);
+        tokio::select! {
+            biased;
+            _ = &mut waiting => panic!("the slot is full: the producer must wait"),
+            _ = tokio::task::yield_now() => {}
+        }
+        q.close();
+        assert!(!waiting.await);
+        assert_eq!(q.pop().await, None);
     }
 
     #[test]

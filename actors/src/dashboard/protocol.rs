@@ -23,7 +23,7 @@ pub(crate) const TOKEN_PROTOCOL_PREFIX: &str = "token.";
 pub(crate) const STATUS_EVERY_TICKS: u64 = 10;
 
 /// Commands about the connection itself, answered by the websocket actor (allowed without the token).
-pub(crate) const SESSION_COMMANDS: [&str; 2] = ["set_rate", "ping"];
+pub(crate) const SESSION_COMMANDS: [&str; 4] = ["set_rate", "ping", "horde_watch", "horde_unwatch"];
 
 /// A command about the connection itself.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,6 +35,18 @@ pub(crate) enum SessionCommand {
     },
     /// Answered with an ack; a liveness check.
     Ping,
+    /// Receive the Horde's names once, then `count` of its values from `from` (all that fit in one
+    /// message when `None`), `hz` times a second.
+    HordeWatch {
+        /// Messages a second, in `[MIN_HZ, MAX_HZ]`.
+        hz: f64,
+        /// The first prediction.
+        from: usize,
+        /// How many, at most `MAX_VALUES`.
+        count: Option<usize>,
+    },
+    /// Stop receiving the Horde's values.
+    HordeUnwatch,
 }
 
 /// What a client asked for.
@@ -220,12 +232,52 @@ fn parse_session(
             }
             SessionCommand::SetRate { hz }
         }
+        "horde_watch" => parse_horde_watch(&mut fields).map_err(bad)?,
+        "horde_unwatch" => SessionCommand::HordeUnwatch,
         _ => SessionCommand::Ping,
     };
     match fields.keys().next() {
         Some(extra) => Err(bad(format!("unknown field `{extra}`"))),
         None => Ok(command),
     }
+}
+
+/// `horde_watch`'s arguments, each optional and bounded.
+fn parse_horde_watch(fields: &mut Map<String, Value>) -> Result<SessionCommand, String> {
+    use super::horde_feed::{DEFAULT_HZ, MAX_HZ, MAX_VALUES, MIN_HZ};
+    let hz = match fields.remove("hz") {
+        None => DEFAULT_HZ,
+        Some(Value::Number(n)) => n.as_f64().unwrap_or(f64::NAN),
+        Some(other) => return Err(format!("`hz` must be a number, got {}", json_kind(&other))),
+    };
+    if !(MIN_HZ..=MAX_HZ).contains(&hz) {
+        return Err(format!(
+            "`hz` must be in [{MIN_HZ}, {MAX_HZ}] messages a second, got {hz}"
+        ));
+    }
+    let index = |fields: &mut Map<String, Value>, key: &str| match fields.remove(key) {
+        None => Ok(None),
+        Some(Value::Number(n)) if n.as_u64().is_some() => {
+            Ok(n.as_u64().map(|v| usize::try_from(v).unwrap_or(usize::MAX)))
+        }
+        Some(other) => Err(format!(
+            "`{key}` must be a non-negative integer, got {}",
+            match &other {
+                Value::Number(n) => n.to_string(),
+                v => json_kind(v).to_string(),
+            }
+        )),
+    };
+    let from = index(fields, "from")?.unwrap_or(0);
+    let count = index(fields, "count")?;
+    if let Some(c) = count
+        && !(1..=MAX_VALUES).contains(&c)
+    {
+        return Err(format!(
+            "`count` must be in [1, {MAX_VALUES}] values a message, got {c}"
+        ));
+    }
+    Ok(SessionCommand::HordeWatch { hz, from, count })
 }
 
 #[derive(Serialize)]
@@ -446,6 +498,58 @@ mod tests {
             let r = rejected(text);
             assert_eq!(r.error.code(), "bad_arguments", "{text}");
             assert!(r.error.to_string().contains(detail), "{text}: {}", r.error);
+        }
+    }
+
+    #[test]
+    fn horde_watch_takes_bounded_optional_arguments() {
+        let ok = |text: &str| parse_request(text).unwrap().command;
+        assert_eq!(
+            ok(r#"{"cmd":"horde_watch"}"#),
+            ClientCommand::Session(SessionCommand::HordeWatch {
+                hz: 2.0,
+                from: 0,
+                count: None
+            })
+        );
+        assert_eq!(
+            ok(r#"{"cmd":"horde_watch","hz":10,"from":5,"count":16384}"#),
+            ClientCommand::Session(SessionCommand::HordeWatch {
+                hz: 10.0,
+                from: 5,
+                count: Some(16384)
+            })
+        );
+        assert_eq!(
+            ok(r#"{"cmd":"horde_unwatch"}"#),
+            ClientCommand::Session(SessionCommand::HordeUnwatch)
+        );
+        for (text, says) in [
+            (
+                r#"{"cmd":"horde_watch","hz":11}"#,
+                "`hz` must be in [0.1, 10]",
+            ),
+            (r#"{"cmd":"horde_watch","hz":0}"#, "got 0"),
+            (r#"{"cmd":"horde_watch","hz":"fast"}"#, "a string"),
+            (
+                r#"{"cmd":"horde_watch","count":0}"#,
+                "`count` must be in [1, 16384]",
+            ),
+            (r#"{"cmd":"horde_watch","count":16385}"#, "got 16385"),
+            (
+                r#"{"cmd":"horde_watch","from":-1}"#,
+                "`from` must be a non-negative integer, got -1",
+            ),
+            (r#"{"cmd":"horde_watch","from":1.5}"#, "got 1.5"),
+            (
+                r#"{"cmd":"horde_watch","names":true}"#,
+                "unknown field `names`",
+            ),
+            (r#"{"cmd":"horde_unwatch","hz":1}"#, "unknown field `hz`"),
+        ] {
+            let r = rejected(text);
+            assert_eq!(r.error.code(), "bad_arguments", "{text}");
+            assert!(r.error.to_string().contains(says), "{text}: {}", r.error);
         }
     }
 

@@ -28,6 +28,7 @@ use tokio_util::sync::CancellationToken;
 
 use super::auth::Access;
 use super::history_messages::{HistoryMessages, REDACTED};
+use super::horde_feed::{self, HordeFeed, HordeWindow, MAX_VALUES as MAX_HORDE_VALUES};
 use super::hub::{HubHandle, Outgoing};
 use super::messages::Hello;
 use super::out_queue::{Decimator, OutQueue};
@@ -106,6 +107,34 @@ pub(crate) struct Session {
     pub(crate) counters: Arc<SessionCounters>,
     /// Fires when the endpoint shuts down.
     pub(crate) cancel: CancellationToken,
+    /// The Horde's names and values, for the clients that ask (`None`: no `[horde]`).
+    pub(crate) horde: Option<Arc<HordeFeed>>,
+}
+
+/// One connection's watch of the Horde: its streaming task (stopped when replaced or dropped) and whether
+/// the names went out already.
+#[derive(Default)]
+struct HordeSubscription {
+    task: Option<tokio::task::JoinHandle<()>>,
+    names_sent: bool,
+}
+
+impl HordeSubscription {
+    fn stop(&mut self) -> bool {
+        match self.task.take() {
+            Some(t) => {
+                t.abort();
+                true
+            }
+            None => false,
+        }
+    }
+}
+
+impl Drop for HordeSubscription {
+    fn drop(&mut self) {
+        self.stop();
+    }
 }
 
 enum Out {
@@ -128,9 +157,12 @@ impl Session {
         }
         let hello = self.hello.clone().with_in_force(in_force).to_json();
         let _ = queue.push_control(Out::Text(hello.into()));
+        // The recent `learning` messages go out after the history, before the live telemetry.
+        let recent_learning = self.hub.recent_learning();
         let seen = Seen {
             through_seq: snapshot.last_seq,
             through_event: snapshot.last_event_id,
+            through_learning: recent_learning.last().map(|(seq, _)| *seq),
         };
         let history = HistoryMessages::new(
             snapshot,
@@ -148,7 +180,11 @@ impl Session {
                 seen,
             },
         ));
-        let writer = write(sink, queue.clone(), self.counters.clone(), history);
+        let past = Past {
+            history: Some(history),
+            learning: recent_learning.into_iter().map(|(_, text)| text).collect(),
+        };
+        let writer = write(sink, queue.clone(), self.counters.clone(), past);
         tokio::pin!(writer);
         tokio::select! {
             _ = &mut writer => {}
@@ -168,9 +204,10 @@ impl Session {
     async fn read(
         &self,
         mut stream: futures_util::stream::SplitStream<WebSocket>,
-        queue: &OutQueue<Out>,
+        queue: &Arc<OutQueue<Out>>,
         stride: &AtomicU64,
     ) {
+        let mut horde = HordeSubscription::default();
         let mut bucket = TokenBucket::new(self.rate, std::time::Instant::now());
         let mut pace = Pacer::default();
         while let Some(msg) = stream.next().await {
@@ -185,7 +222,7 @@ impl Session {
                     pace.over_limit().await;
                     continue;
                 }
-                Ok(Message::Text(text)) => self.handle(&text, stride).await,
+                Ok(Message::Text(text)) => self.handle(&text, stride, queue, &mut horde).await,
                 Ok(Message::Binary(_)) => {
                     let e = super::protocol::ProtocolError::Binary;
                     self.error(&None, e.code(), &e.to_string())
@@ -266,7 +303,13 @@ impl Session {
         error_json(id, code, message)
     }
 
-    async fn handle(&self, text: &str, stride: &AtomicU64) -> String {
+    async fn handle(
+        &self,
+        text: &str,
+        stride: &AtomicU64,
+        queue: &Arc<OutQueue<Out>>,
+        horde: &mut HordeSubscription,
+    ) -> String {
         let ClientRequest { id, cmd, command } = match parse_request(text) {
             Ok(r) => r,
             Err(rej) => return self.error(&rej.id, rej.error.code(), &rej.error.to_string()),
@@ -282,6 +325,13 @@ impl Session {
                 )
             }
             ClientCommand::Session(SessionCommand::Ping) => ack_json(&id, &cmd, &json!({})),
+            ClientCommand::Session(SessionCommand::HordeWatch { hz, from, count }) => {
+                self.horde_watch(&id, &cmd, queue, horde, (hz, from, count))
+            }
+            ClientCommand::Session(SessionCommand::HordeUnwatch) => {
+                let watching = horde.stop();
+                ack_json(&id, &cmd, &json!({ "was_watching": watching }))
+            }
             ClientCommand::Control(_) if self.access == Access::Watch => self.error(
                 &id,
                 "unauthorized",
@@ -317,6 +367,70 @@ impl Session {
                 }
             }
         }
+    }
+}
+
+impl Session {
+    /// `horde_watch`: checks the window against the Horde's size, then (re)starts the connection's stream.
+    fn horde_watch(
+        &self,
+        id: &Option<Value>,
+        cmd: &str,
+        queue: &Arc<OutQueue<Out>>,
+        sub: &mut HordeSubscription,
+        (hz, from, count): (f64, usize, Option<usize>),
+    ) -> String {
+        let Some(feed) = &self.horde else {
+            return self.error(
+                id,
+                "no_horde",
+                "this server runs no Horde: its configuration has no [[horde.families]]",
+            );
+        };
+        let total = feed.len();
+        if from >= total {
+            return self.error(
+                id,
+                "bad_arguments",
+                &format!(
+                    "bad arguments for `{cmd}`: `from` must be below the Horde's {total} predictions, got {from}"
+                ),
+            );
+        }
+        let count = count.unwrap_or((total - from).min(MAX_HORDE_VALUES));
+        if count > total - from {
+            return self.error(
+                id,
+                "bad_arguments",
+                &format!(
+                    "bad arguments for `{cmd}`: `from` + `count` must be at most the Horde's {total} predictions, got {}",
+                    from.saturating_add(count)
+                ),
+            );
+        }
+        sub.stop();
+        let send_names = !sub.names_sent;
+        sub.names_sent = true;
+        let window = HordeWindow { from, count, hz };
+        sub.task = Some(tokio::spawn(horde_feed::stream(
+            feed.clone(),
+            queue.clone(),
+            window,
+            send_names,
+            Out::Text,
+        )));
+        ack_json(
+            id,
+            cmd,
+            &json!({
+                "total": total,
+                "from": from,
+                "count": count,
+                "hz": hz,
+                "encoding": horde_feed::ENCODING,
+                "names": send_names,
+            }),
+        )
     }
 }
 
@@ -381,6 +495,7 @@ fn classify_read_error(e: &axum::Error) -> ReadError {
 struct Seen {
     through_seq: Option<u64>,
     through_event: u64,
+    through_learning: Option<u64>,
 }
 
 /// Where the forwarder puts what it passes, and how it chooses.
@@ -417,6 +532,12 @@ async fn forward(mut rx: broadcast::Receiver<Outgoing>, f: Forwarding) {
                 queue.push_telemetry(Out::Text(text))
             }
             Ok(Outgoing::Status(text)) => queue.push_telemetry(Out::Text(text)),
+            Ok(Outgoing::Learning { seq, .. })
+                if seen.through_learning.is_some_and(|s| seq <= s) =>
+            {
+                continue;
+            }
+            Ok(Outgoing::Learning { text, .. }) => queue.push_telemetry(Out::Text(text)),
             Ok(Outgoing::Event { id, .. }) if id <= seen.through_event => continue,
             Ok(Outgoing::Event {
                 operator,
@@ -437,17 +558,28 @@ async fn forward(mut rx: broadcast::Receiver<Outgoing>, f: Forwarding) {
     }
 }
 
-/// The next message to write: a reply first, then the history's next message (while the connection is
-/// open), then telemetry; `None` once the queue is closed and drained.
-async fn next_out(queue: &OutQueue<Out>, history: &mut Option<HistoryMessages>) -> Option<Out> {
+/// What a new client is sent before its live telemetry: the history, then the recent `learning` messages.
+struct Past {
+    history: Option<HistoryMessages>,
+    learning: std::collections::VecDeque<Utf8Bytes>,
+}
+
+/// The next message to write: a reply first, then the past (while the connection is open), then
+/// telemetry; `None` once the queue is closed and drained.
+async fn next_out(queue: &OutQueue<Out>, past: &mut Past) -> Option<Out> {
     if let Some(reply) = queue.try_pop_control() {
         return Some(reply);
     }
-    if let Some(h) = history {
+    if let Some(h) = &mut past.history {
         match h.next() {
             Some(text) if !queue.is_closed() => return Some(Out::Text(text.into())),
-            _ => *history = None,
+            _ => past.history = None,
         }
+    }
+    if !queue.is_closed()
+        && let Some(text) = past.learning.pop_front()
+    {
+        return Some(Out::Text(text));
     }
     queue.pop().await
 }
@@ -456,10 +588,9 @@ async fn write(
     mut sink: futures_util::stream::SplitSink<WebSocket, Message>,
     queue: Arc<OutQueue<Out>>,
     counters: Arc<SessionCounters>,
-    history: HistoryMessages,
+    mut past: Past,
 ) {
-    let mut history = Some(history);
-    while let Some(out) = next_out(&queue, &mut history).await {
+    while let Some(out) = next_out(&queue, &mut past).await {
         let (msg, last) = match out {
             Out::Text(text) => (Message::Text(text), false),
             Out::Close(code, reason) => (

@@ -141,6 +141,11 @@ pub struct DashboardStats {
     pub token_failures: u64,
     /// Handshakes answered 429 because their address had no wrong-token allowance left.
     pub token_throttled: u64,
+    /// `horde_values` messages queued for the clients watching the Horde.
+    pub horde_values: u64,
+    /// Of the Horde's values a watching client asked for, those not sent because it had not yet taken the
+    /// previous message (a slow client gets the newest, never a backlog).
+    pub horde_values_skipped: u64,
 }
 
 /// The Foxglove endpoint's counters (`serve --foxglove`), written by the endpoint and read by `/metrics`.

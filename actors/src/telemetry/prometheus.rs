@@ -206,7 +206,7 @@ fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
         "TCP connections to the dashboard port that are not (yet) websockets, now.",
         ws.pending as f64,
     );
-    let counters: [(&str, &str, u64); 10] = [
+    let counters: [(&str, &str, u64); 12] = [
         (
             "pavlov_ws_connections_total",
             "Websocket connections accepted.",
@@ -256,6 +256,16 @@ fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
             "pavlov_ws_hub_records_missed_total",
             "Tick records the dashboard hub missed because it fell behind the tick feed.",
             ws.records_missed,
+        ),
+        (
+            "pavlov_ws_horde_values_total",
+            "horde_values messages queued for websocket clients watching the Horde.",
+            ws.horde_values,
+        ),
+        (
+            "pavlov_ws_horde_values_skipped_total",
+            "Horde values not sent to a watching client because it had not yet taken the previous message.",
+            ws.horde_values_skipped,
         ),
     ];
     for (name, help, value) in counters {

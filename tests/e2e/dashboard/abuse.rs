@@ -89,7 +89,7 @@ async fn good_client(addr: SocketAddr, mut stop: watch::Receiver<bool>) -> GoodL
                 match v["type"].as_str() {
                     Some("tick") => log.seqs.push(v["seq"].as_u64().expect("seq")),
                     // The run's own messages: statuses, the history after hello, every client's events.
-                    Some("status" | "history" | "event") => {}
+                    Some("status" | "learning" | "history" | "event") => {}
                     Some("ack") => match v["id"].as_u64().and_then(|id| pending.remove(&id)) {
                         Some(control) => {
                             log.acked += 1;

@@ -143,7 +143,7 @@ impl Client {
             if matches(&v) {
                 return v;
             }
-            if v["type"] != "tick" && v["type"] != "status" {
+            if v["type"] != "tick" && v["type"] != "status" && v["type"] != "learning" {
                 self.skipped.push(v);
             }
             assert!(

@@ -20,7 +20,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
 
 /// Every family `/metrics` serves once the first tick is out (the README lists the same).
-const FAMILIES: [(&str, &str); 44] = [
+const FAMILIES: [(&str, &str); 46] = [
     ("pavlov_tick_lateness_seconds", "histogram"),
     ("pavlov_ticks_fired_total", "counter"),
     ("pavlov_tick_timer", "gauge"),
@@ -53,6 +53,8 @@ const FAMILIES: [(&str, &str); 44] = [
     ("pavlov_ws_token_failures_total", "counter"),
     ("pavlov_ws_token_throttled_total", "counter"),
     ("pavlov_ws_hub_records_missed_total", "counter"),
+    ("pavlov_ws_horde_values_total", "counter"),
+    ("pavlov_ws_horde_values_skipped_total", "counter"),
     ("pavlov_ws_closed_total", "counter"),
     ("pavlov_foxglove_clients", "gauge"),
     ("pavlov_foxglove_connections_total", "counter"),

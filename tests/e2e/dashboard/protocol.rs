@@ -178,7 +178,8 @@ async fn reply_to(ws: &mut Ws, id: &Value) -> Value {
             return v;
         }
         assert!(
-            ["tick", "status", "event", "history"].contains(&v["type"].as_str().unwrap_or("")),
+            ["tick", "status", "learning", "event", "history"]
+                .contains(&v["type"].as_str().unwrap_or("")),
             "unexpected reply {v}"
         );
     }
@@ -274,6 +275,7 @@ async fn ticks_stream_at_the_tick_rate_with_every_field() {
                 last = m;
             }
             Some("status") => status = Some(m),
+            Some("learning") => {}
             other => panic!("unexpected {other:?}"),
         }
     }
