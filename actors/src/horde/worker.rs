@@ -148,17 +148,16 @@ impl<W: Weight> Worker<W> {
         p.copying = Some((target, tick));
     }
 
-    /// Copies checkpoint rows until `until`; hands a completed checkpoint to a writer thread.
+    /// Copies checkpoint rows until `until`, and at least [`COPY_CHUNK`] of them (a step that takes
+    /// more than half a tick would otherwise leave a checkpoint uncopied as long as ticks keep coming);
+    /// hands a completed checkpoint to a writer thread.
     fn copy_for(&mut self, p: &mut Progress, until: Instant) {
         if p.copying.is_none() {
             return;
         }
-        let mut complete = false;
-        while Instant::now() < until {
+        let mut complete = self.horde.advance_snapshot(COPY_CHUNK);
+        while !complete && Instant::now() < until {
             complete = self.horde.advance_snapshot(COPY_CHUNK);
-            if complete {
-                break;
-            }
         }
         if !complete {
             return;
