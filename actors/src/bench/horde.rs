@@ -272,12 +272,7 @@ impl fmt::Display for HordeComparison {
             self.horde.to_command.quantiles(),
             self.plain.to_command.quantiles(),
         );
-        let rows: [(
-            &str,
-            &LatencyQuantiles,
-            &LatencyQuantiles,
-            fn(&LatencyQuantiles) -> u64,
-        ); 6] = [
+        let rows: [Row; 6] = [
             ("tick lateness p50", &hl, &pl, |q| q.p50_us),
             ("tick lateness p99", &hl, &pl, |q| q.p99_us),
             ("tick lateness max", &hl, &pl, |q| q.max_us),
@@ -368,6 +363,14 @@ impl HordeComparison {
         writeln!(f, "goal a checkpoint adds no skipped tick: {says}")
     }
 }
+
+/// A row of the comparison: its name, both sides' quantiles, and which quantile.
+type Row<'a> = (
+    &'a str,
+    &'a LatencyQuantiles,
+    &'a LatencyQuantiles,
+    fn(&LatencyQuantiles) -> u64,
+);
 
 #[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 enum Verdict {
