@@ -39,6 +39,8 @@ pub struct Side {
     /// Skipped ticks and seconds outside checkpoints.
     skipped_outside: u64,
     outside: Duration,
+    /// Checkpoints asked for too near a run's end to be written, not counted.
+    too_late: usize,
 }
 
 /// One Horde checkpoint as seen from outside: from the tick learning asked for it until its file was
@@ -101,6 +103,7 @@ impl Side {
         self.checkpoints.extend(run.checkpoints);
         self.skipped_outside += run.skipped_outside;
         self.outside += run.outside;
+        self.too_late += run.too_late;
     }
 }
 
@@ -141,12 +144,16 @@ async fn run_one(config: &Config, dir: &Path, duration: Duration) -> Result<Side
     let figures = health.figures();
     let (lateness, to_command) = health.histograms();
     let hordes: Vec<HordeStatus> = status.iter().map(|s| s.borrow().clone()).collect();
-    let (checkpoints, skipped_outside, outside) = if status.is_some() {
+    let (mut checkpoints, skipped_outside, outside) = if status.is_some() {
         let period_ms = config.tick.period_ms.max(1);
         windows(&samples, start, every_s * 1000 / period_ms)
     } else {
         (Vec::new(), 0, Duration::ZERO)
     };
+    // One asked for in the run's last half period has no time to be written: not counted.
+    let before = checkpoints.len();
+    checkpoints.retain(|c| c.at + every_s as f64 / 2.0 < duration.as_secs_f64());
+    let too_late = before - checkpoints.len();
     let run = Side {
         duration: start.elapsed(),
         ticks: figures.ticks_fired,
@@ -157,6 +164,7 @@ async fn run_one(config: &Config, dir: &Path, duration: Duration) -> Result<Side
         checkpoints,
         skipped_outside,
         outside,
+        too_late,
     };
     server.shutdown().await;
     Ok(run)
@@ -346,8 +354,8 @@ impl HordeComparison {
         }
         writeln!(
             f,
-            "  outside checkpoints: {} skipped in {outside_s:.1} s ({rate:.2} a second)",
-            side.skipped_outside
+            "  outside checkpoints: {} skipped in {outside_s:.1} s ({rate:.2} a second); {} asked for in a run's last half period not counted",
+            side.skipped_outside, side.too_late
         )?;
         let says = if side.checkpoints.is_empty() {
             "NOT SHOWN (no checkpoint was asked for: run longer)"
