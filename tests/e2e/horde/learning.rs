@@ -97,7 +97,8 @@ async fn a_horde_learns_and_metrics_show_it() {
         learned + skipped <= fired,
         "{learned} + {skipped} > {fired}"
     );
-    assert!(value(&first, "pavlov_horde_chain_breaks_total") <= skipped);
+    // A chain breaks at a skipped tick or one learning did not offer (a stale observation).
+    assert!(value(&first, "pavlov_horde_chain_breaks_total") <= fired);
     let (p50, p99, max) = (
         value(&first, "pavlov_horde_step_p50_seconds"),
         value(&first, "pavlov_horde_step_p99_seconds"),
