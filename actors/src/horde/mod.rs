@@ -11,8 +11,10 @@
 //! time, [`pavlov::learn::group`]) and written on another thread ([`crate::storage::horde_file`]), so
 //! a checkpoint of 10⁸ weights skips no tick either.
 //!
-//! - [`worker`]: the thread's loop; [`status`]: what it reports.
+//! - [`worker`]: the thread's loop; [`status`]: what it reports; [`priority`]: its thread runs niced,
+//!   so the tick path's threads win a core from it.
 
+mod priority;
 pub mod status;
 mod worker;
 
@@ -170,7 +172,10 @@ impl HordeHandle {
         };
         let thread = std::thread::Builder::new()
             .name("pavlov-horde".into())
-            .spawn(move || worker.run())
+            .spawn(move || {
+                priority::lower_this_thread();
+                worker.run()
+            })
             .map_err(HordeError::Thread)?;
         Ok(HordeHandle {
             ticks: tick_tx,
