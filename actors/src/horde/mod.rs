@@ -11,10 +11,8 @@
 //! time, [`pavlov::learn::group`]) and written on another thread ([`crate::storage::horde_file`]), so
 //! a checkpoint of 10⁸ weights skips no tick either.
 //!
-//! - [`worker`]: the thread's loop; [`status`]: what it reports; [`priority`]: its thread runs niced,
-//!   so the tick path's threads win a core from it.
+//! - [`worker`]: the thread's loop; [`status`]: what it reports.
 
-mod priority;
 pub mod status;
 mod worker;
 
@@ -172,10 +170,7 @@ impl HordeHandle {
         };
         let thread = std::thread::Builder::new()
             .name("pavlov-horde".into())
-            .spawn(move || {
-                priority::lower_this_thread();
-                worker.run()
-            })
+            .spawn(move || worker.run())
             .map_err(HordeError::Thread)?;
         Ok(HordeHandle {
             ticks: tick_tx,
