@@ -97,6 +97,22 @@ mod tests {
     }
 
     #[test]
+    fn the_shipped_horde_config_is_the_stall_study_plus_a_nexting_horde() {
+        let text = include_str!("../../config/horde.toml");
+        let cfg = Config::from_toml(text).unwrap();
+        let shape = crate::learn::horde::check(&cfg.horde.families, &cfg.signal_names()).unwrap();
+        // About 10⁴ predictions over one shared tile coding of ~6,000 features, ≥ 450 active.
+        assert_eq!(shape.predictions, 44 * 6 + 2 * 6 + 5808 * 2);
+        assert_eq!(shape.feature_sets, 1, "one tile coding per tick for all");
+        assert_eq!(shape.active_features, 484);
+        assert_eq!(shape.weights, shape.predictions * 5808);
+        // Without [horde] it is the stall study, key for key: the Horde changes no control setting.
+        let mut control = cfg.clone();
+        control.horde = super::HordeConfig::default();
+        assert_eq!(control, Config::from_toml(STALL).unwrap());
+    }
+
+    #[test]
     fn a_bad_family_is_refused_with_its_key() {
         for (edit, says) in [
             (

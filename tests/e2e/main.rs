@@ -6,6 +6,7 @@ mod common;
 mod dashboard;
 mod experiment;
 mod foxglove;
+mod horde;
 mod house;
 mod runtime;
 mod skeleton;

@@ -8,12 +8,14 @@
 //! - [`estop_probe`]: the operator's e-stop, timed from send to ack, during the run;
 //! - [`foxglove_load`]: Foxglove clients subscribed to every channel, for `--foxglove-clients`;
 //! - [`timers`]: the timer thread against tokio's interval, interleaved in one invocation.
+//! - [`horde`]: the server with a Horde against the same server without one, interleaved.
 //! - [`reconnect`]: clients that reconnect again and again, timing the history each connection gets.
 
 pub mod abuse;
 pub mod estop_probe;
 pub(crate) mod floods;
 pub mod foxglove_load;
+pub mod horde;
 pub mod load;
 pub(crate) mod reconnect;
 pub mod timers;

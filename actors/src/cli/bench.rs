@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use anyhow::Result;
-use pavlov_actors::bench::{self, abuse::Abuse, foxglove_load, load, timers};
+use pavlov_actors::bench::{self, abuse::Abuse, foxglove_load, horde, load, timers};
 
 use super::args::{ConfigArgs, load_config, repository_web_dir, validate};
 
@@ -39,6 +39,11 @@ pub struct BenchArgs {
     /// tokio, thread; --seconds in all for each), with tick lateness and tick → command for both.
     #[arg(long, conflicts_with_all = ["ws_clients", "stalled_client", "ws_abuse", "foxglove_clients"])]
     compare_timers: bool,
+    /// Compare the configuration with its [horde] against the same without [horde], interleaved (Horde,
+    /// plain, plain, Horde; --seconds in all for each): the Horde's step time, ticks learned and
+    /// skipped, tick lateness and tick → command for both, and skipped ticks around Horde checkpoints.
+    #[arg(long, conflicts_with_all = ["ws_clients", "stalled_client", "ws_abuse", "foxglove_clients", "compare_timers"])]
+    horde: bool,
     /// Override [tick] spin_us: wake this many µs before each deadline and spin (the timer thread only).
     #[arg(long, value_name = "US")]
     spin_us: Option<u32>,
@@ -52,6 +57,16 @@ pub async fn run(args: BenchArgs) -> Result<()> {
         validate(&cfg, "--spin-us")?;
     }
     let duration = Duration::from_secs(args.seconds);
+    if args.horde {
+        if !cfg.horde.is_enabled() {
+            anyhow::bail!(
+                "--horde needs a configuration with [[horde.families]] (e.g. --config config/horde.toml)"
+            );
+        }
+        let report = horde::run_horde_comparison(cfg, duration).await?;
+        say!("{report}");
+        return Ok(());
+    }
     if args.compare_timers {
         let report = timers::run_timer_comparison(cfg, duration).await?;
         say!("{report}");

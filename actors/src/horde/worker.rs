@@ -148,17 +148,16 @@ impl<W: Weight> Worker<W> {
         p.copying = Some((target, tick));
     }
 
-    /// Copies checkpoint rows until `until`; hands a completed checkpoint to a writer thread.
+    /// Copies checkpoint rows until `until`, and at least [`COPY_CHUNK`] of them (a step that takes
+    /// more than half a tick would otherwise leave a checkpoint uncopied as long as ticks keep coming);
+    /// hands a completed checkpoint to a writer thread.
     fn copy_for(&mut self, p: &mut Progress, until: Instant) {
         if p.copying.is_none() {
             return;
         }
-        let mut complete = false;
-        while Instant::now() < until {
+        let mut complete = self.horde.advance_snapshot(COPY_CHUNK);
+        while !complete && Instant::now() < until {
             complete = self.horde.advance_snapshot(COPY_CHUNK);
-            if complete {
-                break;
-            }
         }
         if !complete {
             return;
@@ -239,4 +238,72 @@ fn spawn_write<W: Weight>(
             }
             Ok(path)
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::mpsc::sync_channel;
+
+    use pavlov::config::Config;
+
+    use super::*;
+
+    /// A Horde whose step leaves no time over (a period of zero) still completes a checkpoint while
+    /// ticks keep coming: a chunk of rows is copied after every step.
+    #[test]
+    fn a_checkpoint_is_copied_even_when_steps_leave_no_time() {
+        let text = format!(
+            "{}\n[horde]\n[[horde.families]]\nname = \"p\"\ncumulants = [\"obs/*\"]\ntaus = [2.0]\n\
+             lambda = 0.5\nalpha = 0.01\nfeatures = {{ kind = \"one_dim\", all_obs = true, tiles = 4 }}\n",
+            include_str!("../../../config/stall.toml")
+        );
+        let cfg = Config::from_toml(&text).unwrap();
+        let horde: Horde<f32> =
+            Horde::new(cfg.horde.families.clone(), &cfg.signal_names()).unwrap();
+        let (tick_tx, tick_rx) = sync_channel(1);
+        let (command_tx, command_rx) = sync_channel(4);
+        let (status_tx, status_rx) = watch::channel(HordeStatus::default());
+        let (values_tx, _values_rx) = watch::channel(Arc::new(HordeValues::default()));
+        let worker = Worker {
+            horde,
+            ticks: tick_rx,
+            commands: command_rx,
+            offers: Arc::new(OfferCounters::default()),
+            status: status_tx,
+            values: values_tx,
+            period: Duration::ZERO,
+            tick_offset: 0,
+        };
+        let dir = std::env::temp_dir().join(format!("pavlov-horde-worker-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        command_tx
+            .send(HordeCommand::Checkpoint {
+                dir: dir.clone(),
+                keep: 5,
+            })
+            .unwrap();
+        let thread = std::thread::spawn(move || worker.run());
+        let obs = vec![0.5; cfg.signal_names().obs.len()];
+        // 176 rows in chunks of 16: done within a dozen ticks; 100 leave no doubt.
+        for seq in 0..100 {
+            tick_tx
+                .send(HordeTick {
+                    seq,
+                    obs: obs.clone(),
+                    raw: obs.clone(),
+                    extra: vec![],
+                    stimuli: vec![false],
+                })
+                .unwrap();
+        }
+        drop(tick_tx);
+        thread.join().unwrap();
+        let status = status_rx.borrow().clone();
+        assert_eq!(status.ticks_learned, 100);
+        assert_eq!(status.checkpoints_written, 1, "{status:?}");
+        assert_eq!(status.checkpoint_errors, 0);
+        assert!(dir.join("horde-0.bin").exists());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

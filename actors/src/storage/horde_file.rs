@@ -235,7 +235,7 @@ pub fn read<W: Weight>(path: &Path) -> Result<(u64, HordeSnapshot<W>), HordeFile
 }
 
 /// The Horde checkpoints in `dir`, oldest first.
-fn list(dir: &Path) -> std::io::Result<Vec<(u64, PathBuf)>> {
+pub(crate) fn list(dir: &Path) -> std::io::Result<Vec<(u64, PathBuf)>> {
     let mut found: Vec<(u64, PathBuf)> = Vec::new();
     for entry in std::fs::read_dir(dir)? {
         let entry = entry?;

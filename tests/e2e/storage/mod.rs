@@ -4,7 +4,7 @@
 
 mod checkpoint;
 mod checkpoint_runs;
-mod fixtures;
+pub(crate) mod fixtures;
 mod recording_convert;
 mod recording_crash;
 mod recording_names;
