@@ -312,5 +312,8 @@ impl Gtd {
     }
 }
 
+mod chain;
+pub use chain::GtdChain;
+
 #[cfg(test)]
 mod tests;
