@@ -75,7 +75,7 @@ pub(crate) enum Engine {
     /// On-policy TD(λ): a group of one prediction, in f64 (it matches the dense reference to rounding).
     Td(TraceGroup<f64>),
     /// Off-policy GTD(λ) ([`super::gtd`]).
-    Gtd(GtdChain),
+    Gtd(Box<GtdChain>),
 }
 
 /// One prediction and its learner.
@@ -107,8 +107,8 @@ impl Learner {
             Cumulant::Stimulus(s) => names.resolve_stimulus(&spec.name, s)?,
         };
         let engine = match spec.gtd_params() {
-            Some(params) if spec.learner == LearnerKind::Gtd => Engine::Gtd(GtdChain::new(
-                Gtd::new(resolved.coder.num_features(), params)?,
+            Some(params) if spec.learner == LearnerKind::Gtd => Engine::Gtd(Box::new(
+                GtdChain::new(Gtd::new(resolved.coder.num_features(), params)?),
             )),
             _ => Engine::Td(TraceGroup::new(
                 resolved.coder.num_features(),
