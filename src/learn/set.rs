@@ -70,6 +70,8 @@ impl PredictionOut {
 }
 
 /// The algorithm behind one prediction.
+// One per prediction (a handful at most), built once: the variants' sizes do not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub(crate) enum Engine {
     /// On-policy TD(λ): a group of one prediction, in f64 (it matches the dense reference to rounding).
