@@ -43,6 +43,9 @@ fn stall_spec() -> PredictionSpec {
             tilings: 1,
         },
         cumulant: Cumulant::Stimulus("stall".into()),
+        learner: Default::default(),
+        target_policy: None,
+        beta: None,
     }
 }
 
@@ -71,6 +74,9 @@ fn command_spec() -> PredictionSpec {
             tiles: 10,
         },
         cumulant: Cumulant::Stimulus("left_elbow_command".into()),
+        learner: Default::default(),
+        target_policy: None,
+        beta: None,
     }
 }
 

@@ -112,6 +112,10 @@ pub struct TickInputs {
     pub values: Option<SensorValues>,
     /// Whether an operator's injected request forced the stimulus on.
     pub forced_stimulus: bool,
+    /// Whether the previous tick's command was the default policy's (its importance sampling ratio
+    /// ρ = 1 for an off-policy prediction about π; else 0): see `crate::agent::learning`.
+    #[serde(default)]
+    pub previous_followed_default: bool,
 }
 
 /// Everything that happened on one tick.

@@ -10,6 +10,11 @@
 //! [`MAX_REQUEST_MS`]. A prediction whose weights were about to become non-finite stops learning, is
 //! reported by [`LearningStage::learn`], and no longer drives the gate (see [`crate::learn::set`]).
 //!
+//! Off-policy predictions (`learner = "gtd"`, `target_policy = "default"`) learn about the default
+//! policy π from the behaviour actually run: the input [`LearnInput::previous_followed_default`] gives
+//! the ratio ρ of the transition into the tick ([`followed_default`] says how it is defined and why it is
+//! 0 or 1). On-policy predictions ignore it.
+//!
 //! With the left-elbow stimulus, a tick whose elbow angles are missing or stale (either arm: the features
 //! tile both) is acted on but not learned from, and the learning chain breaks there, as it does for stale
 //! robot data: E is unknown on such a tick, not "no command", and half the tilings are inactive.
@@ -34,6 +39,25 @@ pub struct LearnInput<'a> {
     pub elbow: Option<ElbowFeatures>,
     /// A human command request injected by an operator: E is on regardless of the sensors.
     pub forced_stimulus: bool,
+    /// Whether the command sent on the previous tick was the default policy π's
+    /// ([`followed_default`]): the importance sampling ratio of the transition into this tick for an
+    /// off-policy prediction about π (see the module documentation).
+    pub previous_followed_default: bool,
+}
+
+/// Whether a tick's command was the default policy π's: the importance sampling ratio
+/// `ρ = π(A|S) / b(A|S)` of that tick's action for a prediction whose target policy is π.
+///
+/// Both policies are deterministic given the agent's state on the tick: π is a fixed function of the
+/// tick (the stall cycle) and the behaviour b is the gate's choice between π and the response ϱ (and a
+/// safety stop or teleop over it), made from the stimulus, the prediction and the mode, all of which are
+/// part of that state. So b gives the action taken probability 1 (b(A|S) = 1) and π gives it 1 when it
+/// is π's action and 0 otherwise: ρ = 1/b = 1 when the command equals π's, else 0. (Were b a genuinely
+/// random mixture of π and ϱ with probability p of π, ρ would be 1/p on π's action: the case of the
+/// issue's "ρ ∈ {0, 1/b}".) The comparison is on the command actually written, so a safety stop or an
+/// e-stop counts as leaving π.
+pub fn followed_default(command: crate::control::Action, default: crate::control::Action) -> bool {
+    command == default
 }
 
 /// The longest injected human request, ms (10 s). A request forces the stimulus E on for its whole
@@ -110,6 +134,8 @@ pub struct LearnOutput {
     pub gate_threshold: f64,
     /// Elbow angles, when a skeleton is used.
     pub elbow: Option<ElbowAngles>,
+    /// The input of the same name, carried into the tick's record for replay.
+    pub previous_followed_default: bool,
 }
 
 /// Perception, prediction and learning for one configuration.
@@ -124,6 +150,8 @@ pub struct LearningStage {
     extra: [f64; 4],
     stimuli: [bool; 1],
     pending_stimulus: Option<bool>,
+    /// ρ of the transition into the pending tick (1: the previous tick followed π).
+    pending_rho: f64,
     /// Diverged predictions already reported by `learn`.
     reported: Vec<String>,
     /// Whether the pending tick's elbow angles are all there (always true without the elbow stimulus).
@@ -161,6 +189,7 @@ impl LearningStage {
             gate_index,
             extra: [f64::NAN; 4],
             pending_stimulus: None,
+            pending_rho: 0.0,
             reported: Vec::new(),
             pending_complete: true,
             skipped_missing_elbow: 0,
@@ -230,6 +259,11 @@ impl LearningStage {
         }
         let stimulus = self.stimulus(&input);
         self.pending_stimulus = Some(stimulus);
+        self.pending_rho = if input.previous_followed_default {
+            1.0
+        } else {
+            0.0
+        };
         self.stimuli = [stimulus];
         self.pending_complete = match self.stimulus_spec {
             StimulusSpec::Stall { .. } => true,
@@ -258,6 +292,7 @@ impl LearningStage {
             gate_value,
             gate_threshold,
             elbow,
+            previous_followed_default: input.previous_followed_default,
         }
     }
 
@@ -277,7 +312,7 @@ impl LearningStage {
             });
         }
         let before = self.set.divergences();
-        self.set.learn(&[stimulus])?;
+        self.set.learn_with_ratio(&[stimulus], self.pending_rho)?;
         let divergences = self.set.divergences();
         let newly_diverged = if divergences > before {
             // Rare (never with the bounds in force); the names are only gathered then.
@@ -430,6 +465,7 @@ mod tests {
                 values: Some(&on),
                 elbow: None,
                 forced_stimulus: false,
+                previous_followed_default: true,
             });
             s.learn().unwrap();
             seen.push(out.stimulus);
@@ -454,6 +490,7 @@ mod tests {
                 values: Some(&v),
                 elbow: None,
                 forced_stimulus: false,
+                previous_followed_default: true,
             });
             s.learn().unwrap();
             if t >= 50 * 390 && phase == 38 {
@@ -481,6 +518,7 @@ mod tests {
                 values: None,
                 elbow: Some(elbow(left)),
                 forced_stimulus: false,
+                previous_followed_default: true,
             });
             s.learn().unwrap();
         };
@@ -510,6 +548,7 @@ mod tests {
             values: None,
             elbow: None,
             forced_stimulus: true,
+            previous_followed_default: true,
         });
         assert!(out.stimulus);
         assert!(out.obs_vector.iter().all(|x| x.is_nan()));
@@ -607,6 +646,7 @@ mod tests {
             values: Some(v),
             elbow: None,
             forced_stimulus: false,
+            previous_followed_default: true,
         };
         let out = s.act(input(&bumped));
         assert_eq!(out.gate_value, Some(0.9e308), "valid until it diverges");

@@ -70,6 +70,7 @@ pub fn assemble(
         inputs: Some(TickInputs {
             values: sensed.values,
             forced_stimulus,
+            previous_followed_default: learned.previous_followed_default,
         }),
     }
 }

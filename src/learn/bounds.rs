@@ -76,7 +76,7 @@ impl ParamBounds {
     }
 }
 
-fn out_of_bounds(name: &str, field: &str, value: f64, bound: String) -> LearnError {
+pub(crate) fn out_of_bounds(name: &str, field: &str, value: f64, bound: String) -> LearnError {
     LearnError::OutOfBounds {
         name: name.to_string(),
         field: field.to_string(),

@@ -102,7 +102,12 @@ pub fn check_finite(state: &SetSnapshot) -> Result<(), CheckpointError> {
             field,
             value,
         };
-        for (what, values) in [("weights", &p.weights), ("traces", &p.traces)] {
+        let secondary = p.secondary.as_deref().unwrap_or(&[]);
+        for (what, values) in [
+            ("weights", &p.weights[..]),
+            ("traces", &p.traces[..]),
+            ("secondary", secondary),
+        ] {
             if let Some((i, &v)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
                 return Err(non_finite(format!("{what}[{i}]"), v));
             }
@@ -117,6 +122,7 @@ pub fn check_finite(state: &SetSnapshot) -> Result<(), CheckpointError> {
             ("lambda", p.lambda),
             ("threshold", threshold),
             ("previous.gamma", gamma),
+            ("beta", p.beta.unwrap_or(0.0)),
         ] {
             if !v.is_finite() {
                 return Err(non_finite(field.to_string(), v));
@@ -371,6 +377,59 @@ mod tests {
         let text = toml::to_string(&cp).unwrap();
         let back: Checkpoint = toml::from_str(&text).unwrap();
         assert_eq!(back, cp);
+    }
+
+    /// Issue 14: an off-policy prediction's secondary weights and β go through a checkpoint (TOML) and
+    /// restore exactly; a non-finite secondary weight is never checkpointed.
+    #[test]
+    fn off_policy_secondary_weights_round_trip_and_must_be_finite() {
+        let text = format!(
+            "{}\n{}",
+            include_str!("../../config/stall.toml"),
+            r#"
+[[predictions]]
+name = "stall_pi"
+tau = 25.0
+lambda = 0.5
+alpha = 0.022727272727272728
+sigma = "identity"
+threshold = { fixed = 0.5 }
+cumulant = { stimulus = "stall" }
+features = { kind = "one_dim", all_obs = true, tiles = 10 }
+learner = "gtd"
+target_policy = "default"
+beta = 0.0022727272727272726
+"#
+        );
+        let cfg = Config::from_toml(&text).unwrap();
+        let mut stage = crate::agent::LearningStage::new(&cfg).unwrap();
+        let mut state = stage.snapshot();
+        let p = &mut state.predictions[1];
+        p.weights[3] = 0.25;
+        p.secondary.as_mut().unwrap()[3] = -0.125;
+        stage.restore(&state).unwrap();
+        let cp = Checkpoint::new(&cfg, 7, stage.snapshot()).unwrap();
+        let back: Checkpoint = toml::from_str(&toml::to_string(&cp).unwrap()).unwrap();
+        assert_eq!(back, cp);
+        let mut restored = crate::agent::LearningStage::new(&cfg).unwrap();
+        restored.restore(&back.state).unwrap();
+        let gtd = restored
+            .predictions()
+            .off_policy_learner("stall_pi")
+            .unwrap();
+        assert_eq!((gtd.weights()[3], gtd.secondary()[3]), (0.25, -0.125));
+        state.predictions[1].secondary.as_mut().unwrap()[5] = f64::NAN;
+        match check_finite(&state) {
+            Err(CheckpointError::NonFinite {
+                prediction, field, ..
+            }) => {
+                assert_eq!(
+                    (prediction.as_str(), field.as_str()),
+                    ("stall_pi", "secondary[5]")
+                );
+            }
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

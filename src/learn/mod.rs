@@ -6,6 +6,8 @@
 //! - [`sigma`]: [`Sigma`], the output nonlinearity (identity or logistic) and its derivative.
 //! - [`td`]: [`TdLambda`], the paper's TD(λ) update over active-index feature lists, dense: the reference.
 //! - [`horde`]: [`Horde`], thousands of general predictions (GVFs) in families, grouped by shared trace.
+//! - [`gtd`]: [`Gtd`], off-policy GTD(λ) (Maei 2011) with importance sampling ratios, for predictions about
+//!   a target policy other than the behaviour run (`learner = "gtd"`).
 //! - [`group`]: [`TraceGroup`], the same update for predictions sharing a trace, deferred so that a tick
 //!   costs the active features only: what runs.
 //! - [`spec`]: [`PredictionSpec`], one prediction as configuration (TOML).
@@ -20,6 +22,7 @@ pub mod bounds;
 pub mod checkpoint;
 pub mod error;
 pub mod group;
+pub mod gtd;
 pub mod horde;
 pub mod inputs;
 pub mod set;
@@ -32,6 +35,7 @@ pub mod tiles;
 pub use bounds::ParamBounds;
 pub use error::LearnError;
 pub use group::{Column, GroupState, TraceGroup};
+pub use gtd::{Gtd, GtdParams};
 pub use horde::{FamilySpec, Horde, HordeSnapshot, HordeState, TickSignals};
 pub use inputs::{FeatureInputs, SignalNames};
 pub use set::{PredictionOut, PredictionSet};

@@ -38,8 +38,9 @@
 use super::LearnError;
 use super::bounds::{ParamBounds, check_lambda, check_set_size, check_threshold};
 use super::group::{Column, TraceGroup};
+use super::gtd::{Gtd, GtdChain};
 use super::inputs::{FeatureInputs, SignalNames, resolve};
-use super::spec::{Cumulant, PredictionSpec, Threshold};
+use super::spec::{Cumulant, LearnerKind, PredictionSpec, Threshold};
 use super::tiles::TileCoder;
 
 /// One prediction's output on one tick.
@@ -68,14 +69,25 @@ impl PredictionOut {
     }
 }
 
+/// The algorithm behind one prediction.
+// One per prediction (a handful at most), built once: the variants' sizes do not matter.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone)]
+pub(crate) enum Engine {
+    /// On-policy TD(λ): a group of one prediction, in f64 (it matches the dense reference to rounding).
+    Td(TraceGroup<f64>),
+    /// Off-policy GTD(λ) ([`super::gtd`]).
+    Gtd(Box<GtdChain>),
+}
+
 /// One prediction and its learner.
 #[derive(Debug, Clone)]
 pub(crate) struct Learner {
     pub spec: PredictionSpec,
     pub gather: Vec<usize>,
     pub coder: TileCoder,
-    /// The learner: a group of one prediction, in f64 (it matches the dense reference to rounding).
-    pub group: TraceGroup<f64>,
+    /// The learner.
+    pub engine: Engine,
     pub stimulus: usize,
     pub threshold: f64,
     /// The limits of runtime changes (α·‖x‖² ≤ 1).
@@ -96,15 +108,20 @@ impl Learner {
         let stimulus = match &spec.cumulant {
             Cumulant::Stimulus(s) => names.resolve_stimulus(&spec.name, s)?,
         };
-        let group = TraceGroup::new(
-            resolved.coder.num_features(),
-            spec.lambda,
-            spec.sigma,
-            vec![Column {
-                alpha: spec.alpha,
-                initial_weight: spec.initial_weight,
-            }],
-        )?;
+        let engine = match spec.gtd_params() {
+            Some(params) if spec.learner == LearnerKind::Gtd => Engine::Gtd(Box::new(
+                GtdChain::new(Gtd::new(resolved.coder.num_features(), params)?),
+            )),
+            _ => Engine::Td(TraceGroup::new(
+                resolved.coder.num_features(),
+                spec.lambda,
+                spec.sigma,
+                vec![Column {
+                    alpha: spec.alpha,
+                    initial_weight: spec.initial_weight,
+                }],
+            )?),
+        };
         let tilings = resolved.coder.num_tilings();
         Ok(Learner {
             threshold: spec.threshold_value(),
@@ -114,7 +131,7 @@ impl Learner {
             bounds,
             gather: resolved.gather,
             coder: resolved.coder,
-            group,
+            engine,
             stimulus,
             spec,
         })
@@ -122,7 +139,10 @@ impl Learner {
 
     /// Whether the prediction stopped learning (see the module documentation).
     pub fn diverged(&self) -> bool {
-        self.group.diverged(0)
+        match &self.engine {
+            Engine::Td(g) => g.diverged(0),
+            Engine::Gtd(c) => c.diverged(),
+        }
     }
 
     fn predict(&mut self, inputs: &FeatureInputs) -> PredictionOut {
@@ -133,7 +153,10 @@ impl Learner {
         self.scratch
             .extend(self.gather.iter().map(|&i| inputs.get(i)));
         self.coder.active(&self.scratch, &mut self.x_now);
-        let y = self.group.predict(&self.x_now)[0];
+        let y = match &mut self.engine {
+            Engine::Td(g) => g.predict(&self.x_now)[0],
+            Engine::Gtd(c) => c.predict(&self.x_now),
+        };
         self.fresh = true;
         PredictionOut {
             name: self.spec.name.clone(),
@@ -146,26 +169,47 @@ impl Learner {
     }
 
     /// The update into this tick; `None` when there was nothing to learn from, or when the prediction
-    /// has diverged (now or before).
-    fn learn(&mut self, stimulus: bool) -> Option<f64> {
+    /// has diverged (now or before). `rho_prev` is the importance sampling ratio of the previous tick's
+    /// action; an on-policy prediction ignores it.
+    fn learn(&mut self, stimulus: bool, rho_prev: f64) -> Option<f64> {
         let reward = self.spec.reward(stimulus);
         let gamma = self.spec.gamma(stimulus);
-        let mut delta = [f64::NAN];
-        // `predict` ran (the set checks it) and one cumulant is given: this cannot fail.
-        let learned = self.group.learn(gamma, &[reward], &mut delta).is_ok();
         self.fresh = false;
-        (learned && delta[0].is_finite()).then_some(delta[0])
+        match &mut self.engine {
+            Engine::Td(g) => {
+                let mut delta = [f64::NAN];
+                // `predict` ran (the set checks it) and one cumulant is given: this cannot fail.
+                let learned = g.learn(gamma, &[reward], &mut delta).is_ok();
+                (learned && delta[0].is_finite()).then_some(delta[0])
+            }
+            Engine::Gtd(c) => c.learn(gamma, reward, rho_prev),
+        }
     }
 
     /// Forgets a `predict` that has not been learned from.
     pub fn clear_pending(&mut self) {
         self.fresh = false;
-        self.group.clear_pending();
+        match &mut self.engine {
+            Engine::Td(g) => g.clear_pending(),
+            Engine::Gtd(c) => c.clear_pending(),
+        }
     }
 
     pub fn break_chain(&mut self) {
         self.fresh = false;
-        self.group.break_chain();
+        match &mut self.engine {
+            Engine::Td(g) => g.break_chain(),
+            Engine::Gtd(c) => c.break_chain(),
+        }
+    }
+
+    /// Back to the initial weights, no previous tick.
+    fn reset(&mut self) {
+        self.fresh = false;
+        match &mut self.engine {
+            Engine::Td(g) => g.reset(),
+            Engine::Gtd(c) => c.reset(),
+        }
     }
 
     /// Checks α, λ and θ against their bounds, then applies them all (or nothing).
@@ -186,11 +230,17 @@ impl Learner {
             check_threshold(name, t)?;
         }
         if let Some(a) = alpha {
-            self.group.set_alpha(0, a)?;
+            match &mut self.engine {
+                Engine::Td(g) => g.set_alpha(0, a)?,
+                Engine::Gtd(c) => c.gtd_mut().set_alpha(a)?,
+            }
             self.spec.alpha = a;
         }
         if let Some(l) = lambda {
-            self.group.set_lambda(l)?;
+            match &mut self.engine {
+                Engine::Td(g) => g.set_lambda(l)?,
+                Engine::Gtd(c) => c.gtd_mut().set_lambda(l)?,
+            }
             self.spec.lambda = l;
         }
         if let Some(t) = threshold {
@@ -242,11 +292,23 @@ impl PredictionSet {
             .collect()
     }
 
-    /// Step 2 of a tick: the TD(λ) update for the transition from the previous tick to this one,
-    /// given this tick's stimuli (in [`SignalNames::stimuli`] order). Returns each prediction's δ,
-    /// or `None` where there was no previous tick to learn from or the prediction has diverged (see the
-    /// module documentation; [`PredictionSet::divergences`] counts the predictions that stopped).
+    /// Step 2 of a tick for on-policy data: [`PredictionSet::learn_with_ratio`] with ρ = 1 (the previous
+    /// tick's action was the target policy's; on-policy predictions ignore ρ anyway).
     pub fn learn(&mut self, stimuli: &[bool]) -> Result<Vec<Option<f64>>, LearnError> {
+        self.learn_with_ratio(stimuli, 1.0)
+    }
+
+    /// Step 2 of a tick: the TD(λ) or GTD(λ) update for the transition from the previous tick to this
+    /// one, given this tick's stimuli (in [`SignalNames::stimuli`] order) and the importance sampling
+    /// ratio `rho_prev` of the previous tick's action (used by off-policy predictions only). Returns each
+    /// prediction's δ, or `None` where there was no previous tick to learn from or the prediction has
+    /// diverged (see the module documentation; [`PredictionSet::divergences`] counts the predictions
+    /// that stopped).
+    pub fn learn_with_ratio(
+        &mut self,
+        stimuli: &[bool],
+        rho_prev: f64,
+    ) -> Result<Vec<Option<f64>>, LearnError> {
         if stimuli.len() != self.names.stimuli.len() {
             return Err(LearnError::StimulusCountMismatch {
                 expected: self.names.stimuli.len(),
@@ -262,7 +324,7 @@ impl PredictionSet {
             .iter_mut()
             .map(|l| {
                 let was = l.diverged();
-                let delta = l.learn(stimuli.get(l.stimulus).copied().unwrap_or(false));
+                let delta = l.learn(stimuli.get(l.stimulus).copied().unwrap_or(false), rho_prev);
                 stopped += u64::from(l.diverged() && !was);
                 delta
             })
@@ -301,10 +363,7 @@ impl PredictionSet {
 
     /// Back to the initial weights, zero traces and no previous tick; a diverged prediction learns again.
     pub fn reset(&mut self) {
-        for l in &mut self.learners {
-            l.fresh = false;
-            l.group.reset();
-        }
+        self.learners.iter_mut().for_each(Learner::reset);
     }
 
     /// The number of predictions.
@@ -327,12 +386,27 @@ impl PredictionSet {
         self.learners.iter().map(|l| &l.spec)
     }
 
-    /// The learner of prediction `name` (a group of one: its weights are `weights(0)`).
+    /// The learner of on-policy prediction `name` (a group of one: its weights are `weights(0)`);
+    /// `None` for an off-policy one ([`PredictionSet::off_policy_learner`]).
     pub fn learner(&self, name: &str) -> Option<&TraceGroup<f64>> {
         self.learners
             .iter()
             .find(|l| l.spec.name == name)
-            .map(|l| &l.group)
+            .and_then(|l| match &l.engine {
+                Engine::Td(g) => Some(g),
+                Engine::Gtd(_) => None,
+            })
+    }
+
+    /// The GTD(λ) learner of off-policy prediction `name`.
+    pub fn off_policy_learner(&self, name: &str) -> Option<&Gtd> {
+        self.learners
+            .iter()
+            .find(|l| l.spec.name == name)
+            .and_then(|l| match &l.engine {
+                Engine::Gtd(c) => Some(c.gtd()),
+                Engine::Td(_) => None,
+            })
     }
 
     /// The tile coder of prediction `name`.
@@ -380,3 +454,6 @@ impl PredictionSet {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod gtd_tests;

@@ -9,6 +9,10 @@
 //! is refused rather than half-believed. A snapshot without `state` (an earlier version's) restores from
 //! the dense form, which continues the run to rounding.
 //!
+//! An off-policy (GTD(λ)) prediction has no deferred state: its dense `weights` (θ), `traces` and
+//! `previous` are exact, and its secondary weights w and step size β are written beside them
+//! (`secondary`, `beta`), so it too continues bit for bit.
+//!
 //! Take snapshots between ticks (after `learn`): a `predict` whose `learn` has not happened yet is not
 //! part of the snapshot, and restoring clears it.
 
@@ -16,7 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use super::LearnError;
 use super::group::GroupState;
-use super::set::PredictionSet;
+use super::set::{Engine, PredictionSet};
 use super::spec::Threshold;
 
 /// The learned state of one prediction.
@@ -34,6 +38,12 @@ pub struct PredictionSnapshot {
     /// The learner's exact state (see the module documentation); absent in earlier versions' files.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub state: Option<GroupState>,
+    /// An off-policy prediction's secondary weights w (GTD(λ)); absent for on-policy ones.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub secondary: Option<Vec<f64>>,
+    /// An off-policy prediction's secondary step size β; absent for on-policy ones.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beta: Option<f64>,
 }
 
 /// The previous tick, which the next `learn` learns from.
@@ -58,18 +68,37 @@ impl PredictionSet {
             predictions: self
                 .learners
                 .iter()
-                .map(|l| PredictionSnapshot {
-                    name: l.spec.name.clone(),
-                    alpha: l.spec.alpha,
-                    lambda: l.spec.lambda,
-                    threshold: l.spec.threshold,
-                    weights: l.group.weights(0),
-                    traces: l.group.traces(),
-                    previous: l.group.previous().map(|(active, gamma)| PreviousStep {
-                        active: active.to_vec(),
-                        gamma,
-                    }),
-                    state: Some(l.group.state()),
+                .map(|l| match &l.engine {
+                    Engine::Td(group) => PredictionSnapshot {
+                        name: l.spec.name.clone(),
+                        alpha: l.spec.alpha,
+                        lambda: l.spec.lambda,
+                        threshold: l.spec.threshold,
+                        weights: group.weights(0),
+                        traces: group.traces(),
+                        previous: group.previous().map(|(active, gamma)| PreviousStep {
+                            active: active.to_vec(),
+                            gamma,
+                        }),
+                        state: Some(group.state()),
+                        secondary: None,
+                        beta: None,
+                    },
+                    Engine::Gtd(chain) => PredictionSnapshot {
+                        name: l.spec.name.clone(),
+                        alpha: l.spec.alpha,
+                        lambda: l.spec.lambda,
+                        threshold: l.spec.threshold,
+                        weights: chain.gtd().weights().to_vec(),
+                        traces: chain.gtd().traces().to_vec(),
+                        previous: chain.previous().map(|(active, gamma)| PreviousStep {
+                            active: active.to_vec(),
+                            gamma,
+                        }),
+                        state: None,
+                        secondary: Some(chain.gtd().secondary().to_vec()),
+                        beta: Some(chain.gtd().params().beta),
+                    },
                 })
                 .collect(),
         }
@@ -113,7 +142,7 @@ fn agrees(dense: &[f64], exact: &[f64]) -> bool {
 
 fn apply(l: &mut super::set::Learner, s: &PredictionSnapshot) -> Result<(), LearnError> {
     let name = &s.name;
-    let features = l.group.features();
+    let features = l.coder.num_features();
     for v in [&s.weights, &s.traces] {
         if v.len() != features {
             return Err(LearnError::FeatureCountMismatch {
@@ -142,6 +171,41 @@ fn apply(l: &mut super::set::Learner, s: &PredictionSnapshot) -> Result<(), Lear
     // The runtime parameters go through the same bounds as `set_params` (α·‖x‖² ≤ 1). Both calls
     // check before they write; `restore` runs this on a copy first, so the set never half-changes.
     l.set_params(Some(s.alpha), Some(s.lambda), Some(s.threshold))?;
+    let group = match &mut l.engine {
+        Engine::Td(group) => {
+            if s.secondary.is_some() || s.beta.is_some() {
+                return Err(LearnError::BadGroupState {
+                    name: name.clone(),
+                    what: "has secondary weights (GTD(λ)), but the prediction is on-policy TD(λ)"
+                        .into(),
+                });
+            }
+            group
+        }
+        Engine::Gtd(chain) => {
+            let (Some(secondary), Some(beta)) = (&s.secondary, s.beta) else {
+                return Err(LearnError::BadGroupState {
+                    name: name.clone(),
+                    what: "has no secondary weights or beta, but the prediction is off-policy \
+                           (learner = \"gtd\")"
+                        .into(),
+                });
+            };
+            if s.state.is_some() {
+                return Err(LearnError::BadGroupState {
+                    name: name.clone(),
+                    what: "has a TD(λ) group state, but the prediction is off-policy (learner = \"gtd\")"
+                        .into(),
+                });
+            }
+            super::gtd::check_beta(name, beta, l.bounds.active_features)?;
+            chain.gtd_mut().set_beta(beta)?;
+            chain.restore(name, &s.weights, secondary, &s.traces, previous)?;
+            l.spec.beta = Some(beta);
+            l.clear_pending();
+            return Ok(());
+        }
+    };
     match &s.state {
         Some(state) => {
             let same_params = state.alphas == [s.alpha] && state.lambda == s.lambda;
@@ -150,11 +214,11 @@ fn apply(l: &mut super::set::Learner, s: &PredictionSnapshot) -> Result<(), Lear
                 && s.previous
                     .as_ref()
                     .is_none_or(|p| p.gamma == state.gamma_prev);
-            l.group.restore_state(name, state)?;
+            group.restore_state(name, state)?;
             let consistent = same_params
                 && same_previous
-                && agrees(&s.weights, &l.group.weights(0))
-                && agrees(&s.traces, &l.group.traces());
+                && agrees(&s.weights, &group.weights(0))
+                && agrees(&s.traces, &group.traces());
             if !consistent {
                 return Err(LearnError::BadGroupState {
                     name: name.clone(),
@@ -164,8 +228,7 @@ fn apply(l: &mut super::set::Learner, s: &PredictionSnapshot) -> Result<(), Lear
                 });
             }
         }
-        None => l
-            .group
+        None => group
             .set_dense(0, &s.weights, &s.traces, previous)
             .map_err(|_| LearnError::NonFiniteSnapshot(name.clone()))?,
     }

@@ -42,6 +42,34 @@ pub enum Threshold {
     Steps(u32),
 }
 
+/// Which learning algorithm updates a prediction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LearnerKind {
+    /// The paper's on-policy TD(λ) ([`super::td`]): the prediction is about the behaviour actually run.
+    #[default]
+    Td,
+    /// Off-policy GTD(λ) ([`super::gtd`]): the prediction is about the declared `target_policy`,
+    /// learned from the behaviour actually run with importance sampling ratios.
+    Gtd,
+}
+
+impl LearnerKind {
+    fn is_td(&self) -> bool {
+        *self == LearnerKind::Td
+    }
+}
+
+/// The policy an off-policy prediction is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TargetPolicy {
+    /// "The default policy π continues": the prediction of the cumulant were π followed from now on,
+    /// whatever response actually runs. With the deterministic policies here, ρ_t = 1 on a tick whose
+    /// command was π's and 0 otherwise (see `crate::agent::learning`).
+    Default,
+}
+
 /// Which signal the prediction is about.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -110,6 +138,17 @@ pub struct PredictionSpec {
     pub features: FeatureSpec,
     /// The signal being predicted.
     pub cumulant: Cumulant,
+    /// The learning algorithm (default: the paper's TD(λ)).
+    #[serde(default, skip_serializing_if = "LearnerKind::is_td")]
+    pub learner: LearnerKind,
+    /// The target policy of an off-policy (`learner = "gtd"`) prediction; required there, refused
+    /// elsewhere.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_policy: Option<TargetPolicy>,
+    /// GTD(λ)'s secondary step size β (> 0, β·‖x‖² ≤ 1); required with `learner = "gtd"`, refused
+    /// elsewhere.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beta: Option<f64>,
 }
 
 impl PredictionSpec {
@@ -155,7 +194,75 @@ impl PredictionSpec {
         }
         check_tau(name, self.tau)?;
         self.td_params().validate(name)?;
-        check_threshold(name, self.threshold)
+        check_threshold(name, self.threshold)?;
+        self.check_learner()
+    }
+
+    /// The off-policy keys: `learner = "gtd"` needs `target_policy` and `beta` (> 0) and σ = identity
+    /// (only linear GTD(λ) is implemented, [`super::gtd`]); `learner = "td"` takes neither key.
+    fn check_learner(&self) -> Result<(), LearnError> {
+        let name = self.name.as_str();
+        let refuse = |field: &str, value: String, bound: &str| LearnError::OutOfBounds {
+            name: name.to_string(),
+            field: field.to_string(),
+            value,
+            bound: bound.to_string(),
+        };
+        match self.learner {
+            LearnerKind::Td => {
+                if let Some(t) = self.target_policy {
+                    return Err(refuse(
+                        "target_policy",
+                        format!("{t:?}").to_lowercase(),
+                        "is only for learner = \"gtd\" (an on-policy TD(λ) prediction is about the behaviour run)",
+                    ));
+                }
+                if let Some(b) = self.beta {
+                    return Err(refuse(
+                        "beta",
+                        format!("{b:?}"),
+                        "is only for learner = \"gtd\" (TD(λ) has no secondary weights)",
+                    ));
+                }
+                Ok(())
+            }
+            LearnerKind::Gtd => {
+                if self.target_policy.is_none() {
+                    return Err(refuse(
+                        "target_policy",
+                        "(absent)".into(),
+                        "is required with learner = \"gtd\" (e.g. target_policy = \"default\")",
+                    ));
+                }
+                let Some(beta) = self.beta else {
+                    return Err(refuse(
+                        "beta",
+                        "(absent)".into(),
+                        "is required with learner = \"gtd\" (the secondary step size, > 0 and β·‖x‖² ≤ 1)",
+                    ));
+                };
+                super::gtd::check_beta_positive(name, beta)?;
+                if self.sigma != Sigma::Identity {
+                    return Err(refuse(
+                        "sigma",
+                        "\"logistic\"".into(),
+                        "is not supported with learner = \"gtd\" (only linear GTD(λ) is implemented; \
+                         the convergent nonlinear form needs a Hessian term): use sigma = \"identity\"",
+                    ));
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// The GTD(λ) parameters, for a `learner = "gtd"` prediction.
+    pub fn gtd_params(&self) -> Option<super::gtd::GtdParams> {
+        (self.learner == LearnerKind::Gtd).then(|| super::gtd::GtdParams {
+            alpha: self.alpha,
+            beta: self.beta.unwrap_or(f64::NAN),
+            lambda: self.lambda,
+            initial_weight: self.initial_weight,
+        })
     }
 
     /// Checks every field against its bound (`super::bounds`) for a robot with `obs_dims` observation
@@ -166,6 +273,9 @@ impl PredictionSpec {
         self.validate()?;
         let bounds = feature_bounds(&self.name, &self.features, obs_dims)?;
         bounds.check_alpha(&self.name, self.alpha)?;
+        if let Some(beta) = self.beta {
+            super::gtd::check_beta(&self.name, beta, bounds.active_features)?;
+        }
         check_initial_value(&self.name, self.initial_weight, bounds.active_features)?;
         Ok(bounds)
     }
@@ -281,6 +391,53 @@ mod tests {
         assert!(
             message.contains("stall") && message.contains("tau"),
             "{message}"
+        );
+    }
+
+    #[test]
+    fn off_policy_keys_are_checked_with_their_names() {
+        let gtd =
+            format!("{STALL}\nlearner = \"gtd\"\ntarget_policy = \"default\"\nbeta = 0.002\n");
+        let spec: PredictionSpec = toml::from_str(&gtd).unwrap();
+        spec.bounds(44).unwrap();
+        assert_eq!(spec.learner, LearnerKind::Gtd);
+        assert_eq!(spec.target_policy, Some(TargetPolicy::Default));
+        assert_eq!(spec.gtd_params().unwrap().beta, 0.002);
+        let field = |text: &str| match toml::from_str::<PredictionSpec>(text).unwrap().bounds(44) {
+            Err(LearnError::OutOfBounds { field, .. }) => field,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(
+            field(&gtd.replace("target_policy = \"default\"\n", "")),
+            "target_policy"
+        );
+        assert_eq!(field(&gtd.replace("beta = 0.002\n", "")), "beta");
+        assert_eq!(field(&gtd.replace("beta = 0.002", "beta = 0.0")), "beta");
+        assert_eq!(field(&gtd.replace("beta = 0.002", "beta = 0.5")), "beta");
+        assert_eq!(field(&gtd.replace("\"identity\"", "\"logistic\"")), "sigma");
+        let td_with_beta = format!("{STALL}\nbeta = 0.002\n");
+        assert_eq!(field(&td_with_beta), "beta");
+        let td_with_target = format!("{STALL}\ntarget_policy = \"default\"\n");
+        assert_eq!(field(&td_with_target), "target_policy");
+        let e = toml::from_str::<PredictionSpec>(&gtd.replace("beta = 0.002", "beta = 0.5"))
+            .unwrap()
+            .bounds(44)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "prediction `stall`: beta = 0.5 exceeds 1/44 = 0.0227 (β·‖x‖² ≤ 1 with 44 active features)"
+        );
+        assert!(
+            toml::from_str::<PredictionSpec>(&gtd.replace("\"default\"", "\"greedy\"")).is_err()
+        );
+        assert!(toml::from_str::<PredictionSpec>(&gtd.replace("\"gtd\"", "\"q\"")).is_err());
+        // An on-policy spec serialises without the new keys (older readers keep working).
+        let on: PredictionSpec = toml::from_str(STALL).unwrap();
+        let text = toml::to_string(&on).unwrap();
+        assert!(
+            !text.contains("learner") && !text.contains("beta"),
+            "{text}"
         );
     }
 

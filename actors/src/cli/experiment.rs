@@ -95,6 +95,11 @@ pub struct StallArgs {
     /// OS threads to run on (default: the number of CPUs, at most 2).
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
+    /// Compare these policies instead (interleaved in this order): reactive, pavlovian, offpolicy
+    /// (Pavlovian control on an off-policy GTD(λ) prediction of the stall under π); writes
+    /// policies.json, policies.md and runs.csv.
+    #[arg(long, value_name = "LIST")]
+    pub policies: Option<String>,
 }
 
 fn load_config(path: Option<&PathBuf>, builtin: &str) -> Result<Config> {
@@ -123,7 +128,13 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
                     .out
                     .unwrap_or_else(|| PathBuf::from(format!("results/stall-{}", a.seed))),
             };
-            let table = stall::run_and_report(&config, &opts, true)?;
+            let table = match &a.policies {
+                Some(list) => {
+                    let policies = stall::policies::parse_policies(list)?;
+                    stall::policies::run_and_report(&config, &opts, &policies, true)?
+                }
+                None => stall::run_and_report(&config, &opts, true)?,
+            };
             say!("{}", table.trim_end());
             Ok(())
         }

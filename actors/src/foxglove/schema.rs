@@ -118,6 +118,7 @@ pub(crate) fn tick_record() -> Value {
             object([("values", array(integer())), ("present", integer())]),
         ),
         ("forced_stimulus", boolean()),
+        ("previous_followed_default", boolean()),
     ]);
     titled(
         "pavlov.TickRecord",
@@ -354,6 +355,7 @@ pub(crate) mod tests {
             inputs: Some(TickInputs {
                 values: Some(values),
                 forced_stimulus: true,
+                previous_followed_default: true,
             }),
             sensors: pavlov::record::SensorReadings {
                 battery_current_ma: Some(-250),

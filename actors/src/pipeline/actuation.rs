@@ -10,6 +10,7 @@
 
 use std::sync::Arc;
 
+use pavlov::agent::learning::followed_default;
 use pavlov::agent::safety;
 use pavlov::agent::tick_record::{self, Actuated, Sensed};
 use pavlov::config::SafetyConfig;
@@ -170,6 +171,9 @@ pub(crate) struct ActuationChannels {
     pub(crate) stats: watch::Sender<ActuationStats>,
     /// Where a pipeline stall is announced.
     pub(crate) events: EventLog,
+    /// The last record's tick and whether its command was the default policy's, for learning's
+    /// off-policy ratio on the next tick.
+    pub(crate) followed: watch::Sender<Option<(u64, bool)>>,
 }
 
 /// Runs until `cancel` fires or the decision channel closes; the writer then sends the shut-down sequence.
@@ -186,6 +190,7 @@ pub(crate) async fn run(
         feed,
         stats,
         events,
+        followed,
     } = channels;
     loop {
         tokio::select! {
@@ -195,6 +200,10 @@ pub(crate) async fn run(
                 let Some(d) = d else { break };
                 let latched = *estop.borrow();
                 let record = actuation.on_decision(d, latched, &writer);
+                followed.send_replace(Some((
+                    record.seq,
+                    followed_default(record.command, record.default_action),
+                )));
                 feed.publish(Arc::new(record));
                 stats.send_replace(actuation.stats());
             }

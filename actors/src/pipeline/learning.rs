@@ -418,6 +418,8 @@ pub(crate) struct LearningChannels {
     pub(crate) events: EventLog,
     /// Requests for the learner's state between two ticks (a recording begins).
     pub(crate) snapshots: mpsc::Receiver<oneshot::Sender<StartState>>,
+    /// Actuation's last record: its tick and whether its command was the default policy's.
+    pub(crate) followed: watch::Receiver<Option<(u64, bool)>>,
 }
 
 /// Runs until `cancel` fires or observations stop.
@@ -434,6 +436,7 @@ pub(crate) async fn run(
         out,
         events,
         mut snapshots,
+        followed,
     } = channels;
     learning.events = Some(events);
     let mut seq = 0;
@@ -455,10 +458,18 @@ pub(crate) async fn run(
                 let now_ms = since.as_millis() as u64;
                 let elbow = learning.elbows.as_mut().map(|t| t.step(&pose.borrow(), now_ms));
                 let forced_stimulus = seq < learning.request_until;
+                // ρ of the transition into this tick: the previous tick's record, if actuation made
+                // one, says whether π was followed; no record (a dropped decision, the watchdog's stop)
+                // means it was not.
+                let previous_followed_default = matches!(
+                    *followed.borrow(),
+                    Some((s, true)) if s.checked_add(1) == Some(seq)
+                );
                 let output = learning.stage.act(LearnInput {
                     values: obs.values.as_ref(),
                     elbow,
                     forced_stimulus,
+                    previous_followed_default,
                 });
                 let fresh = observation_is_fresh(obs.link.state, obs.age_ticks, learning.max_obs_age_ticks);
                 let p = Learned {

@@ -124,6 +124,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
     let (pose_tx, pose_rx) = watch::channel(PoseTracker::new(config.skeleton.max_joint_age_ms));
     let ticks = SharedTickStats::default();
     let (snapshots_tx, snapshots_rx) = mpsc::channel(2);
+    let (followed_tx, followed_rx) = watch::channel(None);
 
     let ticker = ticker::spawn(
         &config.tick,
@@ -155,6 +156,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
                 out: learned_tx,
                 events: events.clone(),
                 snapshots: snapshots_rx,
+                followed: followed_rx,
             },
             cancel.clone(),
         )),
@@ -179,6 +181,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
                 feed: feed.clone(),
                 stats: stats_tx,
                 events: events.clone(),
+                followed: followed_tx,
             },
             cancel.clone(),
         )),

@@ -153,6 +153,7 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
             values: inputs.values.as_ref(),
             elbow,
             forced_stimulus: inputs.forced_stimulus,
+            previous_followed_default: inputs.previous_followed_default,
         });
         // The same rule as the learning actor: a stale observation is acted on but not learned from.
         if safety::observation_is_fresh(

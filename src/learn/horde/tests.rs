@@ -135,6 +135,9 @@ fn the_papers_stall_prediction_as_a_family_equals_the_prediction_set_bit_for_bit
             tilings: 1,
         },
         cumulant: Cumulant::Stimulus("stall".into()),
+        learner: Default::default(),
+        target_policy: None,
+        beta: None,
     };
     let mut set = PredictionSet::new(vec![spec], &names()).unwrap();
     for (obs, raw, _, stall) in stream(3000, 2) {

@@ -31,6 +31,9 @@ fn spec(tau: f64, lambda: f64, alpha: f64, sigma: Sigma, w0: f64, tiles: usize) 
             tilings: 1,
         },
         cumulant: Cumulant::Stimulus("e".into()),
+        learner: Default::default(),
+        target_policy: None,
+        beta: None,
     }
 }
 

@@ -168,3 +168,64 @@ fn the_cli_writes_the_results_directory_and_its_recordings_replay() {
     assert!(String::from_utf8_lossy(&replay.stdout).contains("identical"));
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// Issue 14: `--policies reactive,pavlovian,offpolicy` runs the three policies interleaved from one
+/// command, writes the tables, and the off-policy run's recording (its gate on the GTD(λ) prediction)
+/// replays exactly through the real binary; a bad list is refused with the name.
+#[test]
+fn the_three_way_study_runs_from_one_command_and_its_off_policy_run_replays() {
+    let out = tmp("stall-policies");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_pavlov"))
+        .args([
+            "experiment",
+            "stall",
+            "--policies",
+            "reactive,pavlovian,offpolicy",
+            "--runs",
+            "1",
+            "--minutes",
+            "0.5",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("pavlov experiment stall --policies");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    for needle in [
+        "| metric | reactive | pavlovian | offpolicy |",
+        "offpolicy vs pavlovian",
+        "RMSE off-policy `stall_pi`",
+    ] {
+        assert!(stdout.contains(needle), "no {needle:?} in {stdout}");
+    }
+    let study: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("policies.json")).unwrap()).unwrap();
+    let runs = study["runs"].as_array().unwrap();
+    let policies: Vec<&str> = runs.iter().map(|r| r["policy"].as_str().unwrap()).collect();
+    assert_eq!(policies, ["reactive", "pavlovian", "offpolicy"]);
+    assert!(runs.iter().all(|r| r["accuracy"].is_object()));
+    let replay = std::process::Command::new(env!("CARGO_BIN_EXE_pavlov"))
+        .arg("replay")
+        .arg(out.join("runs").join("02-offpolicy"))
+        .output()
+        .expect("pavlov replay");
+    assert!(replay.status.success());
+    assert!(String::from_utf8_lossy(&replay.stdout).contains("identical"));
+    let _ = std::fs::remove_dir_all(&out);
+
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_pavlov"))
+        .args(["experiment", "stall", "--policies", "reactive,greedy"])
+        .output()
+        .expect("pavlov experiment stall --policies");
+    assert!(!bad.status.success());
+    assert!(
+        String::from_utf8_lossy(&bad.stderr).contains("unknown policy `greedy`"),
+        "{}",
+        String::from_utf8_lossy(&bad.stderr)
+    );
+}

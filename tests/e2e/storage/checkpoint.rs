@@ -28,6 +28,7 @@ fn predictions_from(cfg: &Config, cp: Option<&Checkpoint>, record: &TickRecord) 
         values: inputs.values.as_ref(),
         elbow: None,
         forced_stimulus: inputs.forced_stimulus,
+        previous_followed_default: inputs.previous_followed_default,
     });
     out.predictions.iter().map(|p| p.value).collect()
 }

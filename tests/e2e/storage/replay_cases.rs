@@ -194,3 +194,102 @@ fn a_recording_of_a_resumed_run_replays_exactly() {
     assert!(!replay::replay(&fresh).unwrap().exact());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 14: a recording of a run with an off-policy (GTD(λ)) prediction, started mid-run, replays
+/// exactly: its start state carries the secondary weights, and each tick's inputs the ratio ρ of the
+/// transition into it. The run is reactive for 30 s (π is followed except while stalled, so both ratios
+/// occur), then Pavlovian on the off-policy prediction. Without the recorded ρ (every tick claimed to
+/// follow π) it does not replay.
+#[test]
+fn a_recording_with_an_off_policy_prediction_replays_exactly() {
+    let root = fresh_dir("replay-gtd");
+    let mut cfg = pavlov_actors::experiment::stall::policies::with_offpolicy_prediction(
+        &common::stall_config(),
+    )
+    .expect("the off-policy prediction fits");
+    cfg.control.gate_prediction = "stall_pi".into();
+    cfg.control.mode = Mode::Reactive;
+    cfg.sim.seed = 7;
+    let recorder = Recorder::spawn(
+        RecordingHeader::new(&cfg, "gtd"),
+        None,
+        root.clone(),
+        20_000,
+    )
+    .expect("recorder");
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .start_paused(true)
+        .build()
+        .unwrap();
+    let link = recorder.link.clone();
+    rt.block_on(async move {
+        let server = Server::builder(cfg, RobotTarget::Simulated)
+            .recorder(link)
+            .start()
+            .await
+            .expect("server");
+        ticks(&server, 1000).await;
+        let started = send(
+            &server,
+            RecorderCommand::StartRecording {
+                dir: Some("gtd".into()),
+            },
+        )
+        .await;
+        assert!(started.is_ok(), "{started:?}");
+        ticks(&server, 500).await;
+        let pavlovian = GatingCommand::SetMode {
+            mode: Mode::Pavlovian,
+        };
+        assert!(send(&server, pavlovian).await.is_ok());
+        ticks(&server, 1000).await;
+        assert!(
+            send(&server, RecorderCommand::StopRecording {})
+                .await
+                .is_ok()
+        );
+        server.shutdown().await;
+    });
+    drop(rt);
+    let report = recorder.join();
+    assert!(report.errors.is_empty(), "{:?}", report.errors);
+    let rec = recording::load(&root.join("gtd")).expect("reads back");
+    let start = rec.header.start.as_ref().expect("a start state");
+    let gtd = &start.learner.predictions.predictions[1];
+    assert_eq!(gtd.name, "stall_pi");
+    let secondary = gtd
+        .secondary
+        .as_ref()
+        .expect("secondary weights in the start state");
+    assert!(
+        secondary.iter().any(|&w| w != 0.0),
+        "learned before the recording"
+    );
+    let inputs = |r: &pavlov::record::TickRecord| r.inputs.clone().expect("inputs");
+    let followed = rec
+        .records
+        .iter()
+        .filter(|r| inputs(r).previous_followed_default)
+        .count();
+    assert!(
+        followed > 0 && followed < rec.records.len(),
+        "both ratios occur: {followed} of {}",
+        rec.records.len()
+    );
+    assert!(
+        rec.records
+            .iter()
+            .any(|r| r.mode == Mode::Pavlovian && r.gate && !r.stimulus),
+        "the off-policy prediction drove the gate"
+    );
+    replay_exact(&rec);
+    let mut all_followed = rec.clone();
+    for r in &mut all_followed.records {
+        if let Some(i) = r.inputs.as_mut() {
+            i.previous_followed_default = true;
+        }
+    }
+    assert!(!replay::replay(&all_followed).unwrap().exact());
+    let _ = std::fs::remove_dir_all(&root);
+}

@@ -208,6 +208,8 @@ mod tests {
             lagged: 0,
             wall_s: 0.0,
             first_predictive_stop_s: (mode == Mode::Pavlovian).then_some(4.0 + index as f64),
+            policy: String::new(),
+            accuracy: None,
             excerpt: Vec::new(),
         }
     }

@@ -7,8 +7,10 @@
 //! - [`run`]: what one run keeps (metrics, per-window counts, the Figure 1 excerpt);
 //! - [`analysis`]: the statistics; [`report`]: files and the terminal table; [`plots`]: the SVG figures.
 
+pub(crate) mod accuracy;
 pub mod analysis;
 pub(crate) mod plots;
+pub mod policies;
 pub mod report;
 pub(crate) mod run;
 
@@ -73,6 +75,9 @@ pub fn plan(config: &Config, opts: &StallOptions) -> Vec<RunSpec> {
                 excerpt_from_tick: (ticks > excerpt_from).then_some(excerpt_from),
                 excerpt_len,
                 record_dir: opts.record.then(|| opts.out.join("runs").join(name)),
+                policy: mode_name(mode).to_string(),
+                gate_prediction: None,
+                score: None,
             }
         })
         .collect()

@@ -32,6 +32,12 @@ pub struct RunSpec {
     pub(crate) excerpt_len: usize,
     /// Where to record the run (None: no recording).
     pub(crate) record_dir: Option<PathBuf>,
+    /// The policy's name in tables (`reactive`, `pavlovian`, `offpolicy`).
+    pub(crate) policy: String,
+    /// The prediction that drives the gate, when not the configuration's.
+    pub(crate) gate_prediction: Option<String>,
+    /// Score the on-policy and off-policy predictions (named) against π's return.
+    pub(crate) score: Option<(String, String)>,
 }
 
 /// Counts over one window of a run.
@@ -72,6 +78,12 @@ pub struct RunResult {
     pub(crate) wall_s: f64,
     /// When the response first engaged on the prediction alone (gate on, stimulus off), s.
     pub(crate) first_predictive_stop_s: Option<f64>,
+    /// The policy's name (`reactive`, `pavlovian`, `offpolicy`).
+    #[serde(default)]
+    pub policy: String,
+    /// The predictions' accuracy against π's return, when scored.
+    #[serde(default)]
+    pub accuracy: Option<super::accuracy::RunAccuracy>,
     /// The Figure 1 excerpt (not serialised into the study).
     #[serde(skip)]
     pub(crate) excerpt: Vec<TickRecord>,
@@ -84,6 +96,7 @@ struct StallCollector<'a> {
     windows: Vec<WindowCounts>,
     excerpt: Vec<TickRecord>,
     first_predictive_stop_s: Option<f64>,
+    returns: Option<super::accuracy::PiReturns>,
 }
 
 struct Kept {
@@ -91,6 +104,7 @@ struct Kept {
     windows: Vec<WindowCounts>,
     excerpt: Vec<TickRecord>,
     first_predictive_stop_s: Option<f64>,
+    accuracy: Option<super::accuracy::RunAccuracy>,
 }
 
 impl Collect for StallCollector<'_> {
@@ -99,6 +113,9 @@ impl Collect for StallCollector<'_> {
     fn record(&mut self, record: Arc<TickRecord>) {
         if self.first_predictive_stop_s.is_none() && record.gate && !record.stimulus {
             self.first_predictive_stop_s = Some(record.t_ms / 1000.0);
+        }
+        if let Some(r) = &mut self.returns {
+            r.observe(&record);
         }
         let before = self.metrics.totals();
         self.metrics.observe(&record);
@@ -128,6 +145,10 @@ impl Collect for StallCollector<'_> {
             windows: self.windows,
             excerpt: self.excerpt,
             first_predictive_stop_s: self.first_predictive_stop_s,
+            accuracy: self
+                .returns
+                .as_ref()
+                .map(super::accuracy::PiReturns::finish),
         })
     }
 }
@@ -137,6 +158,14 @@ pub(crate) fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> 
     let mut config = base.clone();
     config.control.mode = spec.mode;
     config.sim.seed = spec.seed;
+    if let Some(g) = &spec.gate_prediction {
+        config.control.gate_prediction = g.clone();
+    }
+    let continuation = config
+        .predictions
+        .iter()
+        .find(|p| Some(&p.name) == spec.score.as_ref().map(|s| &s.0))
+        .map_or(0.96, |p| p.continuation());
     let period_ms = config.tick.period_ms as f64;
     let label = format!("run {} {:?} seed {}", spec.index, spec.mode, spec.seed);
     let request = RunRequest {
@@ -150,6 +179,10 @@ pub(crate) fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> 
         windows: Vec::new(),
         excerpt: Vec::new(),
         first_predictive_stop_s: None,
+        returns: spec
+            .score
+            .as_ref()
+            .map(|(on, off)| super::accuracy::PiReturns::new(on, off, continuation)),
     };
     let done = run_paused(request, collector)?;
     let kept = done.output;
@@ -165,6 +198,8 @@ pub(crate) fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> 
         lagged: done.lagged,
         wall_s: done.wall_s,
         first_predictive_stop_s: kept.first_predictive_stop_s,
+        policy: spec.policy.clone(),
+        accuracy: kept.accuracy,
         excerpt: kept.excerpt,
     })
 }

@@ -178,6 +178,7 @@ mod tests {
             inputs: Some(TickInputs {
                 values: Some(values),
                 forced_stimulus: false,
+                previous_followed_default: false,
             }),
             ..TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Pavlovian)
         }

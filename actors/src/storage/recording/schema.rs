@@ -220,6 +220,7 @@ fn tick_file() -> FileDescriptorProto {
         &[
             typed("values", 1, Message, ".pavlov.RawSensors"),
             f("forced_stimulus", 2, Bool),
+            f("previous_followed_default", 3, Bool),
         ],
     );
     let raw = message(

@@ -162,6 +162,7 @@ impl TickEncoder {
                     nested(scratch, 1, raw);
                 }
                 bool_field(scratch, 2, inputs.forced_stimulus);
+                bool_field(scratch, 3, inputs.previous_followed_default);
                 nested(buf, 16, scratch);
             }
             // 17: the observation, when there are no inputs to recompute it from.

@@ -159,6 +159,8 @@ pub(crate) struct Inputs {
     pub(crate) values: Option<RawSensors>,
     #[prost(bool, tag = "2")]
     pub(crate) forced_stimulus: bool,
+    #[prost(bool, tag = "3")]
+    pub(crate) previous_followed_default: bool,
 }
 
 /// `pavlov.RawSensors`: a raw sensor snapshot: `values[id]` is packet `id`'s value when bit `id` of
@@ -384,6 +386,7 @@ pub(crate) fn fill(msg: &mut Tick, r: &TickRecord) {
         Some(i) => {
             let out = msg.inputs.get_or_insert_with(Inputs::default);
             out.forced_stimulus = i.forced_stimulus;
+            out.previous_followed_default = i.previous_followed_default;
             match &i.values {
                 None => out.values = None,
                 Some(v) => fill_raw(out.values.get_or_insert_with(RawSensors::default), v),
@@ -466,6 +469,7 @@ pub(crate) fn to_record(
         Some(i) => Some(TickInputs {
             values: i.values.as_ref().map(values_from).transpose()?,
             forced_stimulus: i.forced_stimulus,
+            previous_followed_default: i.previous_followed_default,
         }),
     };
     let obs = match inputs.as_ref().and_then(|i| i.values.as_ref()) {
@@ -673,6 +677,7 @@ pub(crate) mod tests {
                     inputs: (i % 5 != 4).then(|| TickInputs {
                         values: vals.clone(),
                         forced_stimulus: i % 2 == 0,
+                        previous_followed_default: i % 3 == 0,
                     }),
                 }
             })

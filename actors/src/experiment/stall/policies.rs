@@ -1,0 +1,619 @@
+//! `pavlov experiment stall --policies reactive,pavlovian,offpolicy`: the experiment the paper's
+//! Discussion proposes — the stall study with a third policy whose gate is driven by an **off-policy**
+//! prediction of the stall under the default policy π (GTD(λ), `crate`'s `pavlov::learn::gtd`), next to
+//! reactive control and the paper's on-policy Pavlovian control.
+//!
+//! Runs are interleaved in the order given (run i uses policy i mod k) with the stall study's seed
+//! derivation ([`super::run_seed`]). Every run, whatever its policy, carries both predictions — the
+//! paper's on-policy `stall` and the off-policy [`OFFPOLICY_PREDICTION`] — and only the gate's prediction
+//! differs (`pavlovian`: `stall`, `offpolicy`: `stall_pi`; reactive ignores both), so each run also
+//! scores both against the return π would have earned where π was followed ([`super::accuracy`]).
+//!
+//! The off-policy prediction copies the paper's stall prediction (τ, λ, α, features, θ) and adds
+//! GTD(λ)'s β = α/10, a usual choice for the secondary step size, fixed before any run and not tuned.
+
+use std::fmt::Write as _;
+use std::time::Instant;
+
+use pavlov::analysis::bootstrap::{RESAMPLES, mean_difference};
+use pavlov::analysis::stats::{Describe, WelchTest, describe, relative_change, welch};
+use pavlov::config::Config;
+use pavlov::control::Mode;
+use pavlov::learn::PredictionSpec;
+use serde::{Deserialize, Serialize};
+
+use super::analysis::{TOTALS, total};
+use super::run::{self, RunResult, RunSpec};
+use super::{StallOptions, WINDOW_S, run_seed};
+use crate::experiment::run_all;
+
+/// The off-policy prediction's name.
+pub const OFFPOLICY_PREDICTION: &str = "stall_pi";
+
+/// The off-policy prediction added when the configuration has none of that name: the paper's stall
+/// prediction learned with GTD(λ) about "π continues" (β = α/10).
+pub const OFFPOLICY_SPEC: &str = r#"
+name = "stall_pi"
+tau = 25.0
+lambda = 0.5
+alpha = 0.022727272727272728
+sigma = "identity"
+initial_weight = 0.0
+threshold = { fixed = 0.5 }
+cumulant = { stimulus = "stall" }
+features = { kind = "one_dim", all_obs = true, tiles = 10 }
+learner = "gtd"
+target_policy = "default"
+beta = 0.0022727272727272726
+"#;
+
+/// The on-policy prediction's name (the paper's).
+const ONPOLICY_PREDICTION: &str = "stall";
+
+/// A policy of the study.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StallPolicy {
+    /// The response on the stimulus alone.
+    Reactive,
+    /// The paper's Pavlovian control on the on-policy prediction `stall`.
+    Pavlovian,
+    /// Pavlovian control on the off-policy prediction `stall_pi`.
+    Offpolicy,
+}
+
+impl StallPolicy {
+    /// The name in tables and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            StallPolicy::Reactive => "reactive",
+            StallPolicy::Pavlovian => "pavlovian",
+            StallPolicy::Offpolicy => "offpolicy",
+        }
+    }
+
+    fn mode(self) -> Mode {
+        match self {
+            StallPolicy::Reactive => Mode::Reactive,
+            _ => Mode::Pavlovian,
+        }
+    }
+
+    fn gate_prediction(self) -> &'static str {
+        match self {
+            StallPolicy::Offpolicy => OFFPOLICY_PREDICTION,
+            _ => ONPOLICY_PREDICTION,
+        }
+    }
+}
+
+/// A bad `--policies` list.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PoliciesError {
+    /// A name that is not a policy.
+    #[error("--policies: unknown policy `{0}` (expected reactive, pavlovian or offpolicy)")]
+    Unknown(String),
+    /// A policy named twice.
+    #[error("--policies: `{0}` is named twice")]
+    Twice(String),
+    /// Fewer than two policies.
+    #[error("--policies: name at least two policies to compare, got {0}")]
+    TooFew(usize),
+    /// The configuration cannot take the off-policy prediction.
+    #[error("--policies: the configuration with the off-policy prediction `stall_pi`: {0}")]
+    Config(String),
+}
+
+/// Parses `reactive,pavlovian,offpolicy`.
+pub fn parse_policies(list: &str) -> Result<Vec<StallPolicy>, PoliciesError> {
+    let mut out = Vec::new();
+    for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let p = match name {
+            "reactive" => StallPolicy::Reactive,
+            "pavlovian" => StallPolicy::Pavlovian,
+            "offpolicy" => StallPolicy::Offpolicy,
+            other => return Err(PoliciesError::Unknown(other.to_string())),
+        };
+        if out.contains(&p) {
+            return Err(PoliciesError::Twice(name.to_string()));
+        }
+        out.push(p);
+    }
+    if out.len() < 2 {
+        return Err(PoliciesError::TooFew(out.len()));
+    }
+    Ok(out)
+}
+
+/// `base` with the off-policy prediction added (when it has none of that name), checked.
+pub fn with_offpolicy_prediction(base: &Config) -> Result<Config, PoliciesError> {
+    let mut config = base.clone();
+    if !config
+        .predictions
+        .iter()
+        .any(|p| p.name == OFFPOLICY_PREDICTION)
+    {
+        let spec: PredictionSpec =
+            toml::from_str(OFFPOLICY_SPEC).map_err(|e| PoliciesError::Config(e.to_string()))?;
+        config.predictions.push(spec);
+    }
+    config
+        .validate()
+        .map_err(|e| PoliciesError::Config(e.to_string()))?;
+    Ok(config)
+}
+
+/// The interleaved run list: run i uses `policies[i mod k]` and the stall study's seed for index i.
+pub(crate) fn plan(
+    config: &Config,
+    opts: &StallOptions,
+    policies: &[StallPolicy],
+) -> Vec<(StallPolicy, RunSpec)> {
+    let period_s = config.tick.period_ms.max(1) as f64 / 1000.0;
+    let ticks = (opts.minutes * 60.0 / period_s).round().max(1.0) as u64;
+    let window_ticks = (WINDOW_S / period_s).round().max(1.0) as u64;
+    let k = policies.len().max(1);
+    (0..k * opts.runs_per_policy)
+        .map(|index| {
+            let policy = policies[index % k];
+            let name = format!("{index:02}-{}", policy.name());
+            (
+                policy,
+                RunSpec {
+                    index,
+                    mode: policy.mode(),
+                    seed: run_seed(opts.seed, index),
+                    ticks,
+                    window_ticks,
+                    excerpt_from_tick: None,
+                    excerpt_len: 0,
+                    record_dir: opts.record.then(|| opts.out.join("runs").join(name)),
+                    policy: policy.name().to_string(),
+                    gate_prediction: Some(policy.gate_prediction().to_string()),
+                    score: Some((
+                        ONPOLICY_PREDICTION.to_string(),
+                        OFFPOLICY_PREDICTION.to_string(),
+                    )),
+                },
+            )
+        })
+        .collect()
+}
+
+/// One metric over one policy's runs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PolicyMetric {
+    /// The policy.
+    pub policy: String,
+    /// Mean, SD and SE over its runs.
+    pub describe: Describe,
+    /// Smallest and largest value.
+    pub range: Option<(f64, f64)>,
+}
+
+/// One metric compared between two policies: `b` against `a`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PairChange {
+    /// The baseline policy.
+    pub a: String,
+    /// The policy compared with it.
+    pub b: String,
+    /// (mean_b − mean_a) / mean_a.
+    pub relative_change: Option<f64>,
+    /// 95 % bootstrap interval of the relative change.
+    pub relative_change_ci: Option<(f64, f64)>,
+    /// Welch's t-test of b against a.
+    pub welch: Option<WelchTest>,
+}
+
+/// One metric over every policy.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MetricRow {
+    /// The metric's key ([`TOTALS`]).
+    pub metric: String,
+    /// Label and unit.
+    pub label: String,
+    /// Per policy, in the order given.
+    pub policies: Vec<PolicyMetric>,
+    /// Every pair (later policy against earlier one).
+    pub changes: Vec<PairChange>,
+}
+
+/// The predictions' accuracy over one policy's runs (each figure: over runs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AccuracyRow {
+    /// The policy.
+    pub policy: String,
+    /// Fraction of ticks on which π's command was sent.
+    pub followed_fraction: Describe,
+    /// Ticks scored per run (π followed until the return was known).
+    pub scored_ticks: Describe,
+    /// Ticks scored whose return was above 0.5, per run.
+    pub near_ticks: Describe,
+    /// RMSE of the on-policy prediction.
+    pub on_rmse: Describe,
+    /// RMSE of the off-policy prediction.
+    pub off_rmse: Describe,
+    /// RMSE where the return was above 0.5 (on-policy).
+    pub on_rmse_near: Describe,
+    /// The same for the off-policy prediction.
+    pub off_rmse_near: Describe,
+    /// Mean error (prediction − return), on-policy.
+    pub on_bias: Describe,
+    /// The same, off-policy.
+    pub off_bias: Describe,
+}
+
+/// Everything `policies.json` holds.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PoliciesStudy {
+    /// The settings.
+    pub options: StallOptions,
+    /// The policies in interleaved order.
+    pub policies: Vec<StallPolicy>,
+    /// The off-policy prediction as configured.
+    pub offpolicy_prediction: Option<PredictionSpec>,
+    /// Every run.
+    pub runs: Vec<RunResult>,
+    /// The run metrics.
+    pub metrics: Vec<MetricRow>,
+    /// The predictions' accuracy.
+    pub accuracy: Vec<AccuracyRow>,
+    /// When the response first engaged on the prediction alone, s, per policy (runs that did).
+    pub first_predictive_stop_s: Vec<(String, Describe)>,
+    /// Wall-clock time, s.
+    pub wall_s: f64,
+}
+
+fn range(xs: &[f64]) -> Option<(f64, f64)> {
+    (!xs.is_empty()).then(|| {
+        xs.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+                (l.min(x), h.max(x))
+            })
+    })
+}
+
+/// The statistics of `runs` over `policies`.
+pub(crate) fn analyse(
+    runs: &[RunResult],
+    policies: &[StallPolicy],
+) -> (Vec<MetricRow>, Vec<AccuracyRow>, Vec<(String, Describe)>) {
+    let of = |p: StallPolicy| runs.iter().filter(move |r| r.policy == p.name());
+    let metrics = TOTALS
+        .iter()
+        .map(|(key, label, unit)| {
+            let values: Vec<Vec<f64>> = policies
+                .iter()
+                .map(|&p| of(p).filter_map(|r| total(r, key)).collect())
+                .collect();
+            let mut changes = Vec::new();
+            for i in 0..policies.len() {
+                for j in i + 1..policies.len() {
+                    let (a, b) = (&values[i], &values[j]);
+                    let da = describe(a);
+                    changes.push(PairChange {
+                        a: policies[i].name().to_string(),
+                        b: policies[j].name().to_string(),
+                        relative_change: relative_change(da.mean, describe(b).mean),
+                        relative_change_ci: mean_difference(b, a, RESAMPLES, 1)
+                            .filter(|_| da.mean != 0.0 && da.mean.is_finite())
+                            .map(|d| (d.lo / da.mean.abs(), d.hi / da.mean.abs())),
+                        welch: welch(a, b),
+                    });
+                }
+            }
+            MetricRow {
+                metric: (*key).to_string(),
+                label: format!("{label} ({unit})"),
+                policies: policies
+                    .iter()
+                    .zip(&values)
+                    .map(|(p, xs)| PolicyMetric {
+                        policy: p.name().to_string(),
+                        describe: describe(xs),
+                        range: range(xs),
+                    })
+                    .collect(),
+                changes,
+            }
+        })
+        .collect();
+    let accuracy = policies
+        .iter()
+        .map(|&p| {
+            let acc: Vec<_> = of(p).filter_map(|r| r.accuracy).collect();
+            let d = |f: &dyn Fn(&super::accuracy::RunAccuracy) -> f64| {
+                describe(
+                    &acc.iter()
+                        .map(f)
+                        .filter(|x| x.is_finite())
+                        .collect::<Vec<_>>(),
+                )
+            };
+            let on = |a: &super::accuracy::RunAccuracy| a.on_policy;
+            let off = |a: &super::accuracy::RunAccuracy| a.off_policy;
+            AccuracyRow {
+                policy: p.name().to_string(),
+                followed_fraction: d(&|a| a.followed_fraction),
+                scored_ticks: d(&|a| a.off_policy.n as f64),
+                near_ticks: d(&|a| a.off_policy.n_near as f64),
+                on_rmse: d(&|a| on(a).rmse),
+                off_rmse: d(&|a| off(a).rmse),
+                on_rmse_near: d(&|a| on(a).rmse_near),
+                off_rmse_near: d(&|a| off(a).rmse_near),
+                on_bias: d(&|a| on(a).bias),
+                off_bias: d(&|a| off(a).bias),
+            }
+        })
+        .collect();
+    let firsts = policies
+        .iter()
+        .map(|&p| {
+            let xs: Vec<f64> = of(p).filter_map(|r| r.first_predictive_stop_s).collect();
+            (p.name().to_string(), describe(&xs))
+        })
+        .collect();
+    (metrics, accuracy, firsts)
+}
+
+/// Runs the study and returns it.
+pub fn run_study(
+    base: &Config,
+    opts: &StallOptions,
+    policies: &[StallPolicy],
+    progress: bool,
+) -> anyhow::Result<PoliciesStudy> {
+    let wall = Instant::now();
+    let config = with_offpolicy_prediction(base)?;
+    let planned = plan(&config, opts, policies);
+    let specs: Vec<RunSpec> = planned.iter().map(|(_, s)| s.clone()).collect();
+    let bar = crate::experiment::progress_bar(specs.len(), progress);
+    let on_done = |r: &RunResult| {
+        bar.inc(1);
+        bar.set_message(format!(
+            "run {} {}: {} over-current",
+            r.index, r.policy, r.metrics.overcurrent_observations
+        ));
+    };
+    let runs = run_all(
+        &specs,
+        opts.threads,
+        &|spec| run::run(&config, spec),
+        &on_done,
+    )?;
+    bar.finish_and_clear();
+    let (metrics, accuracy, first_predictive_stop_s) = analyse(&runs, policies);
+    Ok(PoliciesStudy {
+        options: opts.clone(),
+        policies: policies.to_vec(),
+        offpolicy_prediction: config
+            .predictions
+            .iter()
+            .find(|p| p.name == OFFPOLICY_PREDICTION)
+            .cloned(),
+        runs,
+        metrics,
+        accuracy,
+        first_predictive_stop_s,
+        wall_s: wall.elapsed().as_secs_f64(),
+    })
+}
+
+fn fmt(x: f64) -> String {
+    let a = x.abs();
+    if !x.is_finite() {
+        "–".into()
+    } else if a >= 100.0 {
+        format!("{x:.0}")
+    } else if a >= 10.0 {
+        format!("{x:.1}")
+    } else if a >= 1.0 {
+        format!("{x:.2}")
+    } else {
+        format!("{x:.3}")
+    }
+}
+
+fn pct(x: Option<f64>) -> String {
+    x.map_or("–".into(), |v| format!("{:+.1} %", 100.0 * v))
+}
+
+fn p_value(w: Option<WelchTest>) -> String {
+    w.map_or("–".into(), |w| {
+        if w.p < 1e-3 {
+            format!("p = {:.0e}", w.p)
+        } else {
+            format!("p = {:.3}", w.p)
+        }
+    })
+}
+
+/// The Markdown tables: the metrics (mean ± SE, spread SD [min – max], every pair's change with its 95 %
+/// bootstrap interval and Welch's p) and the predictions' accuracy.
+pub fn table(study: &PoliciesStudy) -> String {
+    let mut s = String::new();
+    let names: Vec<&str> = study.policies.iter().map(|p| p.name()).collect();
+    let _ = writeln!(
+        s,
+        "{} policies × {} runs × {} min, seed {}; mean ± SE over runs; spread = SD [min – max]; {:.1} s of wall time\n",
+        names.len(),
+        study.options.runs_per_policy,
+        study.options.minutes,
+        study.options.seed,
+        study.wall_s
+    );
+    let _ = write!(s, "| metric |");
+    for n in &names {
+        let _ = write!(s, " {n} |");
+    }
+    if let Some(row) = study.metrics.first() {
+        for c in &row.changes {
+            let _ = write!(s, " {} vs {} |", c.b, c.a);
+        }
+    }
+    let _ = writeln!(s);
+    let cols = names.len() + study.metrics.first().map_or(0, |r| r.changes.len());
+    let _ = writeln!(s, "|---|{}", "---|".repeat(cols));
+    for row in &study.metrics {
+        let _ = write!(s, "| {} |", row.label);
+        for p in &row.policies {
+            let _ = write!(
+                s,
+                " {} ± {} <br>SD {} [{} – {}] |",
+                fmt(p.describe.mean),
+                fmt(p.describe.se),
+                fmt(p.describe.sd),
+                p.range.map_or("–".into(), |r| fmt(r.0)),
+                p.range.map_or("–".into(), |r| fmt(r.1)),
+            );
+        }
+        for c in &row.changes {
+            let ci = c.relative_change_ci.map_or("–".into(), |(lo, hi)| {
+                format!("({:+.1}, {:+.1})", 100.0 * lo, 100.0 * hi)
+            });
+            let _ = write!(
+                s,
+                " {} {ci}, {} |",
+                pct(c.relative_change),
+                p_value(c.welch)
+            );
+        }
+        let _ = writeln!(s);
+    }
+    let _ = writeln!(
+        s,
+        "\nAccuracy against the return π would have earned, on ticks where π was followed until that return was known \
+         (mean ± SE over runs):\n"
+    );
+    let _ = writeln!(
+        s,
+        "| policy | ticks with π's command | ticks scored / with G > 0.5 | RMSE on-policy `stall` | RMSE off-policy `stall_pi` | RMSE where G > 0.5: on / off | bias (v − G): on / off |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+    let pm = |d: Describe| format!("{} ± {}", fmt(d.mean), fmt(d.se));
+    for a in &study.accuracy {
+        let _ = writeln!(
+            s,
+            "| {} | {:.1} % | {} / {} | {} | {} | {} / {} | {} / {} |",
+            a.policy,
+            100.0 * a.followed_fraction.mean,
+            fmt(a.scored_ticks.mean),
+            fmt(a.near_ticks.mean),
+            pm(a.on_rmse),
+            pm(a.off_rmse),
+            pm(a.on_rmse_near),
+            pm(a.off_rmse_near),
+            pm(a.on_bias),
+            pm(a.off_bias),
+        );
+    }
+    let _ = writeln!(s);
+    for (p, d) in &study.first_predictive_stop_s {
+        if d.n > 0 {
+            let _ = writeln!(
+                s,
+                "first stop on the prediction alone, {p}: {} ± {} s ({} runs)",
+                fmt(d.mean),
+                fmt(d.se),
+                d.n
+            );
+        }
+    }
+    s
+}
+
+/// Runs the study, writes `policies.json`, `policies.md` and `runs.csv` into `opts.out`, and returns the
+/// tables.
+pub fn run_and_report(
+    base: &Config,
+    opts: &StallOptions,
+    policies: &[StallPolicy],
+    progress: bool,
+) -> anyhow::Result<String> {
+    let study = run_study(base, opts, policies, progress)?;
+    std::fs::create_dir_all(&opts.out)?;
+    std::fs::write(
+        opts.out.join("policies.json"),
+        serde_json::to_string_pretty(&study)?,
+    )?;
+    let mut t = table(&study);
+    std::fs::write(opts.out.join("policies.md"), &t)?;
+    std::fs::write(
+        opts.out.join("runs.csv"),
+        super::report::runs_csv(&study.runs),
+    )?;
+    t.push_str(&format!("results: {}\n", opts.out.display()));
+    Ok(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn policy_lists_are_parsed_with_precise_errors() {
+        assert_eq!(
+            parse_policies("reactive,pavlovian,offpolicy").unwrap(),
+            vec![
+                StallPolicy::Reactive,
+                StallPolicy::Pavlovian,
+                StallPolicy::Offpolicy
+            ]
+        );
+        assert_eq!(
+            parse_policies("reactive, greedy").unwrap_err().to_string(),
+            "--policies: unknown policy `greedy` (expected reactive, pavlovian or offpolicy)"
+        );
+        assert_eq!(
+            parse_policies("offpolicy,offpolicy"),
+            Err(PoliciesError::Twice("offpolicy".into()))
+        );
+        assert_eq!(parse_policies("offpolicy"), Err(PoliciesError::TooFew(1)));
+    }
+
+    #[test]
+    fn the_plan_interleaves_and_only_the_gate_prediction_differs() {
+        let config = with_offpolicy_prediction(
+            &Config::from_toml(include_str!("../../../../config/stall.toml")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(config.predictions.len(), 2);
+        let again = with_offpolicy_prediction(&config).unwrap();
+        assert_eq!(again.predictions.len(), 2, "not added twice");
+        let opts = StallOptions {
+            runs_per_policy: 2,
+            minutes: 0.1,
+            seed: 1,
+            record: false,
+            threads: 1,
+            out: "x".into(),
+        };
+        let all = [
+            StallPolicy::Reactive,
+            StallPolicy::Pavlovian,
+            StallPolicy::Offpolicy,
+        ];
+        let p = plan(&config, &opts, &all);
+        let names: Vec<&str> = p.iter().map(|(p, _)| p.name()).collect();
+        assert_eq!(
+            names,
+            [
+                "reactive",
+                "pavlovian",
+                "offpolicy",
+                "reactive",
+                "pavlovian",
+                "offpolicy"
+            ]
+        );
+        assert_eq!(p[2].1.gate_prediction.as_deref(), Some("stall_pi"));
+        assert_eq!(p[1].1.gate_prediction.as_deref(), Some("stall"));
+        assert_eq!(
+            (p[2].1.mode, p[0].1.mode),
+            (Mode::Pavlovian, Mode::Reactive)
+        );
+        // The stall study's seed derivation.
+        assert_eq!(p[4].1.seed, run_seed(1, 4));
+    }
+}
