@@ -113,7 +113,8 @@ try {
     ws.onopen = () => ws.send(JSON.stringify({ cmd: 'set_params', id: 1, alpha: 0.01 }));
     ws.onmessage = (m) => {
       const v = JSON.parse(m.data);
-      if (v.id === 1) { ws.close(); resolve(v); }
+      // Events carry an id of their own: only an ack or an error answers the command.
+      if (v.id === 1 && (v.type === 'ack' || v.type === 'error')) { ws.close(); resolve(v); }
     };
     ws.onerror = () => reject(new Error('the second client could not connect'));
   }));

@@ -523,7 +523,7 @@ pub fn table(study: &PoliciesStudy) -> String {
     s
 }
 
-/// Runs the study, writes `policies.json`, `policies.md` and `runs.csv` into `opts.out`, and returns the
+/// Runs the study, writes `policies.{json,md}` and `runs.csv` into `opts.out`, and returns the
 /// tables.
 pub fn run_and_report(
     base: &Config,
