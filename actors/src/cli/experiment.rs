@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use pavlov::config::Config;
 
+use pavlov_actors::experiment::shard::{self, Shard};
 use pavlov_actors::experiment::{interaction, stall};
 
 /// The stall experiment's configuration, built in.
@@ -31,6 +32,21 @@ pub enum Experiment {
     /// The paper's interaction experiment: a simulated operator commands a left spin with the left elbow;
     /// reactive vs Pavlovian response timing, and current / rotation aligned on the command (Figs 3, 4).
     Interaction(InteractionArgs),
+    /// Merge the shard files (shard-I-of-N.json) that `--shard I/N` runs wrote into the study's summary,
+    /// tables and figures, the same as the unsharded study's; refuses missing, repeated or mismatched
+    /// shards (different experiment, configuration, options or shard count).
+    Merge(MergeArgs),
+}
+
+/// `pavlov experiment merge`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct MergeArgs {
+    /// Shard files, or directories holding them (every shard-*-of-*.json in each).
+    #[arg(required = true, value_name = "DIR")]
+    pub dirs: Vec<PathBuf>,
+    /// Results directory (default: results/<experiment>-<seed>).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
 }
 
 /// `pavlov experiment interaction`.
@@ -95,6 +111,10 @@ pub struct StallArgs {
     /// OS threads to run on (default: the number of CPUs, at most 2).
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
+    /// Run only the I-th (0-based) of N disjoint slices of the planned runs and write
+    /// shard-I-of-N.json into the results directory; `pavlov experiment merge` puts the shards together.
+    #[arg(long, value_name = "I/N")]
+    pub shard: Option<Shard>,
 }
 
 fn load_config(path: Option<&PathBuf>, builtin: &str) -> Result<Config> {
@@ -109,6 +129,7 @@ fn load_config(path: Option<&PathBuf>, builtin: &str) -> Result<Config> {
 /// Runs `pavlov experiment …`; prints the table on stdout.
 pub fn run(args: ExperimentArgs) -> Result<()> {
     match args.which {
+        Experiment::Merge(a) => merge(a),
         Experiment::Stall(a) => {
             let config = load_config(a.config.as_ref(), STALL_CONFIG)?;
             let threads = a.threads.unwrap_or_else(default_threads);
@@ -122,6 +143,12 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
                     .out
                     .unwrap_or_else(|| PathBuf::from(format!("results/stall-{}", a.seed))),
             };
+            if let Some(shard) = a.shard {
+                let (path, line) = stall::sharded::run_shard(&config, &opts, shard, true)?;
+                say!("{line}");
+                say!("wrote {}", path.display());
+                return Ok(());
+            }
             let table = stall::run_and_report(&config, &opts, true)?;
             say!("{}", table.trim_end());
             Ok(())
@@ -179,6 +206,29 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
             say!("results: {}", opts.out.display());
             Ok(())
         }
+    }
+}
+
+/// `pavlov experiment merge`: finds the shard files, picks the experiment they belong to, merges.
+fn merge(a: MergeArgs) -> Result<()> {
+    let files = shard::shard_files(&a.dirs)?;
+    let experiment = files
+        .first()
+        .map(|f| shard::experiment_of(f))
+        .transpose()?
+        .unwrap_or_default();
+    match experiment.as_str() {
+        stall::sharded::EXPERIMENT => {
+            let table = stall::sharded::merge(&files, a.out.as_deref())?;
+            say!("{}", table.trim_end());
+            Ok(())
+        }
+        other => anyhow::bail!(
+            "{}: shards of experiment {other:?} cannot be merged (known: stall)",
+            files
+                .first()
+                .map_or_else(String::new, |f| f.display().to_string())
+        ),
     }
 }
 

@@ -9,6 +9,7 @@
 
 pub mod interaction;
 pub(crate) mod runner;
+pub mod shard;
 pub mod stall;
 
 use pavlov::control::Mode;
