@@ -5,6 +5,7 @@ mod cli;
 mod common;
 mod dashboard;
 mod experiment;
+mod fleet;
 mod foxglove;
 mod house;
 mod runtime;

@@ -9,6 +9,7 @@
 //! - [`foxglove_load`]: Foxglove clients subscribed to every channel, for `--foxglove-clients`;
 //! - [`timers`]: the timer thread against tokio's interval, interleaved in one invocation.
 //! - [`reconnect`]: clients that reconnect again and again, timing the history each connection gets.
+//! - [`zenoh_load`]: the Zenoh bridge on and off, interleaved, for `--zenoh`.
 
 pub mod abuse;
 pub mod estop_probe;
@@ -17,6 +18,7 @@ pub mod foxglove_load;
 pub mod load;
 pub(crate) mod reconnect;
 pub mod timers;
+pub mod zenoh_load;
 
 use std::fmt;
 use std::time::Duration;

@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use anyhow::Result;
-use pavlov_actors::bench::{self, abuse::Abuse, foxglove_load, load, timers};
+use pavlov_actors::bench::{self, abuse::Abuse, foxglove_load, load, timers, zenoh_load};
 
 use super::args::{ConfigArgs, load_config, repository_web_dir, validate};
 
@@ -39,6 +39,10 @@ pub struct BenchArgs {
     /// tokio, thread; --seconds in all for each), with tick lateness and tick → command for both.
     #[arg(long, conflicts_with_all = ["ws_clients", "stalled_client", "ws_abuse", "foxglove_clients"])]
     compare_timers: bool,
+    /// Measure the Zenoh bridge (`serve --zenoh`): off, on, on, off (--seconds in all), on = publishing
+    /// every tick, event and status to a subscriber on loopback TCP; ticks skipped and tick → command.
+    #[arg(long, conflicts_with_all = ["ws_clients", "stalled_client", "ws_abuse", "foxglove_clients", "compare_timers"])]
+    zenoh: bool,
     /// Override [tick] spin_us: wake this many µs before each deadline and spin (the timer thread only).
     #[arg(long, value_name = "US")]
     spin_us: Option<u32>,
@@ -54,6 +58,11 @@ pub async fn run(args: BenchArgs) -> Result<()> {
     let duration = Duration::from_secs(args.seconds);
     if args.compare_timers {
         let report = timers::run_timer_comparison(cfg, duration).await?;
+        say!("{report}");
+        return Ok(());
+    }
+    if args.zenoh {
+        let report = zenoh_load::run_zenoh_comparison(cfg, duration).await?;
         say!("{report}");
         return Ok(());
     }

@@ -4,6 +4,7 @@ pub mod args;
 pub mod bench;
 pub mod convert;
 pub mod experiment;
+pub mod fleet;
 pub mod human;
 pub mod replay;
 pub mod serve;
@@ -48,4 +49,7 @@ pub enum Command {
     /// Benchmark: run the server on the simulator in real time and print tick lateness and
     /// tick-to-command latency percentiles, optionally with websocket clients and abusers attached.
     Bench(bench::BenchArgs),
+    /// One dashboard page for a lab's robots: subscribes to pavlov/*/… on Zenoh (what `serve --zenoh`
+    /// publishes) and lists each robot's mode, link, tick health and counters, linking to its dashboard.
+    Fleet(fleet::FleetArgs),
 }
