@@ -2,7 +2,8 @@
 //! `beta`, each with its own token) and one `pavlov fleet`, in Zenoh peer mode with no router, every
 //! endpoint pinned on 127.0.0.1 and scouting off so the topology is fixed. The fleet sees both robots'
 //! ticks and status; a command with alpha's token reaches alpha and only alpha; a command without a
-//! token, or with another robot's token, is refused with a precise answer and counted in `/metrics`.
+//! token, or with another robot's token, is refused with a precise answer and counted in `/metrics`; beta
+//! (commands off) refuses every command, saying so.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -158,14 +159,16 @@ fn metric(dashboard: &str, name: &str, label: &str) -> f64 {
         .unwrap_or_else(|| panic!("no {prefix} in /metrics"))
 }
 
-fn serve(dir: &Path, robot: &str, token: &str, zenoh: &Path) -> (Proc, String) {
+fn serve(dir: &Path, robot: &str, token: &str, commands: bool, zenoh: &Path) -> (Proc, String) {
     let cfg = dir.join(format!("{robot}.toml"));
     let base =
         std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../config/stall.toml"))
             .expect("config/stall.toml");
     std::fs::write(
         &cfg,
-        format!("{base}\n[zenoh]\nrobot = \"{robot}\"\ncommands = true\nstatus_every_ms = 200\n"),
+        format!(
+            "{base}\n[zenoh]\nrobot = \"{robot}\"\ncommands = {commands}\nstatus_every_ms = 200\n"
+        ),
     )
     .expect("config");
     let work = dir.join(robot);
@@ -203,8 +206,8 @@ fn the_fleet_sees_two_robots_and_commands_need_each_robots_token() {
     let zb = zenoh_config(&dir, "beta", &[ep(pb)], &[]);
     let zf = zenoh_config(&dir, "fleet", &[ep(free_port())], &[ep(pa), ep(pb)]);
     let (alpha_token, beta_token) = ("alpha-token-0123456789", "beta-token-9876543210");
-    let (_alpha, alpha_dash) = serve(&dir, "alpha", alpha_token, &za);
-    let (_beta, beta_dash) = serve(&dir, "beta", beta_token, &zb);
+    let (_alpha, alpha_dash) = serve(&dir, "alpha", alpha_token, true, &za);
+    let (_beta, beta_dash) = serve(&dir, "beta", beta_token, false, &zb);
     let fleet = spawn(
         &[
             "fleet",
@@ -264,8 +267,8 @@ fn the_fleet_sees_two_robots_and_commands_need_each_robots_token() {
     assert_eq!(answer["ok"], true);
     assert_eq!(answer["result"]["mode"], "manual");
 
-    // Without a token, or with alpha's token at beta: refused, precisely.
-    let (status, body) = http(&fleet_addr, "POST", "/api/command/beta", &manual(None));
+    // Without a token, or with another robot's token: refused, precisely.
+    let (status, body) = http(&fleet_addr, "POST", "/api/command/alpha", &manual(None));
     assert_eq!(status, 403, "{body}");
     let refusal: Value = serde_json::from_str(&body).expect("refusal");
     assert_eq!(refusal["error"], "token");
@@ -278,11 +281,23 @@ fn the_fleet_sees_two_robots_and_commands_need_each_robots_token() {
     let (status, body) = http(
         &fleet_addr,
         "POST",
-        "/api/command/beta",
-        &manual(Some(alpha_token)),
+        "/api/command/alpha",
+        &manual(Some(beta_token)),
     );
     assert_eq!(status, 403, "{body}");
     assert!(body.contains("the token is wrong"), "{body}");
+    // Beta takes no commands over Zenoh, even with its own token.
+    let (status, body) = http(
+        &fleet_addr,
+        "POST",
+        "/api/command/beta",
+        &manual(Some(beta_token)),
+    );
+    assert_eq!(status, 403, "{body}");
+    assert!(
+        body.contains("\"off\"") && body.contains("[zenoh] commands = false"),
+        "{body}"
+    );
     // A robot nobody runs: no answer.
     let (status, body) = http(
         &fleet_addr,
@@ -299,16 +314,13 @@ fn the_fleet_sees_two_robots_and_commands_need_each_robots_token() {
     });
     // And counted where each robot counts.
     let commands = "pavlov_zenoh_commands_total";
-    assert_eq!(metric(&alpha_dash, commands, "outcome=\"applied\""), 1.0);
-    assert_eq!(
-        metric(&alpha_dash, commands, "outcome=\"refused_token\""),
-        0.0
-    );
-    assert_eq!(metric(&beta_dash, commands, "outcome=\"applied\""), 0.0);
-    assert_eq!(
-        metric(&beta_dash, commands, "outcome=\"refused_token\""),
-        2.0
-    );
+    let count =
+        |dash: &str, outcome: &str| metric(dash, commands, &format!("outcome=\"{outcome}\""));
+    assert_eq!(count(&alpha_dash, "applied"), 1.0);
+    assert_eq!(count(&alpha_dash, "refused_token"), 2.0);
+    assert_eq!(count(&beta_dash, "applied"), 0.0);
+    assert_eq!(count(&beta_dash, "refused_off"), 1.0);
+    assert_eq!(count(&beta_dash, "refused_token"), 0.0);
     assert!(
         metric(
             &alpha_dash,
@@ -318,5 +330,62 @@ fn the_fleet_sees_two_robots_and_commands_need_each_robots_token() {
     );
 
     drop(fleet);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `pavlov serve` with `args` in `dir`; its exit code and stderr (it must stop by itself).
+fn serve_refused(dir: &Path, args: &[&str]) -> (Option<i32>, String) {
+    let out = Command::new(PAVLOV)
+        .arg("serve")
+        .args(["--bind", "127.0.0.1:0"])
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .output()
+        .expect("run pavlov");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn bad_zenoh_settings_stop_start_up_naming_the_problem() {
+    let dir = std::env::temp_dir().join(format!("pavlov-zenoh-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let base =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../config/stall.toml"))
+            .expect("config/stall.toml");
+    let write = |name: &str, text: &str| {
+        let p = dir.join(name);
+        std::fs::write(&p, text).expect("write");
+        p.to_str().expect("utf-8").to_string()
+    };
+    // A Zenoh file that is not valid: the file and Zenoh's reason.
+    let bad_json = write("bad.json5", "{ mode: \"peer\", listen: { endpoints: 7 } }");
+    let (code, err) = serve_refused(&dir, &["--zenoh", &bad_json]);
+    assert_ne!(code, Some(0));
+    assert!(
+        err.contains("--zenoh") && err.contains("bad.json5"),
+        "{err}"
+    );
+    // A missing file.
+    let (code, err) = serve_refused(&dir, &["--zenoh", "/nonexistent/z.json5"]);
+    assert_ne!(code, Some(0));
+    assert!(err.contains("/nonexistent/z.json5"), "{err}");
+    // A robot name that is not one key-expression chunk.
+    let slash = write("slash.toml", &format!("{base}\n[zenoh]\nrobot = \"a/b\"\n"));
+    let (code, err) = serve_refused(&dir, &["--config", &slash, "--zenoh"]);
+    assert_ne!(code, Some(0));
+    assert!(err.contains("zenoh.robot") && err.contains("'/'"), "{err}");
+    // Commands over Zenoh without a token.
+    let open = write(
+        "open.toml",
+        &format!("{base}\n[zenoh]\nrobot = \"r\"\ncommands = true\n"),
+    );
+    let (code, err) = serve_refused(&dir, &["--config", &open, "--zenoh"]);
+    assert_ne!(code, Some(0));
+    assert!(err.contains("commands = true needs a token"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -52,8 +52,8 @@ pub struct ServeArgs {
     /// answer queries for the configuration, the newest checkpoint and (with [zenoh] commands = true and a
     /// token) commands. CONFIG is a Zenoh configuration file (JSON5: mode, listen/connect endpoints,
     /// scouting); without it, Zenoh's defaults (a peer found by multicast scouting).
-    #[arg(long, value_name = "CONFIG", num_args = 0..=1, default_missing_value = "")]
-    zenoh: Option<PathBuf>,
+    #[arg(long, value_name = "CONFIG", num_args = 0..=1)]
+    zenoh: Option<Option<PathBuf>>,
 }
 
 /// The folder dashboard-started recordings go into.
@@ -115,7 +115,7 @@ pub async fn run(args: ServeArgs) -> Result<()> {
         .context("cannot start the Foxglove endpoint (--foxglove)")?;
     let zenoh_config = zenoh_file
         .as_ref()
-        .map(|f| zenoh_bridge::load_config((!f.as_os_str().is_empty()).then_some(f.as_path())))
+        .map(|f| zenoh_bridge::load_config(f.as_deref()))
         .transpose()
         .context("cannot start the Zenoh bridge (--zenoh)")?;
     if zenoh_config.is_some() && cfg.zenoh.commands && cfg.dashboard.token.is_none() {
