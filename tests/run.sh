@@ -46,11 +46,12 @@ fi
 step "cargo fmt --check"
 cargo fmt --all -- --check
 
-step "cargo clippy --all-targets -- -D warnings"
+step "cargo clippy --all-targets -- -D warnings (without and with the optional zenoh feature)"
 cargo clippy --workspace --all-targets -- -D warnings
+cargo clippy --workspace --all-targets --features pavlov-actors/zenoh -- -D warnings
 
-step "cargo test (unit and end-to-end)"
-cargo test --workspace --all-targets
+step "cargo test (unit and end-to-end; with the zenoh feature, so the fleet test runs)"
+cargo test --workspace --all-targets --features pavlov-actors/zenoh
 
 step "soak: 24 simulated hours of the whole server with faults injected (release build, ~1 min)"
 cargo test --release -p pavlov-actors --test soak -- --nocapture

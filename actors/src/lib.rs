@@ -20,6 +20,8 @@ pub mod bench;
 pub mod command;
 pub mod dashboard;
 pub mod experiment;
+#[cfg(feature = "zenoh")]
+pub mod fleet;
 pub mod foxglove;
 pub mod horde;
 pub mod link;
@@ -28,3 +30,5 @@ pub mod server;
 pub mod simulated;
 pub mod storage;
 pub mod telemetry;
+#[cfg(feature = "zenoh")]
+pub mod zenoh_bridge;

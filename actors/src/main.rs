@@ -38,6 +38,7 @@ fn main() -> Result<()> {
             Command::Sim(args) => cli::sim::run(args).await,
             Command::Human(args) => cli::human::run(args).await,
             Command::Bench(args) => cli::bench::run(args).await,
+            Command::Fleet(args) => cli::fleet::run(args).await,
         }
     })
 }

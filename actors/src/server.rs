@@ -249,6 +249,7 @@ impl ServerBuilder {
             recorder: feed.recorder_gauge(),
             link: feed.latest_link(),
             foxglove: Default::default(),
+            zenoh: Default::default(),
             horde: horde.as_ref().map(|h| h.status.clone()),
         };
         actors.push(tokio::spawn(crate::telemetry::health_log::run(

@@ -15,11 +15,13 @@ mod dashboard;
 mod horde;
 mod link;
 mod tick;
+mod zenoh;
 pub use bounds::MAX_SAFETY_TIMEOUT_MS;
 pub use dashboard::{DashboardConfig, MAX_CLIENT_QUEUE, MIN_PUBLIC_TOKEN_CHARS};
 pub use horde::{HordeConfig, Precision};
 pub use link::LinkConfig;
 pub use tick::{MAX_SPIN_US, TickConfig, TickTimer};
+pub use zenoh::{ZenohConfig, check_robot_name};
 
 /// A configuration error, naming the offending key.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -344,6 +346,9 @@ pub struct Config {
     /// `[horde]`.
     #[serde(default, skip_serializing_if = "HordeConfig::is_off")]
     pub horde: HordeConfig,
+    /// `[zenoh]` (used by `pavlov serve --zenoh`).
+    #[serde(default, skip_serializing_if = "ZenohConfig::is_default")]
+    pub zenoh: ZenohConfig,
 }
 
 impl Config {
@@ -401,6 +406,7 @@ impl Config {
         self.skeleton.validate()?;
         self.horde.validate(&self.signal_names())?;
         self.link.validate()?;
+        self.zenoh.validate()?;
         self.sim.fault_spec()?;
         if self.checkpoint.dir.trim().is_empty() {
             return Err(invalid("checkpoint.dir", "must name a directory"));

@@ -5,6 +5,8 @@ mod cli;
 mod common;
 mod dashboard;
 mod experiment;
+#[cfg(feature = "zenoh")]
+mod fleet;
 mod foxglove;
 mod horde;
 mod house;

@@ -10,6 +10,7 @@
 //! - [`timers`]: the timer thread against tokio's interval, interleaved in one invocation.
 //! - [`horde`]: the server with a Horde against the same server without one, interleaved.
 //! - [`reconnect`]: clients that reconnect again and again, timing the history each connection gets.
+//! - [`zenoh_load`]: the Zenoh bridge on and off, interleaved, for `--zenoh`.
 
 pub mod abuse;
 pub mod estop_probe;
@@ -19,6 +20,8 @@ pub mod horde;
 pub mod load;
 pub(crate) mod reconnect;
 pub mod timers;
+#[cfg(feature = "zenoh")]
+pub mod zenoh_load;
 
 use std::fmt;
 use std::time::Duration;

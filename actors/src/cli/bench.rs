@@ -4,6 +4,8 @@
 use std::time::Duration;
 
 use anyhow::Result;
+#[cfg(feature = "zenoh")]
+use pavlov_actors::bench::zenoh_load;
 use pavlov_actors::bench::{self, abuse::Abuse, foxglove_load, horde, load, timers};
 
 use super::args::{ConfigArgs, load_config, repository_web_dir, validate};
@@ -44,6 +46,10 @@ pub struct BenchArgs {
     /// skipped, tick lateness and tick → command for both, and skipped ticks around Horde checkpoints.
     #[arg(long, conflicts_with_all = ["ws_clients", "stalled_client", "ws_abuse", "foxglove_clients", "compare_timers"])]
     horde: bool,
+    /// Measure the Zenoh bridge (`serve --zenoh`): off, on, on, off (--seconds in all), on = publishing
+    /// every tick, event and status to a subscriber on loopback TCP; ticks skipped and tick → command.
+    #[arg(long, conflicts_with_all = ["ws_clients", "stalled_client", "ws_abuse", "foxglove_clients", "compare_timers"])]
+    zenoh: bool,
     /// Override [tick] spin_us: wake this many µs before each deadline and spin (the timer thread only).
     #[arg(long, value_name = "US")]
     spin_us: Option<u32>,
@@ -71,6 +77,16 @@ pub async fn run(args: BenchArgs) -> Result<()> {
         let report = timers::run_timer_comparison(cfg, duration).await?;
         say!("{report}");
         return Ok(());
+    }
+    if args.zenoh {
+        #[cfg(feature = "zenoh")]
+        {
+            let report = zenoh_load::run_zenoh_comparison(cfg, duration).await?;
+            say!("{report}");
+            return Ok(());
+        }
+        #[cfg(not(feature = "zenoh"))]
+        anyhow::bail!("--zenoh: {}", super::NO_ZENOH);
     }
     let reconnect_every = match args.ws_reconnect_every {
         None => None,

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use pavlov::config::Config;
 
+use pavlov_actors::experiment::shard::{self, Shard};
 use pavlov_actors::experiment::{interaction, stall};
 
 /// The stall experiment's configuration, built in.
@@ -31,6 +32,21 @@ pub enum Experiment {
     /// The paper's interaction experiment: a simulated operator commands a left spin with the left elbow;
     /// reactive vs Pavlovian response timing, and current / rotation aligned on the command (Figs 3, 4).
     Interaction(InteractionArgs),
+    /// Merge the shard files (shard-I-of-N.json) that `--shard I/N` runs wrote into the study's summary,
+    /// tables and figures, the same as the unsharded study's; refuses missing, repeated or mismatched
+    /// shards (different experiment, configuration, options or shard count).
+    Merge(MergeArgs),
+}
+
+/// `pavlov experiment merge`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct MergeArgs {
+    /// Shard files, or directories holding them (every shard-*-of-*.json in each).
+    #[arg(required = true, value_name = "DIR")]
+    pub dirs: Vec<PathBuf>,
+    /// Results directory (default: results/<experiment>-<seed>).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
 }
 
 /// `pavlov experiment interaction`.
@@ -100,6 +116,10 @@ pub struct StallArgs {
     /// policies.json, policies.md and runs.csv.
     #[arg(long, value_name = "LIST")]
     pub policies: Option<String>,
+    /// Run only the I-th (0-based) of N disjoint slices of the planned runs and write
+    /// shard-I-of-N.json into the results directory; `pavlov experiment merge` puts the shards together.
+    #[arg(long, value_name = "I/N")]
+    pub shard: Option<Shard>,
 }
 
 fn load_config(path: Option<&PathBuf>, builtin: &str) -> Result<Config> {
@@ -114,6 +134,7 @@ fn load_config(path: Option<&PathBuf>, builtin: &str) -> Result<Config> {
 /// Runs `pavlov experiment …`; prints the table on stdout.
 pub fn run(args: ExperimentArgs) -> Result<()> {
     match args.which {
+        Experiment::Merge(a) => merge(a),
         Experiment::Stall(a) => {
             check_study(a.runs, a.minutes, MAX_STALL_RUNS)?;
             let config = load_config(a.config.as_ref(), STALL_CONFIG)?;
@@ -128,6 +149,16 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
                     .out
                     .unwrap_or_else(|| PathBuf::from(format!("results/stall-{}", a.seed))),
             };
+            if let Some(shard) = a.shard {
+                anyhow::ensure!(
+                    a.policies.is_none(),
+                    "--shard slices the reactive/Pavlovian study; it does not take --policies yet"
+                );
+                let (path, line) = stall::sharded::run_shard(&config, &opts, shard, true)?;
+                say!("{line}");
+                say!("wrote {}", path.display());
+                return Ok(());
+            }
             let table = match &a.policies {
                 Some(list) => {
                     let policies = stall::policies::parse_policies(list)?;
@@ -218,6 +249,29 @@ fn check_study(runs: usize, minutes: f64, max_runs: usize) -> Result<()> {
         "--minutes must be above 0 and at most {MAX_MINUTES} (a day), got {minutes}"
     );
     Ok(())
+}
+
+/// `pavlov experiment merge`: finds the shard files, picks the experiment they belong to, merges.
+fn merge(a: MergeArgs) -> Result<()> {
+    let files = shard::shard_files(&a.dirs)?;
+    let experiment = files
+        .first()
+        .map(|f| shard::experiment_of(f))
+        .transpose()?
+        .unwrap_or_default();
+    match experiment.as_str() {
+        stall::sharded::EXPERIMENT => {
+            let table = stall::sharded::merge(&files, a.out.as_deref())?;
+            say!("{}", table.trim_end());
+            Ok(())
+        }
+        other => anyhow::bail!(
+            "{}: shards of experiment {other:?} cannot be merged (known: stall)",
+            files
+                .first()
+                .map_or_else(String::new, |f| f.display().to_string())
+        ),
+    }
 }
 
 fn default_threads() -> usize {

@@ -4,6 +4,12 @@ pub mod args;
 pub mod bench;
 pub mod convert;
 pub mod experiment;
+pub mod fleet;
+
+/// What `--zenoh` and `pavlov fleet` say in a binary built without the `zenoh` feature.
+#[cfg(not(feature = "zenoh"))]
+pub(crate) const NO_ZENOH: &str = "this pavlov was built without Zenoh: build it with the `zenoh` feature \
+     (`cargo install --path actors --features zenoh`, or `cargo run --release --features zenoh -- …`)";
 pub mod human;
 pub mod replay;
 pub mod serve;
@@ -48,4 +54,7 @@ pub enum Command {
     /// Benchmark: run the server on the simulator in real time and print tick lateness and
     /// tick-to-command latency percentiles, optionally with websocket clients and abusers attached.
     Bench(bench::BenchArgs),
+    /// One dashboard page for a lab's robots: subscribes to pavlov/*/… on Zenoh (what `serve --zenoh`
+    /// publishes) and lists each robot's mode, link, tick health and counters, linking to its dashboard.
+    Fleet(fleet::FleetArgs),
 }

@@ -8,6 +8,8 @@ use pavlov_actors::dashboard::Dashboard;
 use pavlov_actors::foxglove::{self, Foxglove};
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::storage::{checkpoint_files, recorder, recording};
+#[cfg(feature = "zenoh")]
+use pavlov_actors::zenoh_bridge::{self, ZenohBridge};
 
 use super::args::{
     ConfigArgs, DashboardArgs, read_config, shutdown_signal, skeleton_format_name, validate,
@@ -47,6 +49,12 @@ pub struct ServeArgs {
         default_missing_value = foxglove::DEFAULT_ADDR
     )]
     foxglove: Option<String>,
+    /// Also publish every tick, event and a status on Zenoh under pavlov/<robot>/… ([zenoh] robot) and
+    /// answer queries for the configuration, the newest checkpoint and (with [zenoh] commands = true and a
+    /// token) commands. CONFIG is a Zenoh configuration file (JSON5: mode, listen/connect endpoints,
+    /// scouting); without it, Zenoh's defaults (a peer found by multicast scouting).
+    #[arg(long, value_name = "CONFIG", num_args = 0..=1)]
+    zenoh: Option<Option<PathBuf>>,
 }
 
 /// The folder dashboard-started recordings go into.
@@ -62,6 +70,7 @@ pub async fn run(args: ServeArgs) -> Result<()> {
         resume,
         resume_from,
         foxglove: foxglove_addr,
+        zenoh: zenoh_file,
     } = args;
     let (mut cfg, origin) = read_config(&config_args)?;
     let generated_token = dashboard.apply(&mut cfg)?;
@@ -105,6 +114,21 @@ pub async fn run(args: ServeArgs) -> Result<()> {
         .map(|addr| Foxglove::bind(addr, &cfg.dashboard))
         .transpose()
         .context("cannot start the Foxglove endpoint (--foxglove)")?;
+    #[cfg(not(feature = "zenoh"))]
+    if zenoh_file.is_some() {
+        anyhow::bail!("--zenoh: {}", super::NO_ZENOH);
+    }
+    #[cfg(feature = "zenoh")]
+    let zenoh_config = zenoh_file
+        .as_ref()
+        .map(|f| zenoh_bridge::load_config(f.as_deref()))
+        .transpose()
+        .context("cannot start the Zenoh bridge (--zenoh)")?;
+    #[cfg(feature = "zenoh")]
+    if zenoh_config.is_some() && cfg.zenoh.commands && cfg.dashboard.token.is_none() {
+        return Err(zenoh_bridge::ZenohError::CommandsNeedToken)
+            .context("cannot start the Zenoh bridge (--zenoh)");
+    }
     let recorder = recorder::Recorder::spawn_new(
         recording::RecordingHeader::new(&cfg, "pavlov serve"),
         record.clone(),
@@ -140,6 +164,28 @@ pub async fn run(args: ServeArgs) -> Result<()> {
                 return Err(e).context("cannot start the Foxglove endpoint (--foxglove)");
             }
         },
+    };
+    #[cfg(feature = "zenoh")]
+    let zenoh = match zenoh_config {
+        None => None,
+        Some(zc) => {
+            let url = if server.config.zenoh.dashboard_url.is_empty() {
+                dash.url()
+            } else {
+                server.config.zenoh.dashboard_url.clone()
+            };
+            match ZenohBridge::start(zc, &server, url).await {
+                Ok(z) => Some(z),
+                Err(e) => {
+                    if let Some(f) = fox {
+                        f.shutdown().await;
+                    }
+                    dash.shutdown().await;
+                    server.shutdown().await;
+                    return Err(e).context("cannot start the Zenoh bridge (--zenoh)");
+                }
+            }
+        }
     };
     if let Some(resumed) = &server.checkpoints.resumed {
         for line in resumed.report_lines() {
@@ -181,8 +227,24 @@ pub async fn run(args: ServeArgs) -> Result<()> {
             sk.local_addr
         );
     }
+    #[cfg(feature = "zenoh")]
+    if let Some(z) = &zenoh {
+        say!(
+            "zenoh: publishing on pavlov/{}/{{tick,event,status}}; commands over Zenoh {}",
+            z.robot(),
+            if server.config.zenoh.commands {
+                "on (with the token)"
+            } else {
+                "off"
+            }
+        );
+    }
     shutdown_signal().await;
     tracing::info!("shutting down: stopping the robot");
+    #[cfg(feature = "zenoh")]
+    if let Some(z) = zenoh {
+        z.shutdown().await;
+    }
     if let Some(f) = fox {
         f.shutdown().await;
     }

@@ -154,7 +154,7 @@ pub fn generate_token() -> std::io::Result<String> {
 }
 
 /// Compares without stopping at the first difference, so timing does not reveal how much of a guess is right.
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+pub(crate) fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     let mut diff = a.len() ^ b.len();
     for (i, &x) in a.iter().enumerate() {
         let y = b.get(i % b.len().max(1)).copied().unwrap_or(0);

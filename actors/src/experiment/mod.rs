@@ -10,6 +10,7 @@
 pub mod interaction;
 pub(crate) mod plot_style;
 pub(crate) mod runner;
+pub mod shard;
 pub mod stall;
 
 use pavlov::control::Mode;

@@ -202,3 +202,83 @@ impl FoxgloveCounters {
         }
     }
 }
+
+/// The Zenoh bridge's counters (`serve --zenoh`), written by the bridge and read by `/metrics` and the
+/// bridge's status message. Every server has one, so the figures read 0 when no bridge runs.
+#[derive(Debug, Default)]
+pub(crate) struct ZenohCounters {
+    /// Tick records published on `pavlov/<robot>/tick`.
+    pub(crate) ticks_published: AtomicU64,
+    /// Events published on `pavlov/<robot>/event`.
+    pub(crate) events_published: AtomicU64,
+    /// Status messages published on `pavlov/<robot>/status`.
+    pub(crate) status_published: AtomicU64,
+    /// Tick records the publisher lost because it fell behind (its queue dropped the oldest).
+    pub(crate) ticks_missed: AtomicU64,
+    /// Events the publisher lost because it fell behind.
+    pub(crate) events_missed: AtomicU64,
+    /// Puts Zenoh refused (the session closing, a transport error).
+    pub(crate) put_errors: AtomicU64,
+    /// Queries answered on `config` and `checkpoint`.
+    pub(crate) queries: AtomicU64,
+    /// Commands applied.
+    pub(crate) commands_applied: AtomicU64,
+    /// Commands refused: the token missing or wrong.
+    pub(crate) commands_refused_token: AtomicU64,
+    /// Commands refused: commands over Zenoh are off (`[zenoh] commands = false`).
+    pub(crate) commands_refused_off: AtomicU64,
+    /// Commands refused: not a valid command message.
+    pub(crate) commands_refused_invalid: AtomicU64,
+    /// Commands the server's owner refused (busy, rejected, unavailable).
+    pub(crate) commands_failed: AtomicU64,
+}
+
+/// A copy of [`ZenohCounters`] at one moment.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct ZenohFigures {
+    /// Tick records published.
+    pub ticks_published: u64,
+    /// Events published.
+    pub events_published: u64,
+    /// Status messages published.
+    pub status_published: u64,
+    /// Tick records lost by the publisher.
+    pub ticks_missed: u64,
+    /// Events lost by the publisher.
+    pub events_missed: u64,
+    /// Puts Zenoh refused.
+    pub put_errors: u64,
+    /// Queries answered.
+    pub queries: u64,
+    /// Commands applied.
+    pub commands_applied: u64,
+    /// Commands refused for the token.
+    pub commands_refused_token: u64,
+    /// Commands refused because commands are off.
+    pub commands_refused_off: u64,
+    /// Commands refused as invalid.
+    pub commands_refused_invalid: u64,
+    /// Commands the owner refused.
+    pub commands_failed: u64,
+}
+
+impl ZenohCounters {
+    /// The figures now.
+    pub(crate) fn figures(&self) -> ZenohFigures {
+        let get = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        ZenohFigures {
+            ticks_published: get(&self.ticks_published),
+            events_published: get(&self.events_published),
+            status_published: get(&self.status_published),
+            ticks_missed: get(&self.ticks_missed),
+            events_missed: get(&self.events_missed),
+            put_errors: get(&self.put_errors),
+            queries: get(&self.queries),
+            commands_applied: get(&self.commands_applied),
+            commands_refused_token: get(&self.commands_refused_token),
+            commands_refused_off: get(&self.commands_refused_off),
+            commands_refused_invalid: get(&self.commands_refused_invalid),
+            commands_failed: get(&self.commands_failed),
+        }
+    }
+}

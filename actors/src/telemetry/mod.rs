@@ -25,6 +25,7 @@ use tokio::sync::watch;
 
 use counters::{
     ActuationStats, FoxgloveCounters, RecorderGauge, SharedTickStats, SharedWriterStats,
+    ZenohCounters,
 };
 use histogram::{LatencyHistogram, LatencyQuantiles};
 
@@ -43,6 +44,8 @@ pub struct Health {
     pub(crate) link: watch::Receiver<Option<LinkStatus>>,
     /// The Foxglove endpoint's counters (all zero without `serve --foxglove`).
     pub(crate) foxglove: std::sync::Arc<FoxgloveCounters>,
+    /// The Zenoh bridge's counters (all zero without `serve --zenoh`).
+    pub(crate) zenoh: std::sync::Arc<ZenohCounters>,
     /// The Horde's figures, when there is a Horde.
     pub(crate) horde: Option<watch::Receiver<crate::horde::status::HordeStatus>>,
 }
@@ -202,6 +205,7 @@ mod tests {
             recorder: RecorderGauge::new(None, Default::default()),
             link: watch::channel(link).1,
             foxglove: Default::default(),
+            zenoh: Default::default(),
             horde: None,
         }
     }

@@ -9,7 +9,7 @@ use pavlov::config::TickTimer;
 use pavlov::record::LinkStatus;
 use pavlov::supervision::{LinkState, TripCause};
 
-use super::counters::{ActuationStats, DashboardStats, FoxgloveFigures};
+use super::counters::{ActuationStats, DashboardStats, FoxgloveFigures, ZenohFigures};
 use super::exposition::Exposition;
 pub(crate) use super::exposition::HistogramSample;
 use super::{Health, RecorderFigures};
@@ -54,6 +54,8 @@ pub(crate) struct MetricsSnapshot {
     pub(crate) sim_faults: Option<pavlov::sim::faults::FaultCounters>,
     /// The Foxglove endpoint's counters (zero without one).
     pub(crate) foxglove: FoxgloveFigures,
+    /// The Zenoh bridge's counters (zero without one).
+    pub(crate) zenoh: ZenohFigures,
     /// The Horde's figures (`None` without `[horde]`).
     pub(crate) horde: Option<HordeStatus>,
 }
@@ -78,6 +80,7 @@ impl MetricsSnapshot {
             tick_age_seconds: health.tick_age().map(|d| d.as_secs_f64()),
             healthy: health.verdict() == super::Verdict::Ok,
             foxglove: health.foxglove.figures(),
+            zenoh: health.zenoh.figures(),
             horde: health.horde.as_ref().map(|h| h.borrow().clone()),
         }
     }
@@ -334,6 +337,65 @@ fn foxglove_metrics(e: &mut Exposition, f: &FoxgloveFigures) {
     }
 }
 
+fn zenoh_metrics(e: &mut Exposition, z: &ZenohFigures) {
+    e.family(
+        "pavlov_zenoh_published_total",
+        "counter",
+        "Messages the Zenoh bridge published (serve --zenoh; 0 without it), by stream.",
+    );
+    for (stream, value) in [
+        ("tick", z.ticks_published),
+        ("event", z.events_published),
+        ("status", z.status_published),
+    ] {
+        e.sample(
+            "pavlov_zenoh_published_total",
+            &[("stream", stream)],
+            value as f64,
+        );
+    }
+    e.family(
+        "pavlov_zenoh_missed_total",
+        "counter",
+        "Tick records and events the Zenoh publisher lost because it fell behind (its queue drops the oldest; never delays the tick).",
+    );
+    for (stream, value) in [("tick", z.ticks_missed), ("event", z.events_missed)] {
+        e.sample(
+            "pavlov_zenoh_missed_total",
+            &[("stream", stream)],
+            value as f64,
+        );
+    }
+    e.counter(
+        "pavlov_zenoh_put_errors_total",
+        "Zenoh puts that failed (session closing, transport error).",
+        z.put_errors,
+    );
+    e.counter(
+        "pavlov_zenoh_queries_total",
+        "Zenoh queries answered on pavlov/<robot>/config and pavlov/<robot>/checkpoint.",
+        z.queries,
+    );
+    e.family(
+        "pavlov_zenoh_commands_total",
+        "counter",
+        "Commands received over Zenoh by outcome: applied, refused_token (missing or wrong token), refused_off ([zenoh] commands = false), refused_invalid (not a command message), failed (the owner refused: busy, rejected, unavailable).",
+    );
+    for (outcome, value) in [
+        ("applied", z.commands_applied),
+        ("refused_token", z.commands_refused_token),
+        ("refused_off", z.commands_refused_off),
+        ("refused_invalid", z.commands_refused_invalid),
+        ("failed", z.commands_failed),
+    ] {
+        e.sample(
+            "pavlov_zenoh_commands_total",
+            &[("outcome", outcome)],
+            value as f64,
+        );
+    }
+}
+
 fn horde_metrics(e: &mut Exposition, h: &HordeStatus) {
     e.gauge(
         "pavlov_horde_predictions",
@@ -431,6 +493,7 @@ pub(crate) fn render(s: &MetricsSnapshot) -> String {
     }
     ws_metrics(&mut e, &s.ws);
     foxglove_metrics(&mut e, &s.foxglove);
+    zenoh_metrics(&mut e, &s.zenoh);
     if let Some(h) = &s.horde {
         horde_metrics(&mut e, h);
     }
@@ -490,6 +553,12 @@ mod tests {
 
     fn snapshot() -> MetricsSnapshot {
         MetricsSnapshot {
+            zenoh: ZenohFigures {
+                ticks_published: 11,
+                ticks_missed: 2,
+                commands_refused_token: 3,
+                ..ZenohFigures::default()
+            },
             timer: TickTimer::Tokio,
             ticks_fired: 1000,
             ticks_skipped: 3,
@@ -581,6 +650,25 @@ mod tests {
         assert_eq!(value("pavlov_tick_timer", &[("timer", "tokio")]), 1.0);
         assert_eq!(value("pavlov_tick_timer", &[("timer", "thread")]), 0.0);
         assert_eq!(value("pavlov_ticks_skipped_total", &[]), 3.0);
+        assert_eq!(
+            value("pavlov_zenoh_published_total", &[("stream", "tick")]),
+            11.0
+        );
+        assert_eq!(
+            value("pavlov_zenoh_missed_total", &[("stream", "tick")]),
+            2.0
+        );
+        assert_eq!(
+            value(
+                "pavlov_zenoh_commands_total",
+                &[("outcome", "refused_token")]
+            ),
+            3.0
+        );
+        assert_eq!(
+            value("pavlov_zenoh_commands_total", &[("outcome", "applied")]),
+            0.0
+        );
         assert_eq!(value("pavlov_link_bad_frames_total", &[]), 2.0);
         assert_eq!(value("pavlov_link_skipped_bytes_total", &[]), 17.0);
         assert_eq!(value("pavlov_link_reconnects_total", &[]), 4.0);

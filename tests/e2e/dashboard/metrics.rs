@@ -20,7 +20,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
 
 /// Every family `/metrics` serves once the first tick is out (the README lists the same).
-const FAMILIES: [(&str, &str); 46] = [
+const FAMILIES: [(&str, &str); 51] = [
     ("pavlov_tick_lateness_seconds", "histogram"),
     ("pavlov_ticks_fired_total", "counter"),
     ("pavlov_tick_timer", "gauge"),
@@ -60,6 +60,11 @@ const FAMILIES: [(&str, &str); 46] = [
     ("pavlov_foxglove_connections_total", "counter"),
     ("pavlov_foxglove_refused_total", "counter"),
     ("pavlov_foxglove_missed_total", "counter"),
+    ("pavlov_zenoh_published_total", "counter"),
+    ("pavlov_zenoh_missed_total", "counter"),
+    ("pavlov_zenoh_put_errors_total", "counter"),
+    ("pavlov_zenoh_queries_total", "counter"),
+    ("pavlov_zenoh_commands_total", "counter"),
     ("pavlov_recorder_backlog", "gauge"),
     ("pavlov_recorder_dropped_total", "counter"),
     ("pavlov_actuation_commands_total", "counter"),

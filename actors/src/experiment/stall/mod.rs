@@ -13,6 +13,7 @@ pub(crate) mod plots;
 pub mod policies;
 pub mod report;
 pub(crate) mod run;
+pub mod sharded;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -86,7 +87,17 @@ pub fn plan(config: &Config, opts: &StallOptions) -> Vec<RunSpec> {
 /// Runs the whole study with `base` as the configuration; `progress` shows a progress bar on stderr.
 pub fn run_study(base: &Config, opts: &StallOptions, progress: bool) -> anyhow::Result<StallStudy> {
     let wall = Instant::now();
-    let specs = plan(base, opts);
+    let runs = run_runs(base, plan(base, opts), opts, progress)?;
+    Ok(assemble(opts.clone(), runs, wall.elapsed().as_secs_f64()))
+}
+
+/// Runs `specs` on `opts.threads` threads, in order.
+fn run_runs(
+    base: &Config,
+    specs: Vec<RunSpec>,
+    opts: &StallOptions,
+    progress: bool,
+) -> anyhow::Result<Vec<RunResult>> {
     let bar = super::progress_bar(specs.len(), progress);
     let on_done = |r: &RunResult| {
         bar.inc(1);
@@ -100,12 +111,16 @@ pub fn run_study(base: &Config, opts: &StallOptions, progress: bool) -> anyhow::
     };
     let runs = run_all(&specs, opts.threads, &|spec| run::run(base, spec), &on_done)?;
     bar.finish_and_clear();
+    Ok(runs)
+}
+
+/// The study from its runs (in planned order): the statistics and the bookkeeping.
+fn assemble(options: StallOptions, runs: Vec<RunResult>, wall_s: f64) -> StallStudy {
     let analysis = analyse(&runs, WINDOW_S);
     let simulated_s: f64 = runs.iter().map(|r| r.metrics.elapsed_s).sum();
-    let wall_s = wall.elapsed().as_secs_f64();
-    Ok(StallStudy {
+    StallStudy {
         experiment: "stall".into(),
-        options: opts.clone(),
+        options,
         seed_derivation: "run i (0-based, even = reactive, odd = Pavlovian) uses simulator seed \
                           Rng::new(seed).fork(i).next_u64() (pavlov::rng: SplitMix64 seeding, xoshiro256++)"
             .into(),
@@ -114,7 +129,7 @@ pub fn run_study(base: &Config, opts: &StallOptions, progress: bool) -> anyhow::
         wall_s,
         simulated_s,
         speedup: if wall_s > 0.0 { simulated_s / wall_s } else { 0.0 },
-    })
+    }
 }
 
 /// Runs the study, writes every output into `opts.out` and returns the terminal table.

@@ -1,0 +1,191 @@
+//! `pavlov bench --zenoh`: what publishing on Zenoh costs the tick. Runs a fresh server on the simulated
+//! Create without and with the Zenoh bridge, interleaved (off, on, on, off; each a quarter of the time),
+//! and with the bridge a second Zenoh session on loopback subscribed to `pavlov/<robot>/**`, so every tick
+//! and status really crosses a TCP link. Reports ticks skipped and tick → command for both, and what the
+//! bridge published, lost, and the subscriber received. A benchmark, not a test: it asserts nothing.
+
+use std::fmt;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use pavlov::config::Config;
+
+use crate::server::{RobotTarget, Server};
+use crate::telemetry::counters::ZenohFigures;
+use crate::telemetry::histogram::LatencyHistogram;
+use crate::zenoh_bridge::{KEY_ROOT, ZenohBridge};
+
+/// One side's runs, merged.
+#[derive(Clone, Default)]
+pub struct Side {
+    duration: Duration,
+    ticks: u64,
+    skipped: u64,
+    lateness: LatencyHistogram,
+    to_command: LatencyHistogram,
+    zenoh: ZenohFigures,
+    received: u64,
+}
+
+/// Without and with the bridge.
+pub struct ZenohComparison {
+    off: Side,
+    on: Side,
+}
+
+/// A loopback-only Zenoh peer configuration: listen on `listen`, connect to `connect`, no scouting.
+fn loopback(listen: &[String], connect: &[String]) -> Result<zenoh::Config, String> {
+    let text = serde_json::json!({
+        "mode": "peer",
+        "listen": { "endpoints": listen },
+        "connect": { "endpoints": connect },
+        "scouting": { "multicast": { "enabled": false }, "gossip": { "enabled": false } },
+    });
+    zenoh::Config::from_json5(&text.to_string()).map_err(|e| e.to_string())
+}
+
+fn free_port() -> Result<u16, String> {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .map_err(|e| e.to_string())
+}
+
+/// Runs the comparison for `duration` in all.
+pub async fn run_zenoh_comparison(
+    config: Config,
+    duration: Duration,
+) -> anyhow::Result<ZenohComparison> {
+    let quarter = duration / 4;
+    let (mut off, mut on) = (Side::default(), Side::default());
+    for with in [false, true, true, false] {
+        let run = run_one(&config, with, quarter).await?;
+        let side = if with { &mut on } else { &mut off };
+        side.duration += run.duration;
+        side.ticks += run.ticks;
+        side.skipped += run.skipped;
+        side.lateness.merge(&run.lateness);
+        side.to_command.merge(&run.to_command);
+        side.received += run.received;
+        let (a, b) = (&mut side.zenoh, run.zenoh);
+        a.ticks_published += b.ticks_published;
+        a.status_published += b.status_published;
+        a.events_published += b.events_published;
+        a.ticks_missed += b.ticks_missed;
+        a.events_missed += b.events_missed;
+        a.put_errors += b.put_errors;
+    }
+    Ok(ZenohComparison { off, on })
+}
+
+async fn run_one(config: &Config, with: bool, duration: Duration) -> anyhow::Result<Side> {
+    let mut config = config.clone();
+    config.zenoh.robot = "bench".into();
+    let server = Server::builder(config, RobotTarget::Simulated)
+        .start()
+        .await?;
+    let mut bridge = None;
+    let mut subscriber = None;
+    let received = Arc::new(AtomicU64::new(0));
+    if with {
+        let port = free_port().map_err(anyhow::Error::msg)?;
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let bridge_config =
+            loopback(std::slice::from_ref(&endpoint), &[]).map_err(anyhow::Error::msg)?;
+        bridge = Some(
+            ZenohBridge::start(bridge_config, &server, "http://127.0.0.1/bench".into()).await?,
+        );
+        let sub_config = loopback(&[], &[endpoint]).map_err(anyhow::Error::msg)?;
+        let session = zenoh::open(sub_config)
+            .await
+            .map_err(|e| anyhow::anyhow!("subscriber session: {e}"))?;
+        let sub = session
+            .declare_subscriber(format!("{KEY_ROOT}/bench/**"))
+            .await
+            .map_err(|e| anyhow::anyhow!("subscriber: {e}"))?;
+        let count = received.clone();
+        let task = tokio::spawn(async move {
+            while sub.recv_async().await.is_ok() {
+                count.fetch_add(1, Ordering::Relaxed);
+            }
+        });
+        subscriber = Some((session, task));
+    }
+    let start = std::time::Instant::now();
+    tokio::time::sleep(duration).await;
+    let health = server.health();
+    let figures = health.figures();
+    let (lateness, to_command) = health.histograms();
+    let side = Side {
+        duration: start.elapsed(),
+        ticks: figures.ticks_fired,
+        skipped: figures.ticks_skipped,
+        lateness,
+        to_command,
+        zenoh: health.zenoh.figures(),
+        received: received.load(Ordering::Relaxed),
+    };
+    if let Some((session, task)) = subscriber {
+        task.abort();
+        let _ = session.close().await;
+    }
+    if let Some(b) = bridge {
+        b.shutdown().await;
+    }
+    server.shutdown().await;
+    Ok(side)
+}
+
+impl fmt::Display for ZenohComparison {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "Zenoh bridge, interleaved (off, on, on, off); on = publishing every tick, event and status to a \
+             subscriber on loopback TCP"
+        )?;
+        for (name, s) in [("off", &self.off), ("on", &self.on)] {
+            writeln!(
+                f,
+                "{name:>4}: {:.1} s, {} ticks fired, {} skipped",
+                s.duration.as_secs_f64(),
+                s.ticks,
+                s.skipped
+            )?;
+        }
+        let z = &self.on.zenoh;
+        writeln!(
+            f,
+            "  on: published {} ticks, {} status, {} events; missed {} ticks, {} events; {} put errors; \
+             the subscriber received {}",
+            z.ticks_published,
+            z.status_published,
+            z.events_published,
+            z.ticks_missed,
+            z.events_missed,
+            z.put_errors,
+            self.on.received
+        )?;
+        writeln!(f, "{:<26}{:>10}{:>10}{:>12}", "µs", "off", "on", "on / off")?;
+        let (ol, nl) = (self.off.lateness.quantiles(), self.on.lateness.quantiles());
+        let (oc, nc) = (
+            self.off.to_command.quantiles(),
+            self.on.to_command.quantiles(),
+        );
+        for (name, a, b) in [
+            ("tick lateness p50", ol.p50_us, nl.p50_us),
+            ("tick lateness p99", ol.p99_us, nl.p99_us),
+            ("tick → command p50", oc.p50_us, nc.p50_us),
+            ("tick → command p99", oc.p99_us, nc.p99_us),
+            ("tick → command max", oc.max_us, nc.max_us),
+        ] {
+            let ratio = if a == 0 {
+                "–".to_string()
+            } else {
+                format!("{:.2}", b as f64 / a as f64)
+            };
+            writeln!(f, "{name:<26}{a:>10}{b:>10}{ratio:>12}")?;
+        }
+        Ok(())
+    }
+}
