@@ -14,11 +14,13 @@ mod bounds;
 mod dashboard;
 mod horde;
 mod link;
+mod rules;
 mod tick;
 pub use bounds::MAX_SAFETY_TIMEOUT_MS;
 pub use dashboard::{DashboardConfig, MAX_CLIENT_QUEUE, MIN_PUBLIC_TOKEN_CHARS};
 pub use horde::{HordeConfig, Precision};
 pub use link::LinkConfig;
+pub use rules::{MAX_RULES, RuleSpec};
 pub use tick::{MAX_SPIN_US, TickConfig, TickTimer};
 
 /// A configuration error, naming the offending key.
@@ -329,6 +331,10 @@ pub struct Config {
     pub control: ControlConfig,
     /// `[[predictions]]`, learned side by side.
     pub predictions: Vec<PredictionSpec>,
+    /// `[[rules]]`: the rule table of Pavlovian control (empty: the paper's single rule, see
+    /// [`Config::rule_table`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rules: Vec<RuleSpec>,
     /// `[sim]`.
     #[serde(default)]
     pub sim: SimConfig,
@@ -450,6 +456,7 @@ impl Config {
                 format!("no prediction is named `{}`", self.control.gate_prediction),
             ));
         }
+        self.check_rules()?;
         Ok(())
     }
 }
