@@ -94,7 +94,8 @@ export function renderNow(state) {
   $('seq').textContent = fmt(t.seq);
   $('runtime').textContent = fmtDuration(t.t);
   $('now-mode').textContent = t.mode;
-  $('now-gate').textContent = t.gate ? 'response ϱ' : 'default π';
+  // Which rule engaged the gate (its name, or `stimulus`); older servers send none.
+  $('now-gate').textContent = t.gate ? (t.rule ? `ϱ · ${t.rule}` : 'response ϱ') : 'default π';
   $('now-gate').className = t.gate ? 'on' : '';
   $('now-stimulus').textContent = t.stimulus ? 'ON' : 'off';
   $('now-stimulus').className = t.stimulus ? 'alarm' : '';

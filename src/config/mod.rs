@@ -502,6 +502,29 @@ mod tests {
     }
 
     #[test]
+    fn every_example_configuration_loads() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/config");
+        let mut loaded = Vec::new();
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                if let Err(e) = Config::from_toml(&text) {
+                    panic!("{}: {e}", path.display());
+                }
+                loaded.push(path.file_name().unwrap().to_string_lossy().into_owned());
+            }
+        }
+        loaded.sort();
+        for name in ["rules.toml", "stall.toml", "interaction.toml", "horde.toml"] {
+            assert!(
+                loaded.iter().any(|l| l == name),
+                "{name} not among {loaded:?}"
+            );
+        }
+    }
+
+    #[test]
     fn an_unknown_key_is_named() {
         let text = STALL.replace("period_ms = 20", "period_ms = 20\nperoid = 3");
         let e = Config::from_toml(&text).unwrap_err().to_string();

@@ -159,7 +159,10 @@ pub(crate) fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> 
     config.control.mode = spec.mode;
     config.sim.seed = spec.seed;
     if let Some(g) = &spec.gate_prediction {
+        // The policy names the prediction that gates: the paper's single rule on it, whatever rule
+        // table the base configuration declares.
         config.control.gate_prediction = g.clone();
+        config.rules.clear();
     }
     let continuation = config
         .predictions
