@@ -3,8 +3,9 @@
 //! In reactive mode the fixed response ϱ replaces the default policy π while the stimulus E is present,
 //! `b = I{E}ϱ + (1 − I{E})π`; in Pavlovian mode also while the gating prediction exceeds its threshold,
 //! `f(v) = I{E ∨ v > θ}`, generalised to a rule table (several predictions, thresholds and responses,
-//! [`crate::control::rules`]) whose highest-priority rule that fired picks the response; in manual mode the wheels follow teleop commands, which expire after
-//! [`TELEOP_HOLD_TICKS`] so that an operator who goes away cannot leave the robot driving.
+//! [`crate::control::rules`]) whose highest-priority rule that fired picks the response; in manual mode
+//! the wheels follow teleop commands, which expire after [`TELEOP_HOLD_TICKS`] so that an operator who
+//! goes away cannot leave the robot driving.
 
 use std::sync::Arc;
 
