@@ -143,6 +143,11 @@ pub struct TickRecord {
     pub predictions: Vec<PredictionValue>,
     /// Whether the fixed response ϱ was selected (f(v) = 1).
     pub gate: bool,
+    /// What engaged the gate: the name of the `[[rules]]` rule that fired (by default the gate
+    /// prediction's name), or `stimulus` for the stimulus alone; absent when the gate did not engage
+    /// (and in recordings made before the rule table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rule: Option<String>,
     /// The default policy's action π on this tick.
     pub default_action: Action,
     /// The command written to the robot.
@@ -192,6 +197,7 @@ impl TickRecord {
             stimulus: false,
             predictions: Vec::new(),
             gate: false,
+            rule: None,
             default_action: Action::STOP,
             command: Action::STOP,
             safety_stop: None,

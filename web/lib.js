@@ -97,6 +97,15 @@ export function fmtLead(ms) {
   return `${sign}${Math.abs(r).toLocaleString('en-US')} ms`;
 }
 
+/**
+ * The Now card's Gate row: `default π` while the gate is off, else the response with what engaged it (a
+ * `[[rules]]` rule's name, or `stimulus`); a server without a rule table sends none.
+ */
+export function gateText(tick) {
+  if (!tick.gate) return 'default π';
+  return tick.rule ? `ϱ · ${tick.rule}` : 'response ϱ';
+}
+
 /** Formats seconds as `m:ss` or `h:mm:ss`. */
 export function fmtDuration(seconds) {
   if (seconds === null || seconds === undefined || Number.isNaN(seconds)) return '—';

@@ -2,7 +2,7 @@
 // the recording card, and the link banners, drawn from the messages app.js receives (PROTOCOL.md).
 
 import {
-  alignedData, fmt, fmtDuration, fmtLead, fmtParam, tokenFromHash,
+  alignedData, fmt, fmtDuration, fmtLead, fmtParam, gateText, tokenFromHash,
 } from './lib.js';
 
 const $ = (id) => document.getElementById(id);
@@ -94,7 +94,7 @@ export function renderNow(state) {
   $('seq').textContent = fmt(t.seq);
   $('runtime').textContent = fmtDuration(t.t);
   $('now-mode').textContent = t.mode;
-  $('now-gate').textContent = t.gate ? 'response ϱ' : 'default π';
+  $('now-gate').textContent = gateText(t);
   $('now-gate').className = t.gate ? 'on' : '';
   $('now-stimulus').textContent = t.stimulus ? 'ON' : 'off';
   $('now-stimulus').className = t.stimulus ? 'alarm' : '';

@@ -2,16 +2,21 @@
 //!
 //! In reactive mode the fixed response ϱ replaces the default policy π while the stimulus E is present,
 //! `b = I{E}ϱ + (1 − I{E})π`; in Pavlovian mode also while the gating prediction exceeds its threshold,
-//! `f(v) = I{E ∨ v > θ}`; in manual mode the wheels follow teleop commands, which expire after
-//! [`TELEOP_HOLD_TICKS`] so that an operator who goes away cannot leave the robot driving.
+//! `f(v) = I{E ∨ v > θ}`, generalised to a rule table (several predictions, thresholds and responses,
+//! [`crate::control::rules`]) whose highest-priority rule that fired picks the response; in manual mode
+//! the wheels follow teleop commands, which expire after [`TELEOP_HOLD_TICKS`] so that an operator who
+//! goes away cannot leave the robot driving.
 
-use crate::control::{Action, Mode, Policy, gate, mix};
+use std::sync::Arc;
+
+use crate::control::rules::{Fired, GateInput, Rule, STIMULUS_RULE, select};
+use crate::control::{Action, Mode, Policy};
 
 /// How many ticks a teleop command drives the wheels without being refreshed (0.5 s at 50 Hz).
 pub const TELEOP_HOLD_TICKS: u64 = 25;
 
 /// What gating decided on one tick.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct GateOutput {
     /// Mode in force.
     pub mode: Mode,
@@ -21,6 +26,9 @@ pub struct GateOutput {
     pub default_action: Action,
     /// The action to take (actuation may still override it for safety).
     pub action: Action,
+    /// What engaged the gate: the name of the rule that fired, or `stimulus` (the stimulus alone);
+    /// `None` when the gate did not engage.
+    pub rule: Option<Arc<str>>,
 }
 
 /// Gating's state.
@@ -29,6 +37,8 @@ pub struct GatingStage {
     mode: Mode,
     default_policy: Policy,
     response: Policy,
+    rules: Vec<Rule>,
+    stimulus_rule: Arc<str>,
     estop: bool,
     teleop: Option<(Action, u64)>,
 }
@@ -53,12 +63,15 @@ fn mode_name(m: Mode) -> &'static str {
 }
 
 impl GatingStage {
-    /// A gate in `mode` between `default_policy` (π) and `response` (ϱ).
-    pub fn new(mode: Mode, default_policy: Policy, response: Policy) -> Self {
+    /// A gate in `mode` between `default_policy` (π) and the responses: `response` (ϱ) for the stimulus
+    /// alone, each rule's own when it fires (`Config::rule_table`: the paper's single rule by default).
+    pub fn new(mode: Mode, default_policy: Policy, response: Policy, rules: Vec<Rule>) -> Self {
         GatingStage {
             mode,
             default_policy,
             response,
+            rules,
+            stimulus_rule: STIMULUS_RULE.into(),
             estop: false,
             teleop: None,
         }
@@ -93,35 +106,35 @@ impl GatingStage {
         Ok(())
     }
 
-    /// Decides tick `seq`'s action from the stimulus and the gating prediction (`None` = invalid input:
-    /// the gate then falls back to the stimulus alone).
-    pub fn decide(
-        &mut self,
-        seq: u64,
-        stimulus: bool,
-        prediction: Option<f64>,
-        threshold: f64,
-    ) -> GateOutput {
+    /// Decides tick `seq`'s action from the stimulus and every prediction's gate input, in the
+    /// prediction set's order (a `None` value = invalid input: that prediction fires no rule).
+    pub fn decide(&mut self, seq: u64, stimulus: bool, inputs: &[GateInput]) -> GateOutput {
         let default_action = self.default_policy.action(seq);
-        let (engaged, action) = match self.mode {
+        let (rule, action) = match self.mode {
             Mode::Manual => {
                 let a = match self.teleop {
                     Some((a, at)) if seq.saturating_sub(at) <= TELEOP_HOLD_TICKS => a,
                     _ => Action::STOP,
                 };
-                (false, a)
+                (None, a)
             }
-            mode => {
-                let engaged = gate(mode, stimulus, prediction, threshold);
-                let response = self.response.action(seq);
-                (engaged, mix(response, default_action, engaged))
-            }
+            mode => match select(mode, stimulus, &self.rules, inputs) {
+                None => (None, default_action),
+                Some(Fired::Stimulus) => {
+                    (Some(self.stimulus_rule.clone()), self.response.action(seq))
+                }
+                Some(Fired::Rule(i)) => {
+                    let rule = &self.rules[i];
+                    (Some(rule.name.clone()), rule.response.action(seq))
+                }
+            },
         };
         GateOutput {
             mode: self.mode,
-            gate: engaged,
+            gate: rule.is_some(),
             default_action,
             action: if self.estop { Action::STOP } else { action },
+            rule,
         }
     }
 }
@@ -130,45 +143,122 @@ impl GatingStage {
 mod tests {
     use super::*;
 
+    const FORWARD: Policy = Policy::Constant {
+        left_mm_s: 200,
+        right_mm_s: 200,
+    };
+
+    /// The paper's single rule: prediction 0 at its own threshold, the response `stop`.
     fn stage(mode: Mode) -> GatingStage {
-        GatingStage::new(
-            mode,
-            Policy::Constant {
-                left_mm_s: 200,
-                right_mm_s: 200,
-            },
+        let rule = Rule {
+            name: "p".into(),
+            prediction: 0,
+            threshold: None,
+            response: Policy::Stop {},
+            priority: 0,
+        };
+        GatingStage::new(mode, FORWARD, Policy::Stop {}, vec![rule])
+    }
+
+    /// One prediction's input at θ = 0.5.
+    fn one(value: Option<f64>) -> [GateInput; 1] {
+        [GateInput {
+            value,
+            threshold: 0.5,
+        }]
+    }
+
+    #[test]
+    fn the_highest_priority_rule_that_fired_acts_and_is_named() {
+        let rule = |name: &str, prediction, response, priority| Rule {
+            name: name.into(),
+            prediction,
+            threshold: None,
+            response,
+            priority,
+        };
+        let spin = Policy::SpinLeft { speed_mm_s: 100 };
+        let back = Policy::Constant {
+            left_mm_s: -50,
+            right_mm_s: -50,
+        };
+        let mut g = GatingStage::new(
+            Mode::Pavlovian,
+            FORWARD,
             Policy::Stop {},
-        )
+            vec![rule("near", 0, spin, 1), rule("far", 1, back, 5)],
+        );
+        let inputs = |a: f64, b: f64| {
+            [
+                GateInput {
+                    value: Some(a),
+                    threshold: 0.5,
+                },
+                GateInput {
+                    value: Some(b),
+                    threshold: 0.5,
+                },
+            ]
+        };
+        let quiet = g.decide(0, false, &inputs(0.1, 0.1));
+        assert_eq!(
+            (quiet.gate, quiet.rule, quiet.action),
+            (false, None, Action::new(200, 200))
+        );
+        let near = g.decide(1, false, &inputs(0.9, 0.1));
+        assert_eq!(
+            (near.rule.as_deref(), near.action),
+            (Some("near"), spin.action(1))
+        );
+        let both = g.decide(2, true, &inputs(0.9, 0.9));
+        assert_eq!(
+            (both.rule.as_deref(), both.action),
+            (Some("far"), back.action(2))
+        );
+        let stimulus = g.decide(3, true, &inputs(0.1, 0.1));
+        assert!(stimulus.gate);
+        assert_eq!(
+            (stimulus.rule.as_deref(), stimulus.action),
+            (Some("stimulus"), Action::STOP)
+        );
+        // Reactive control answers the stimulus alone with the configured response.
+        g.set_mode(Mode::Reactive);
+        assert_eq!(g.decide(4, false, &inputs(0.9, 0.9)).rule, None);
+        let reactive = g.decide(5, true, &inputs(0.9, 0.9));
+        assert_eq!(
+            (reactive.rule.as_deref(), reactive.action),
+            (Some("stimulus"), Action::STOP)
+        );
     }
 
     #[test]
     fn reactive_responds_only_to_the_stimulus_pavlovian_also_to_the_prediction() {
         let mut r = stage(Mode::Reactive);
         assert_eq!(
-            r.decide(0, false, Some(0.9), 0.5).action,
+            r.decide(0, false, &one(Some(0.9))).action,
             Action::new(200, 200)
         );
-        assert_eq!(r.decide(1, true, Some(0.0), 0.5).action, Action::STOP);
+        assert_eq!(r.decide(1, true, &one(Some(0.0))).action, Action::STOP);
         let mut p = stage(Mode::Pavlovian);
-        let out = p.decide(0, false, Some(0.9), 0.5);
+        let out = p.decide(0, false, &one(Some(0.9)));
         assert!(out.gate);
         assert_eq!(out.action, Action::STOP);
         assert_eq!(out.default_action, Action::new(200, 200));
         // An invalid prediction falls back to the stimulus alone.
-        assert!(!p.decide(1, false, None, 0.5).gate);
+        assert!(!p.decide(1, false, &one(None)).gate);
     }
 
     #[test]
     fn estop_overrides_everything_and_teleop_expires() {
         let mut g = stage(Mode::Manual);
-        assert_eq!(g.decide(0, false, None, 0.5).action, Action::STOP);
+        assert_eq!(g.decide(0, false, &one(None)).action, Action::STOP);
         g.teleop(Action::new(100, -100), 10).unwrap();
         assert_eq!(
-            g.decide(10 + TELEOP_HOLD_TICKS, false, None, 0.5).action,
+            g.decide(10 + TELEOP_HOLD_TICKS, false, &one(None)).action,
             Action::new(100, -100)
         );
         assert_eq!(
-            g.decide(11 + TELEOP_HOLD_TICKS, false, None, 0.5).action,
+            g.decide(11 + TELEOP_HOLD_TICKS, false, &one(None)).action,
             Action::STOP
         );
         g.set_estop(true);
@@ -178,7 +268,7 @@ mod tests {
         );
         let mut p = stage(Mode::Pavlovian);
         p.set_estop(true);
-        assert_eq!(p.decide(0, false, Some(0.0), 0.5).action, Action::STOP);
+        assert_eq!(p.decide(0, false, &one(Some(0.0))).action, Action::STOP);
         assert_eq!(
             stage(Mode::Reactive).teleop(Action::STOP, 0),
             Err(GateError::NotManual("reactive"))

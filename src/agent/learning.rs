@@ -132,6 +132,8 @@ pub struct LearnOutput {
     pub gate_value: Option<f64>,
     /// The gating prediction's threshold θ.
     pub gate_threshold: f64,
+    /// Every prediction's input to the rule table (valid value and threshold), in the set's order.
+    pub gate_inputs: Vec<crate::control::GateInput>,
     /// Elbow angles, when a skeleton is used.
     pub elbow: Option<ElbowAngles>,
     /// The input of the same name, carried into the tick's record for replay.
@@ -278,6 +280,13 @@ impl LearningStage {
         let (gate_value, gate_threshold) = outs
             .get(self.gate_index)
             .map_or((None, f64::INFINITY), |o| (o.valid_value(), o.threshold));
+        let gate_inputs = outs
+            .iter()
+            .map(|o| crate::control::GateInput {
+                value: o.valid_value(),
+                threshold: o.threshold,
+            })
+            .collect();
         LearnOutput {
             obs_vector: self.obs.iter().map(|&x| x as f32).collect(),
             stimulus,
@@ -291,6 +300,7 @@ impl LearningStage {
                 .collect(),
             gate_value,
             gate_threshold,
+            gate_inputs,
             elbow,
             previous_followed_default: input.previous_followed_default,
         }
@@ -639,7 +649,10 @@ mod tests {
             left_mm_s: 100,
             right_mm_s: 100,
         };
-        let mut gate = GatingStage::new(Mode::Pavlovian, default, response);
+        let rules = Config::from_toml(include_str!("../../config/stall.toml"))
+            .unwrap()
+            .rule_table();
+        let mut gate = GatingStage::new(Mode::Pavlovian, default, response, rules);
         let mut bumped = snapshot(false);
         bumped.set(id::BUMPS_WHEEL_DROPS, 1);
         let input = |v| LearnInput {
@@ -659,14 +672,13 @@ mod tests {
             assert!(out.predictions[0].value.is_finite());
             assert!(out.predictions[0].value > out.gate_threshold);
             assert_eq!(out.gate_value, None);
-            let d = gate.decide(seq, out.stimulus, out.gate_value, out.gate_threshold);
+            assert_eq!(out.gate_inputs[0].value, None);
+            let d = gate.decide(seq, out.stimulus, &out.gate_inputs);
             assert!(!d.gate, "a diverged prediction engaged the response");
             assert_eq!(d.action, Action::new(100, 100));
             // The stimulus still engages it: the gate is the reactive rule.
-            assert!(
-                gate.decide(seq, true, out.gate_value, out.gate_threshold)
-                    .gate
-            );
+            let d = gate.decide(seq, true, &out.gate_inputs);
+            assert_eq!((d.gate, d.rule.as_deref()), (true, Some("stimulus")));
             let report = s.learn().unwrap();
             assert!(report.newly_diverged.is_empty(), "reported once");
             assert_eq!(report.divergences, 1);

@@ -61,6 +61,7 @@ pub fn assemble(
         stimulus: learned.stimulus,
         predictions: learned.predictions,
         gate: gate.gate,
+        rule: gate.rule.as_deref().map(str::to_owned),
         default_action: gate.default_action,
         command: actuated.command,
         safety_stop: actuated.safety_stop,

@@ -62,12 +62,7 @@ fn check_policies(cfg: &Config) -> Result<(), ConfigError> {
         ("control.default_policy", &cfg.control.default_policy),
         ("control.response", &cfg.control.response),
     ] {
-        policy.validate().map_err(|e| match e {
-            crate::control::ControlError::SpeedOutOfRange { field, speed } => invalid(
-                format!("{key}.{field}"),
-                format!("{speed} mm/s is outside the Drive Direct range -500..=500 mm/s"),
-            ),
-        })?;
+        super::rules::check_policy(key, policy)?;
     }
     Ok(())
 }

@@ -14,12 +14,14 @@ mod bounds;
 mod dashboard;
 mod horde;
 mod link;
+mod rules;
 mod tick;
 mod zenoh;
 pub use bounds::MAX_SAFETY_TIMEOUT_MS;
 pub use dashboard::{DashboardConfig, MAX_CLIENT_QUEUE, MIN_PUBLIC_TOKEN_CHARS};
 pub use horde::{HordeConfig, Precision};
 pub use link::LinkConfig;
+pub use rules::{MAX_RULES, RuleSpec};
 pub use tick::{MAX_SPIN_US, TickConfig, TickTimer};
 pub use zenoh::{ZenohConfig, check_robot_name};
 
@@ -331,6 +333,10 @@ pub struct Config {
     pub control: ControlConfig,
     /// `[[predictions]]`, learned side by side.
     pub predictions: Vec<PredictionSpec>,
+    /// `[[rules]]`: the rule table of Pavlovian control (empty: the paper's single rule, see
+    /// [`Config::rule_table`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rules: Vec<RuleSpec>,
     /// `[sim]`.
     #[serde(default)]
     pub sim: SimConfig,
@@ -456,6 +462,7 @@ impl Config {
                 format!("no prediction is named `{}`", self.control.gate_prediction),
             ));
         }
+        self.check_rules()?;
         Ok(())
     }
 }
@@ -498,6 +505,29 @@ mod tests {
         let p = &i.predictions[0];
         assert_eq!((p.lambda, p.initial_weight, p.tau), (0.8, -1.0, 25.0));
         assert!((p.threshold_value() - 0.96f64.powi(15)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn every_example_configuration_loads() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/config");
+        let mut loaded = Vec::new();
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                if let Err(e) = Config::from_toml(&text) {
+                    panic!("{}: {e}", path.display());
+                }
+                loaded.push(path.file_name().unwrap().to_string_lossy().into_owned());
+            }
+        }
+        loaded.sort();
+        for name in ["rules.toml", "stall.toml", "interaction.toml", "horde.toml"] {
+            assert!(
+                loaded.iter().any(|l| l == name),
+                "{name} not among {loaded:?}"
+            );
+        }
     }
 
     #[test]

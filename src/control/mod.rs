@@ -5,13 +5,16 @@
 //! - [`mod@gate`]: [`Mode`], [`fn@gate`] (reactive `I{E}` or Pavlovian `I{E ∨ v > θ}`) and [`mix`].
 //! - [`policy`]: [`Policy`], the configurable default policies and fixed responses, and
 //!   [`StallDefaultPolicy`], the stall experiment's 20 s driving cycle.
+//! - [`rules`]: the rule table, several responses each driven by its own prediction, and [`select`].
 
 pub mod action;
 pub mod gate;
 pub mod policy;
+pub mod rules;
 pub mod stall;
 
 pub use action::{Action, MAX_WHEEL_MM_S};
 pub use gate::{Mode, gate, mix};
 pub use policy::{ControlError, Policy, StallDefaultPolicy};
+pub use rules::{Fired, GateInput, Rule, STIMULUS_RULE, select};
 pub use stall::{StallDetector, wheel_overcurrent};

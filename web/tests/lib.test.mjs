@@ -4,7 +4,7 @@ import { test } from 'node:test';
 
 import {
   Backoff, GapCounter, SUBPROTOCOL, Timeline, WINDOWS, alignedData, applyParams, columns, connectionTarget, fmt, fmtDuration,
-  fmtLead, fmtParam, markerLabel, paramLimits, parseParam, redrawIntervalMs, sampleFromTick, samplesFromHistory, sensorsLive,
+  fmtLead, fmtParam, gateText, markerLabel, paramLimits, parseParam, redrawIntervalMs, sampleFromTick, samplesFromHistory, sensorsLive,
   teleopWheels, toCsv, tokenFromHash,
 } from '../lib.js';
 
@@ -232,4 +232,11 @@ test('windows go from 10 s to 10 min and wide ones redraw less often', () => {
   assert.deepEqual(WINDOWS.map((w) => w.seconds), [10, 30, 60, 300, 600]);
   assert.equal(redrawIntervalMs(10), 20);
   assert.equal(redrawIntervalMs(600), 1000);
+});
+
+test('the Gate row names the rule that engaged the gate', () => {
+  assert.equal(gateText({ gate: false, rule: null }), 'default π');
+  assert.equal(gateText({ gate: true, rule: 'stall_ahead' }), 'ϱ · stall_ahead');
+  assert.equal(gateText({ gate: true, rule: 'stimulus' }), 'ϱ · stimulus');
+  assert.equal(gateText({ gate: true }), 'response ϱ', 'a server without rules');
 });

@@ -47,6 +47,8 @@ pub(crate) struct TickMessage<'a> {
     predictions: &'a [PredictionValue],
     stimulus: bool,
     gate: bool,
+    /// What engaged the gate: a rule's name or `stimulus`; `null` when it did not engage.
+    rule: Option<&'a str>,
     command: Wheels,
     default: Wheels,
     estop: bool,
@@ -70,6 +72,7 @@ impl<'a> TickMessage<'a> {
             predictions: &r.predictions,
             stimulus: r.stimulus,
             gate: r.gate,
+            rule: r.rule.as_deref(),
             command: r.command.into(),
             default: r.default_action.into(),
             estop: r.estop,
@@ -407,6 +410,7 @@ mod tests {
                 threshold: 0.5,
             }],
             gate: true,
+            rule: Some("stall_ahead".into()),
             default_action: Action {
                 left_mm_s: 100,
                 right_mm_s: 100,
@@ -444,6 +448,18 @@ mod tests {
         assert_eq!(
             (v["stimulus"].clone(), v["gate"].clone(), v["estop"].clone()),
             (json!(true), json!(true), json!(true))
+        );
+        assert_eq!(v["rule"], "stall_ahead");
+        let idle = TickRecord {
+            gate: false,
+            rule: None,
+            ..record
+        };
+        let v: Value = serde_json::from_str(&TickMessage::new(&idle).to_json()).unwrap();
+        assert_eq!(
+            v["rule"],
+            Value::Null,
+            "present, null, when the gate is off"
         );
     }
 

@@ -124,7 +124,8 @@ pub(crate) fn tick_record() -> Value {
         "pavlov.TickRecord",
         "Everything that happened on one 20 ms tick (the recorder's record). Fields that can be null: \
          obs entries (a packet the snapshot lacks), obs_age_ticks, elbow, safety_stop, the battery and \
-         mode sensors, link.mode, link.trip, inputs.",
+         mode sensors, link.mode, link.trip, inputs. rule (what engaged the gate: a rule's name or \
+         `stimulus`) is absent while the gate is off.",
         object([
             ("seq", integer()),
             ("t_ms", number()),
@@ -136,6 +137,7 @@ pub(crate) fn tick_record() -> Value {
             ("stimulus", boolean()),
             ("predictions", array(prediction)),
             ("gate", boolean()),
+            ("rule", string()),
             ("default_action", action()),
             ("command", action()),
             (
@@ -339,6 +341,7 @@ pub(crate) mod tests {
                 threshold: 0.5,
             }],
             gate: true,
+            rule: Some("stall".into()),
             default_action: Action {
                 left_mm_s: 200,
                 right_mm_s: 200,
@@ -437,6 +440,9 @@ pub(crate) mod tests {
         assert!(conforms(&value, &schema, "$").is_err());
         let mut value = serde_json::to_value(full_record()).unwrap();
         value["gate"] = json!("yes");
+        assert!(conforms(&value, &schema, "$").is_err());
+        let mut value = serde_json::to_value(full_record()).unwrap();
+        value["rule"] = json!(3);
         assert!(conforms(&value, &schema, "$").is_err());
     }
 

@@ -111,12 +111,12 @@ pub(crate) async fn run(
                 let last_seq = p.observation.tick.seq;
                 after = Some(last_seq);
                 let o = &p.output;
-                let gate = stage.decide(last_seq, o.stimulus, o.gate_value, o.gate_threshold);
+                let gate = stage.decide(last_seq, o.stimulus, &o.gate_inputs);
                 if gate.gate != engaged {
                     engaged = gate.gate;
                     tracing::debug!(
                         tick = last_seq, engaged, stimulus = o.stimulus, prediction = ?o.gate_value,
-                        threshold = o.gate_threshold, "the fixed response {}",
+                        threshold = o.gate_threshold, rule = ?gate.rule, "the fixed response {}",
                         if engaged { "took over" } else { "let go" }
                     );
                 }

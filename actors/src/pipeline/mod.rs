@@ -108,6 +108,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
         config.control.mode,
         config.control.default_policy,
         config.control.response,
+        config.rule_table(),
     );
     let actuation = Actuation::new(config.robot.model, config.safety.clone());
 

@@ -1,5 +1,6 @@
 //! `pavlov replay DIR`: runs a recording back through the core's learning, gating and safety stages and
-//! checks that they reproduce the recorded stimulus, predictions, gate, safety stop and command exactly.
+//! checks that they reproduce the recorded stimulus, predictions, gate, the rule that engaged it, safety
+//! stop and command exactly.
 //!
 //! The learner starts from the state the recording began with (its header's [`StartState`]: weights,
 //! traces, parameters in force, the stall detector — so a recording made after `--resume` or started from
@@ -9,7 +10,8 @@
 //! parameters and weight resets before the learning step after their tick, mode changes and teleop before
 //! the gating step after theirs. The e-stop and the mode are also taken from the records. The safety stop
 //! and the command are checked on every tick with the same predicate actuation used
-//! ([`pavlov::agent::safety`]); a manual-mode command is compared once the teleop state is known (from the
+//! ([`pavlov::agent::safety`]), as is the rule that engaged the gate (`[[rules]]`; except in recordings
+//! made before the rule table, which engaged the gate without naming one); a manual-mode command is compared once the teleop state is known (from the
 //! start of the run, or half a second into the recording, when any teleop from before it has expired).
 //! What replay cannot reproduce: ticks the runtime dropped between learning and actuation (the first such
 //! gap shows up as a mismatch, and is reported as a gap in `seq`).
@@ -49,6 +51,9 @@ pub struct ReplayReport {
     pub stops_compared: usize,
     /// Commands compared (every tick but manual-mode ticks without a safety stop).
     pub commands_compared: usize,
+    /// Ticks whose `rule` (what engaged the gate) was compared: every tick, unless the recording
+    /// predates the rule table (it engaged the gate on some tick but names no rule anywhere).
+    pub rules_compared: usize,
     /// Ticks where `seq` jumped (records missing from the recording).
     pub seq_gaps: usize,
     /// Recorded events applied to learning or gating.
@@ -103,6 +108,7 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
         config.control.mode,
         config.control.default_policy,
         config.control.response,
+        config.rule_table(),
     );
     let start: Option<&StartState> = rec.header.start.as_ref();
     if let Some(start) = start {
@@ -117,6 +123,9 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
         (Some(Some(_)), Some(first)) => first.seq + TELEOP_HOLD_TICKS + 1,
         _ => 0,
     };
+    // A recording made before the rule table engaged the gate without naming a rule.
+    let compare_rules =
+        rec.records.iter().any(|r| r.rule.is_some()) || !rec.records.iter().any(|r| r.gate);
     let mut estop = false;
     let mut report = ReplayReport::default();
     let mut last_seq: Option<u64> = None;
@@ -194,9 +203,20 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
                 );
             }
         }
-        let g = gating.decide(r.seq, out.stimulus, out.gate_value, out.gate_threshold);
+        let g = gating.decide(r.seq, out.stimulus, &out.gate_inputs);
         if g.gate != r.gate {
             report.note(r.seq, "gate", r.gate.to_string(), g.gate.to_string());
+        }
+        if compare_rules {
+            report.rules_compared += 1;
+        }
+        if compare_rules && g.rule.as_deref() != r.rule.as_deref() {
+            report.note(
+                r.seq,
+                "rule",
+                format!("{:?}", r.rule),
+                format!("{:?}", g.rule.as_deref()),
+            );
         }
         if g.default_action != r.default_action {
             report.note(

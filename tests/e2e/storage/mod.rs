@@ -1,4 +1,4 @@
-//! What the server keeps on disk: recordings (round trip, replay, a kill mid-write, names a client may
+//! What the server keeps on disk: recordings (round trip, replay, a rule table's rules, a kill mid-write, names a client may
 //! give, conversion between MCAP and JSON Lines, an independent MCAP reader), checkpoints (periodic, per
 //! run, resumed with fallback) and saves.
 
@@ -10,5 +10,6 @@ mod recording_crash;
 mod recording_names;
 mod recording_python;
 mod recording_roundtrip;
+mod recording_rules;
 mod replay_cases;
 mod saves;

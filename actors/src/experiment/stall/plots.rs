@@ -342,6 +342,7 @@ mod tests {
             stimulus: false,
             predictions: Vec::new(),
             gate: false,
+            rule: None,
             default_action,
             command: default_action,
             safety_stop: None,

@@ -573,6 +573,39 @@ mod tests {
     }
 
     #[test]
+    fn each_policy_gates_on_its_own_prediction_even_with_a_rule_table() {
+        let base = Config::from_toml(include_str!("../../../../config/rules.toml")).unwrap();
+        let config = with_offpolicy_prediction(&base).unwrap();
+        let opts = StallOptions {
+            runs_per_policy: 1,
+            minutes: 0.1,
+            seed: 1,
+            record: false,
+            threads: 1,
+            out: "x".into(),
+        };
+        let p = plan(
+            &config,
+            &opts,
+            &[StallPolicy::Pavlovian, StallPolicy::Offpolicy],
+        );
+        let off = super::super::run::config_for(&config, &p[1].1);
+        let table = off.rule_table();
+        assert_eq!(table.len(), 1, "the base's two rules are replaced");
+        assert_eq!(off.predictions[table[0].prediction].name, "stall_pi");
+        assert_eq!(table[0].response, off.control.response);
+        // Without a named prediction the base's rule table stands.
+        let mut spec = p[0].1.clone();
+        spec.gate_prediction = None;
+        assert_eq!(
+            super::super::run::config_for(&config, &spec)
+                .rule_table()
+                .len(),
+            2
+        );
+    }
+
+    #[test]
     fn the_plan_interleaves_and_only_the_gate_prediction_differs() {
         let config = with_offpolicy_prediction(
             &Config::from_toml(include_str!("../../../../config/stall.toml")).unwrap(),

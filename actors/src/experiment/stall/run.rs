@@ -153,14 +153,22 @@ impl Collect for StallCollector<'_> {
     }
 }
 
-/// Runs `spec` with `base` (mode and seed are overridden) and returns its result.
-pub(crate) fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> {
+/// The configuration of run `spec`: `base` with its mode and seed, and, when the policy names the
+/// prediction that gates, the paper's single rule on that prediction, whatever rule table `base` declares.
+pub(crate) fn config_for(base: &Config, spec: &RunSpec) -> Config {
     let mut config = base.clone();
     config.control.mode = spec.mode;
     config.sim.seed = spec.seed;
     if let Some(g) = &spec.gate_prediction {
         config.control.gate_prediction = g.clone();
+        config.rules.clear();
     }
+    config
+}
+
+/// Runs `spec` with `base` (see [`config_for`]) and returns its result.
+pub(crate) fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> {
+    let config = config_for(base, spec);
     let continuation = config
         .predictions
         .iter()

@@ -108,7 +108,8 @@ mod tests {
             elbow: None,
             stimulus: seq % 3 == 0,
             predictions: Vec::new(),
-            gate: false,
+            gate: seq % 3 == 0,
+            rule: (seq % 3 == 0).then(|| ["stimulus", "stall"][(seq % 2) as usize].to_string()),
             default_action: Action::new(100, 100),
             command: Action::STOP,
             safety_stop: None,
@@ -131,7 +132,14 @@ mod tests {
 
     #[test]
     fn a_recording_reads_back_whole() {
-        let rec = parse(&text(5)).unwrap();
+        let text = text(5);
+        // The rule is written where the gate engaged, and left out (read back as none) elsewhere, as
+        // in recordings made before the rule table.
+        let lines: Vec<&str> = text.lines().collect();
+        assert!(lines[1].contains("\"rule\":\"stimulus\""), "{}", lines[1]);
+        assert!(lines[4].contains("\"rule\":\"stall\""), "{}", lines[4]);
+        assert!(!lines[2].contains("rule"), "{}", lines[2]);
+        let rec = parse(&text).unwrap();
         assert_eq!(rec.records, (0..5).map(record).collect::<Vec<_>>());
         assert_eq!(rec.header.obs_names.len(), 44);
         assert_eq!(rec.header.label, "test");

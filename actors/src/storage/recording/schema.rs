@@ -162,6 +162,7 @@ fn tick_file() -> FileDescriptorProto {
             typed("link", 15, Message, ".pavlov.Link"),
             typed("inputs", 16, Message, ".pavlov.Inputs"),
             list("obs", 17, Float, None),
+            opt("rule", 18, String),
         ],
     );
     let sensors = message(
@@ -372,6 +373,9 @@ mod tests {
         assert_eq!(age.proto3_optional, Some(true));
         let oneof = &tick.oneof_decl[age.oneof_index.unwrap() as usize];
         assert_eq!(oneof.name(), "_obs_age_ticks");
+        let rule = tick.field.iter().find(|f| f.name() == "rule").unwrap();
+        assert_eq!((rule.number(), rule.proto3_optional), (18, Some(true)));
+        assert_eq!(rule.r#type(), Type::String);
         // Every message or enum a field names is declared.
         let declared: Vec<String> = file
             .message_type

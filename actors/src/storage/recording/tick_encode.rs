@@ -172,6 +172,10 @@ impl TickEncoder {
                 }
             }
         }
+        // 18: what engaged the gate, when something did.
+        if let Some(rule) = &r.rule {
+            encoding::string::encode(18, rule, buf);
+        }
         buf
     }
 }

@@ -66,6 +66,10 @@ pub(crate) struct Tick {
     /// The scaled observation, only for a record without inputs to recompute it from.
     #[prost(float, repeated, tag = "17")]
     pub(crate) obs: Vec<f32>,
+    /// What engaged the gate (a rule's name or `stimulus`); absent when it did not, and in recordings
+    /// made before the rule table.
+    #[prost(string, optional, tag = "18")]
+    pub(crate) rule: Option<String>,
 }
 
 /// `pavlov.Sensors`: the readings of interest, in the OI's units.
@@ -361,6 +365,7 @@ pub(crate) fn fill(msg: &mut Tick, r: &TickRecord) {
         out.threshold = Some(p.threshold);
     }
     msg.gate = r.gate;
+    msg.rule.clone_from(&r.rule);
     msg.default_action = Some(wheels(r.default_action));
     msg.command = Some(wheels(r.command));
     msg.safety_stop = stop_to_pb(r.safety_stop) as i32;
@@ -526,6 +531,7 @@ pub(crate) fn to_record(
             })
             .collect(),
         gate: msg.gate,
+        rule: msg.rule,
         default_action: action(msg.default_action, "default_action")?,
         command: action(msg.command, "command")?,
         safety_stop,
@@ -658,6 +664,12 @@ pub(crate) mod tests {
                         })
                         .collect(),
                     gate: i % 4 == 0,
+                    rule: match i % 4 {
+                        0 => Some(format!("rule {i} ✓")),
+                        1 => Some("stimulus".into()),
+                        2 => Some(String::new()),
+                        _ => None,
+                    },
                     default_action: Action::new(-500 + i as i16, 500),
                     command: Action::new(i16::MIN, i16::MAX),
                     safety_stop: stops[k % 5],
