@@ -127,6 +127,7 @@ impl HordeHandle {
     ) -> Result<Self, HordeError> {
         let mut horde: Horde<W> =
             Horde::new(config.horde.families.clone(), &config.signal_names())?;
+        let mut resumed_tick = 0;
         if let Some(path) = resume {
             let fail = |error: String| HordeError::Resume {
                 path: path.display().to_string(),
@@ -137,6 +138,7 @@ impl HordeHandle {
                 .restore_snapshot(&snapshot)
                 .map_err(|e| fail(e.to_string()))?;
             tracing::info!(path = %path.display(), tick, "resumed the Horde from a checkpoint");
+            resumed_tick = tick;
         }
         let shape = horde.shape();
         tracing::info!(
@@ -167,6 +169,7 @@ impl HordeHandle {
             values: values_tx,
             period,
             tick_offset,
+            resumed_tick,
         };
         let thread = std::thread::Builder::new()
             .name("pavlov-horde".into())

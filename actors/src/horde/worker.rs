@@ -42,6 +42,9 @@ pub(crate) struct Worker<W> {
     pub(crate) period: Duration,
     /// Lifelong tick of this run's tick 0 (checkpoints are named by lifelong ticks).
     pub(crate) tick_offset: u64,
+    /// The tick of the checkpoint this Horde resumed from (0 when fresh): its own checkpoints are never
+    /// named below it, even when it stops before learning a tick of this run.
+    pub(crate) resumed_tick: u64,
 }
 
 struct Progress {
@@ -144,7 +147,7 @@ impl<W: Weight> Worker<W> {
             tracing::debug!("a Horde checkpoint is already being copied; this one is skipped");
             return;
         }
-        let tick = self.tick_offset + p.last_seq.map_or(0, |s| s + 1);
+        let tick = (self.tick_offset + p.last_seq.map_or(0, |s| s + 1)).max(self.resumed_tick);
         p.copying = Some((target, tick));
     }
 
@@ -248,10 +251,16 @@ mod tests {
 
     use super::*;
 
-    /// A Horde whose step leaves no time over (a period of zero) still completes a checkpoint while
-    /// ticks keep coming: a chunk of rows is copied after every step.
-    #[test]
-    fn a_checkpoint_is_copied_even_when_steps_leave_no_time() {
+    type Rig = (
+        Worker<f32>,
+        std::sync::mpsc::SyncSender<HordeTick>,
+        std::sync::mpsc::SyncSender<HordeCommand>,
+        watch::Receiver<HordeStatus>,
+        Config,
+    );
+
+    /// A small Horde's worker over the stall study's observations, and the ends that drive it.
+    fn rig(period: Duration, tick_offset: u64, resumed_tick: u64) -> Rig {
         let text = format!(
             "{}\n[horde]\n[[horde.families]]\nname = \"p\"\ncumulants = [\"obs/*\"]\ntaus = [2.0]\n\
              lambda = 0.5\nalpha = 0.01\nfeatures = {{ kind = \"one_dim\", all_obs = true, tiles = 4 }}\n",
@@ -271,9 +280,51 @@ mod tests {
             offers: Arc::new(OfferCounters::default()),
             status: status_tx,
             values: values_tx,
-            period: Duration::ZERO,
-            tick_offset: 0,
+            period,
+            tick_offset,
+            resumed_tick,
         };
+        (worker, tick_tx, command_tx, status_rx, cfg)
+    }
+
+    /// A resumed Horde that stops before it learns a tick of this run names its last checkpoint by
+    /// the tick it resumed from, never below it (this run's tick 0 is the resumed control checkpoint's
+    /// tick, which can be one behind the Horde's).
+    #[test]
+    fn a_resumed_horde_never_names_a_checkpoint_below_the_one_it_resumed_from() {
+        let (worker, tick_tx, command_tx, status_rx, _) = rig(Duration::from_millis(20), 249, 250);
+        let dir = std::env::temp_dir().join(format!("pavlov-horde-resumed-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let thread = std::thread::spawn(move || worker.run());
+        // Shut down before any tick of this run: the last checkpoint, as the server writes it.
+        let (done_tx, done_rx) = std::sync::mpsc::channel();
+        command_tx
+            .send(HordeCommand::Finish {
+                checkpoint: Some(Target {
+                    dir: dir.clone(),
+                    keep: 5,
+                }),
+                done: done_tx,
+            })
+            .unwrap();
+        let _ = done_rx.recv();
+        drop(tick_tx);
+        thread.join().unwrap();
+        assert_eq!(status_rx.borrow().checkpoints_written, 1);
+        assert!(
+            dir.join("horde-250.bin").exists(),
+            "{:?}",
+            std::fs::read_dir(&dir).unwrap().collect::<Vec<_>>()
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A Horde whose step leaves no time over (a period of zero) still completes a checkpoint while
+    /// ticks keep coming: a chunk of rows is copied after every step.
+    #[test]
+    fn a_checkpoint_is_copied_even_when_steps_leave_no_time() {
+        let (worker, tick_tx, command_tx, status_rx, cfg) = rig(Duration::ZERO, 0, 0);
         let dir = std::env::temp_dir().join(format!("pavlov-horde-worker-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
