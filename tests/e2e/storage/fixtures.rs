@@ -228,3 +228,45 @@ pub fn record_with_changes(
     assert!(report.errors.is_empty(), "{:?}", report.errors);
     report
 }
+
+/// Records the first `ticks` ticks of `cfg` into `dir` (labelled `label`) under the paused clock, with
+/// nothing changed while it runs; returns what the feed streamed, once the recorder has finished cleanly.
+pub fn record_plain(
+    cfg: Config,
+    label: &str,
+    dir: &Path,
+    ticks: usize,
+) -> Vec<pavlov::record::TickRecord> {
+    use pavlov_actors::server::{RobotTarget, Server};
+    use pavlov_actors::storage::recorder::Recorder;
+    use pavlov_actors::storage::recording::RecordingHeader;
+
+    let recorder = Recorder::spawn(
+        RecordingHeader::new(&cfg, label),
+        Some(dir.to_path_buf()),
+        dir.to_path_buf(),
+        ticks + 64,
+    )
+    .expect("recorder");
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .start_paused(true)
+        .build()
+        .unwrap();
+    let link = recorder.link.clone();
+    let streamed = rt.block_on(async move {
+        let server = Server::builder(cfg, RobotTarget::Simulated)
+            .recorder(link)
+            .start()
+            .await
+            .expect("server");
+        let mut rx = server.feed.subscribe();
+        let records = crate::common::collect(&mut rx, ticks).await;
+        server.shutdown().await;
+        records
+    });
+    drop(rt);
+    let report = recorder.join();
+    assert!(report.errors.is_empty(), "{:?}", report.errors);
+    streamed
+}

@@ -4,9 +4,7 @@
 use crate::common;
 
 use pavlov::control::Mode;
-use pavlov_actors::server::{RobotTarget, Server};
-use pavlov_actors::storage::recorder::Recorder;
-use pavlov_actors::storage::recording::{self, RecordingHeader};
+use pavlov_actors::storage::recording;
 use pavlov_actors::storage::replay;
 
 fn record_run(mode: Mode, ticks: usize, dir: &std::path::Path) -> Vec<pavlov::record::TickRecord> {
@@ -23,34 +21,7 @@ fn record_run_with(
     cfg.control.mode = mode;
     cfg.sim.faults = faults.into();
     cfg.sim.seed = 11;
-    let recorder = Recorder::spawn(
-        RecordingHeader::new(&cfg, "roundtrip"),
-        Some(dir.to_path_buf()),
-        dir.to_path_buf(),
-        ticks + 64,
-    )
-    .expect("recorder");
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .start_paused(true)
-        .build()
-        .unwrap();
-    let link = recorder.link.clone();
-    let streamed = rt.block_on(async move {
-        let server = Server::builder(cfg, RobotTarget::Simulated)
-            .recorder(link)
-            .start()
-            .await
-            .expect("server");
-        let mut rx = server.feed.subscribe();
-        let records = common::collect(&mut rx, ticks).await;
-        server.shutdown().await;
-        records
-    });
-    drop(rt);
-    let report = recorder.join();
-    assert!(report.errors.is_empty(), "{:?}", report.errors);
-    streamed
+    super::fixtures::record_plain(cfg, "roundtrip", dir, ticks)
 }
 
 fn json(r: &pavlov::record::TickRecord) -> serde_json::Value {

@@ -2,14 +2,10 @@
 //! rule with its own response): both rules fire, at different times, each tick's command is the
 //! response of the rule it names, and the recording replays exactly, the rule included.
 
-use crate::common;
-
 use pavlov::config::Config;
 use pavlov::control::{Action, Mode};
 use pavlov::record::TickRecord;
-use pavlov_actors::server::{RobotTarget, Server};
-use pavlov_actors::storage::recorder::Recorder;
-use pavlov_actors::storage::recording::{self, RecordingHeader};
+use pavlov_actors::storage::recording;
 use pavlov_actors::storage::replay;
 
 const TICKS: usize = 12_000;
@@ -24,34 +20,7 @@ fn rules_config() -> Config {
 }
 
 fn record_run(cfg: Config, dir: &std::path::Path) -> Vec<TickRecord> {
-    let recorder = Recorder::spawn(
-        RecordingHeader::new(&cfg, "rules"),
-        Some(dir.to_path_buf()),
-        dir.to_path_buf(),
-        TICKS + 64,
-    )
-    .expect("recorder");
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .start_paused(true)
-        .build()
-        .unwrap();
-    let link = recorder.link.clone();
-    let streamed = rt.block_on(async move {
-        let server = Server::builder(cfg, RobotTarget::Simulated)
-            .recorder(link)
-            .start()
-            .await
-            .expect("server");
-        let mut rx = server.feed.subscribe();
-        let records = common::collect(&mut rx, TICKS).await;
-        server.shutdown().await;
-        records
-    });
-    drop(rt);
-    let report = recorder.join();
-    assert!(report.errors.is_empty(), "{:?}", report.errors);
-    streamed
+    super::fixtures::record_plain(cfg, "rules", dir, TICKS)
 }
 
 fn ticks_of<'a>(records: &'a [TickRecord], rule: &str) -> Vec<&'a TickRecord> {
