@@ -139,60 +139,41 @@ fn publish(
 mod tests {
     use super::*;
 
-    #[tokio::test(start_paused = true)]
-    async fn a_paused_clock_is_detected_and_keeps_tokios_interval() {
-        assert!(clock_is_paused());
+    /// Starts a ticker with `config`, checks which timer drives it and that it fires, then stops it.
+    async fn fires_on(config: &TickConfig, expected: TickTimer) {
         let (tx, mut rx) = watch::channel(None);
         let cancel = CancellationToken::new();
         let ticker = spawn(
-            &TickConfig::default(),
+            config,
             Instant::now(),
             tx,
             SharedTickStats::default(),
             cancel.clone(),
         );
-        assert_eq!(ticker.timer, TickTimer::Tokio);
+        assert_eq!(ticker.timer, expected);
         rx.changed().await.unwrap();
         cancel.cancel();
         ticker.task.await.unwrap();
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_paused_clock_is_detected_and_keeps_tokios_interval() {
+        assert!(clock_is_paused());
+        fires_on(&TickConfig::default(), TickTimer::Tokio).await;
     }
 
     #[tokio::test]
     async fn a_running_clock_is_detected_and_gets_the_thread() {
         assert!(!clock_is_paused());
-        let (tx, mut rx) = watch::channel(None);
-        let cancel = CancellationToken::new();
-        let ticker = spawn(
-            &TickConfig::default(),
-            Instant::now(),
-            tx,
-            SharedTickStats::default(),
-            cancel.clone(),
-        );
-        assert_eq!(ticker.timer, TickTimer::Thread);
-        rx.changed().await.unwrap();
-        cancel.cancel();
-        ticker.task.await.unwrap();
+        fires_on(&TickConfig::default(), TickTimer::Thread).await;
     }
 
     #[tokio::test]
     async fn timer_tokio_keeps_tokios_interval_in_real_time() {
-        let (tx, mut rx) = watch::channel(None);
-        let cancel = CancellationToken::new();
         let config = TickConfig {
             timer: TickTimer::Tokio,
             ..TickConfig::default()
         };
-        let ticker = spawn(
-            &config,
-            Instant::now(),
-            tx,
-            SharedTickStats::default(),
-            cancel.clone(),
-        );
-        assert_eq!(ticker.timer, TickTimer::Tokio);
-        rx.changed().await.unwrap();
-        cancel.cancel();
-        ticker.task.await.unwrap();
+        fires_on(&config, TickTimer::Tokio).await;
     }
 }
