@@ -66,11 +66,14 @@ impl Lab {
         self.dash.local_addr()
     }
 
-    async fn ticks(&self, n: usize) {
+    /// Waits for `n` ticks on the server's feed and returns the last one's `seq`.
+    async fn ticks(&self, n: usize) -> u64 {
         let mut feed = self.server.feed.subscribe();
+        let mut last = 0;
         for _ in 0..n {
-            feed.recv().await.unwrap();
+            last = feed.recv().await.unwrap().seq;
         }
+        last
     }
 
     async fn stop(self) {
@@ -171,7 +174,7 @@ async fn a_client_connecting_mid_run_gets_the_recent_history_in_small_messages_t
         c.dashboard.max_message_bytes = 2048;
     })
     .await;
-    lab.ticks(200).await;
+    let seen = lab.ticks(200).await;
     let (mut ws, hello) = ws_from(loopback(1), lab.addr(), Some(TOKEN)).await.unwrap();
     assert_eq!(hello["history_s"], 2, "{hello}");
     assert_eq!(
@@ -205,7 +208,12 @@ async fn a_client_connecting_mid_run_gets_the_recent_history_in_small_messages_t
     assert!(messages >= 4, "{messages} messages");
     let seqs: Vec<u64> = rows.iter().map(|r| r[0].as_u64().unwrap()).collect();
     let last = *seqs.last().unwrap();
-    assert!(last >= 199, "the history reaches the present: {last}");
+    // The dashboard's hub is a subscriber of the feed like this test, so on a loaded machine it may
+    // trail the tick the test last saw by a few; 10 ticks (200 ms) is the most this allows.
+    assert!(
+        last + 10 >= seen,
+        "the history reaches the present: {last}, the feed was at {seen}"
+    );
     assert!(seqs.windows(2).all(|w| w[0] < w[1]), "{seqs:?}");
     // Exactly the last 2 s: 100 ticks of 20 ms (fewer only if the ticker skipped some).
     assert_eq!(seqs[0] + 99, last, "{seqs:?}");
