@@ -8,6 +8,14 @@
 
 use super::Weight;
 
+/// A buffer for the weights of `len` copies whose memory is written, and so mapped, now: a copy into it
+/// later faults no page in (a fresh allocation of hundreds of megabytes would fault in every page while
+/// it is copied, and the kernel's page-table lock those faults take is one the tick's threads need).
+/// Every weight is NaN until a copy overwrites it.
+pub fn snapshot_buffer<W: Weight>(len: usize) -> Vec<W> {
+    vec![W::from_f64(f64::NAN); len]
+}
+
 /// A copy in progress (see the module documentation).
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct RowCopy<W> {
@@ -20,12 +28,17 @@ pub(crate) struct RowCopy<W> {
 }
 
 impl<W: Weight> RowCopy<W> {
-    /// An empty copy of `features` rows of `cols` weights.
-    pub fn new(features: usize, cols: usize) -> Self {
+    /// An empty copy of `features` rows of `cols` weights, into `buffer` when it has the size (a buffer
+    /// of an earlier copy, whose memory is mapped already), else into newly allocated memory.
+    pub fn new(features: usize, cols: usize, buffer: Option<Vec<W>>) -> Self {
+        let w0 = match buffer {
+            Some(b) if b.len() == features * cols => b,
+            _ => vec![W::default(); features * cols],
+        };
         RowCopy {
             cols,
             copied: vec![false; features],
-            w0: vec![W::default(); features * cols],
+            w0,
             cursor: 0,
             left: features,
         }
@@ -82,7 +95,7 @@ mod tests {
     #[test]
     fn rows_written_during_the_copy_keep_their_old_values() {
         let mut live: Vec<f32> = (0..12).map(|v| v as f32).collect(); // 4 rows of 3
-        let mut copy = RowCopy::new(4, 3);
+        let mut copy = RowCopy::new(4, 3, None);
         assert!(!copy.copy_some(&live, 1));
         // Row 2 is about to be written: preserved first.
         copy.preserve(2, &live);
@@ -94,5 +107,20 @@ mod tests {
         assert!(copy.copy_some(&live, 10));
         let w = copy.into_weights();
         assert_eq!(w, (0..12).map(|v| v as f32).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn a_buffer_of_the_right_size_is_reused_and_every_row_overwritten() {
+        let live: Vec<f32> = (0..6).map(|v| v as f32).collect(); // 2 rows of 3
+        let old = vec![f32::NAN; 6];
+        let at = old.as_ptr();
+        let mut copy = RowCopy::new(2, 3, Some(old));
+        assert!(copy.copy_some(&live, 2));
+        let w = copy.into_weights();
+        assert_eq!(w.as_ptr(), at, "the same memory");
+        assert_eq!(w, live);
+        // A buffer of another size is not used.
+        let copy = RowCopy::<f32>::new(2, 3, Some(vec![1.0; 5]));
+        assert_eq!(copy.into_weights(), vec![0.0; 6]);
     }
 }

@@ -24,6 +24,7 @@ mod rows;
 mod state;
 pub mod weight;
 
+pub use copy::snapshot_buffer;
 pub use state::GroupState;
 pub use weight::Weight;
 
@@ -131,6 +132,11 @@ impl<W: Weight> TraceGroup<W> {
     /// The number of features.
     pub fn features(&self) -> usize {
         self.rows.features()
+    }
+
+    /// The number of weights (features × predictions).
+    pub fn weight_count(&self) -> usize {
+        self.rows.w0.len()
     }
 
     /// λ.

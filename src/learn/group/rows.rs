@@ -53,12 +53,13 @@ impl<W: Weight> DeferredRows<W> {
         }
     }
 
-    /// Starts a copy of `W0` as it is now (see [`RowCopy`]); false when one is in progress.
-    pub fn begin_copy(&mut self) -> bool {
+    /// Starts a copy of `W0` as it is now (see [`RowCopy`]), into `buffer` if it has the size; false
+    /// (and `buffer` dropped) when one is in progress.
+    pub fn begin_copy(&mut self, buffer: Option<Vec<W>>) -> bool {
         if self.copy.is_some() {
             return false;
         }
-        self.copy = Some(RowCopy::new(self.features(), self.cols));
+        self.copy = Some(RowCopy::new(self.features(), self.cols, buffer));
         true
     }
 

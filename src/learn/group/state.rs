@@ -71,7 +71,13 @@ impl<W: Weight> TraceGroup<W> {
     /// weights [`TraceGroup::advance_snapshot`] copies between ticks while the group keeps learning.
     /// False when one is in progress.
     pub fn begin_snapshot(&mut self) -> bool {
-        if !self.rows.begin_copy() {
+        self.begin_snapshot_into(None)
+    }
+
+    /// [`TraceGroup::begin_snapshot`] into `buffer` (the weights of an earlier snapshot, or
+    /// [`super::snapshot_buffer`]) when it has the size: no memory is allocated or mapped while copying.
+    pub fn begin_snapshot_into(&mut self, buffer: Option<Vec<W>>) -> bool {
+        if !self.rows.begin_copy(buffer) {
             return false;
         }
         self.pending = Some(Box::new(self.state_without_weights()));

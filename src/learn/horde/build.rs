@@ -89,6 +89,7 @@ impl<W: Weight> Horde<W> {
                 predictions: plan.predictions,
                 cumulants: vec![0.0; cols],
                 deltas: vec![f64::NAN; cols],
+                spare: None,
             });
         }
         Ok(Horde {

@@ -56,6 +56,8 @@ struct Slot<W> {
     predictions: Vec<usize>,
     cumulants: Vec<f64>,
     deltas: Vec<f64>,
+    /// The memory the next snapshot's weights are copied into ([`Horde::keep_snapshot_buffers`]).
+    spare: Option<Vec<W>>,
 }
 
 /// What identifies a prediction in the Horde.

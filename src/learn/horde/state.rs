@@ -60,7 +60,7 @@ impl<W: Weight> Horde<W> {
             return false;
         }
         for slot in &mut self.slots {
-            slot.group.begin_snapshot();
+            slot.group.begin_snapshot_into(slot.spare.take());
         }
         self.snapshot_stopped = Some(self.stopped);
         true
@@ -111,6 +111,27 @@ impl<W: Weight> Horde<W> {
             groups,
             stopped,
         })
+    }
+
+    /// Maps the memory of the next snapshot's weights now (writing every page of it), so copying a
+    /// snapshot later allocates nothing: the Horde then holds its weights twice.
+    pub fn prepare_snapshot_buffers(&mut self) {
+        for slot in &mut self.slots {
+            let len = slot.group.weight_count();
+            if slot.spare.as_ref().is_none_or(|s| s.len() != len) {
+                slot.spare = Some(crate::learn::group::snapshot_buffer(len));
+            }
+        }
+    }
+
+    /// Takes back a written snapshot's weights as the memory of the next one (those of another shape
+    /// are dropped).
+    pub fn keep_snapshot_buffers(&mut self, snapshot: HordeSnapshot<W>) {
+        for (slot, (_, weights)) in self.slots.iter_mut().zip(snapshot.groups) {
+            if weights.len() == slot.group.weight_count() {
+                slot.spare = Some(weights);
+            }
+        }
     }
 
     /// Restores a snapshot; everything is checked before anything changes.

@@ -316,3 +316,36 @@ fn a_snapshot_copied_while_learning_restores_the_state_when_it_began() {
         assert_eq!(tick(&mut b, tick_input), tick(&mut twin, tick_input));
     }
 }
+
+#[test]
+fn snapshots_into_prepared_and_returned_buffers_are_exact_and_reuse_the_memory() {
+    let f = family(NEXTING);
+    let mut a: Horde<f32> = Horde::new(vec![f.clone()], &names()).unwrap();
+    a.prepare_snapshot_buffers();
+    let s = stream(900, 9);
+    let mut at = Vec::new();
+    for round in 0..2 {
+        for (obs, raw, e, stall) in &s[round * 300..round * 300 + 300] {
+            a.step(&TickSignals {
+                obs,
+                raw,
+                extra: &[*e],
+                stimuli: &[*stall],
+            });
+        }
+        let expected = a.state();
+        assert!(a.begin_snapshot());
+        while !a.advance_snapshot(5) {}
+        let snap = a.take_snapshot().unwrap();
+        let mut b: Horde<f32> = Horde::new(vec![f.clone()], &names()).unwrap();
+        b.restore_snapshot(&snap).unwrap();
+        assert_eq!(b.state(), expected, "round {round}");
+        let ptrs: Vec<*const f32> = snap.groups.iter().map(|(_, w)| w.as_ptr()).collect();
+        at.push(ptrs);
+        a.keep_snapshot_buffers(snap);
+    }
+    assert_eq!(
+        at[0], at[1],
+        "the second snapshot is copied into the first one's memory"
+    );
+}
