@@ -13,7 +13,8 @@
 //! checksum                          u64, FNV-1a of every byte before it
 //! ```
 //!
-//! It is written to a hidden temporary file, fsynced and renamed, so a crash leaves the old file or the
+//! It is written to a hidden temporary file a few megabytes at a time ([`super::paced_file`]), fsynced
+//! and renamed, so a crash leaves the old file or the
 //! new one; a file cut short, corrupted, of another precision or holding a non-finite weight is refused
 //! with a precise error.
 
@@ -23,6 +24,8 @@ use std::path::{Path, PathBuf};
 use pavlov::learn::group::{GroupState, Weight};
 use pavlov::learn::{FamilySpec, HordeSnapshot};
 use serde::{Deserialize, Serialize};
+
+use super::paced_file::{self, PacedFile};
 
 const MAGIC: &[u8; 13] = b"PAVLOV-HORDE\n";
 const VERSION: u32 = 1;
@@ -124,7 +127,7 @@ pub fn write_atomic<W: Weight>(
         groups: snapshot.groups.iter().map(|(s, _)| s.clone()).collect(),
     };
     let json = serde_json::to_vec(&header).map_err(|e| HordeFileError::Header(e.to_string()))?;
-    let file = std::fs::File::create(&tmp)?;
+    let file = PacedFile::new(std::fs::File::create(&tmp)?, paced_file::STEP);
     let mut out = Summed {
         inner: BufWriter::with_capacity(1 << 20, file),
         sum: Fnv::new(),
@@ -144,7 +147,7 @@ pub fn write_atomic<W: Weight>(
     let sum = out.sum.0;
     let mut inner = out.inner;
     inner.write_all(&sum.to_le_bytes())?;
-    let file = inner.into_inner().map_err(|e| e.into_error())?;
+    let file = inner.into_inner().map_err(|e| e.into_error())?.into_file();
     file.sync_all()?;
     drop(file);
     std::fs::rename(&tmp, &path)?;
