@@ -21,6 +21,20 @@ pub enum Precision {
     F64,
 }
 
+/// How the Horde's threads are scheduled against the rest of the server's (`[horde] scheduling`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Scheduling {
+    /// Linux's `SCHED_IDLE`: any other thread that wakes preempts the Horde at once, so on a machine with
+    /// few cores the Horde never holds up the tick's threads; while the machine is busy with other work
+    /// it gets almost no CPU and skips ticks (counted).
+    #[default]
+    Idle,
+    /// The normal policy: the Horde keeps up better on a busy machine, and a tick-path thread woken on
+    /// its core may wait up to a scheduler slice (a few ms) for it.
+    Normal,
+}
+
 /// `[horde]`.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -29,6 +43,8 @@ pub struct HordeConfig {
     pub precision: Precision,
     /// `[[horde.families]]`: empty means no Horde.
     pub families: Vec<FamilySpec>,
+    /// How the Horde's threads are scheduled.
+    pub scheduling: Scheduling,
 }
 
 impl HordeConfig {

@@ -19,7 +19,7 @@ mod tick;
 mod zenoh;
 pub use bounds::MAX_SAFETY_TIMEOUT_MS;
 pub use dashboard::{DashboardConfig, MAX_CLIENT_QUEUE, MIN_PUBLIC_TOKEN_CHARS};
-pub use horde::{HordeConfig, Precision};
+pub use horde::{HordeConfig, Precision, Scheduling};
 pub use link::LinkConfig;
 pub use rules::{MAX_RULES, RuleSpec};
 pub use tick::{MAX_SPIN_US, TickConfig, TickTimer};

@@ -13,6 +13,7 @@
 //!
 //! - [`worker`]: the thread's loop; [`status`]: what it reports.
 
+mod background;
 pub mod status;
 mod worker;
 
@@ -23,7 +24,7 @@ use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use pavlov::config::{Config, Precision};
+use pavlov::config::{Config, Precision, Scheduling};
 use pavlov::learn::group::Weight;
 use pavlov::learn::{Horde, LearnError, TickSignals};
 use tokio::sync::watch;
@@ -140,6 +141,9 @@ impl HordeHandle {
             tracing::info!(path = %path.display(), tick, "resumed the Horde from a checkpoint");
             resumed_tick = tick;
         }
+        // The memory checkpoints are copied into, mapped before the first tick (see
+        // `Horde::prepare_snapshot_buffers`): copying a checkpoint then allocates nothing.
+        horde.prepare_snapshot_buffers();
         let shape = horde.shape();
         tracing::info!(
             predictions = shape.predictions,
@@ -160,7 +164,9 @@ impl HordeHandle {
         });
         let (values_tx, values_rx) = watch::channel(Arc::new(HordeValues::default()));
         let offers = Arc::new(OfferCounters::default());
+        let idle = config.horde.scheduling == Scheduling::Idle;
         let worker = Worker {
+            idle,
             horde,
             ticks: tick_rx,
             commands: command_rx,
@@ -173,7 +179,12 @@ impl HordeHandle {
         };
         let thread = std::thread::Builder::new()
             .name("pavlov-horde".into())
-            .spawn(move || worker.run())
+            .spawn(move || {
+                if idle {
+                    background::give_way_to_the_tick();
+                }
+                worker.run()
+            })
             .map_err(HordeError::Thread)?;
         Ok(HordeHandle {
             ticks: tick_tx,

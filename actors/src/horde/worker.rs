@@ -33,6 +33,8 @@ pub(crate) struct Target {
 /// Everything the thread owns.
 pub(crate) struct Worker<W> {
     pub(crate) horde: Horde<W>,
+    /// Whether the checkpoint writer runs under `SCHED_IDLE` (`[horde] scheduling = "idle"`).
+    pub(crate) idle: bool,
     pub(crate) ticks: Receiver<HordeTick>,
     pub(crate) commands: Receiver<HordeCommand>,
     pub(crate) offers: Arc<OfferCounters>,
@@ -47,14 +49,18 @@ pub(crate) struct Worker<W> {
     pub(crate) resumed_tick: u64,
 }
 
-struct Progress {
+/// A checkpoint being written: the file's path or why not, and the snapshot back (its memory is the next
+/// one's).
+type Writer<W> = JoinHandle<(Result<PathBuf, String>, HordeSnapshot<W>)>;
+
+struct Progress<W> {
     last_seq: Option<u64>,
     steps: LatencyHistogram,
     learned: u64,
     breaks: u64,
     /// The checkpoint being copied: where it goes, and the tick it is of.
     copying: Option<(Target, u64)>,
-    writer: Option<JoinHandle<Result<PathBuf, String>>>,
+    writer: Option<Writer<W>>,
     written: u64,
     errors: u64,
     last_file: Option<String>,
@@ -117,7 +123,7 @@ impl<W: Weight> Worker<W> {
             self.copy_for(&mut p, Instant::now() + Duration::from_secs(3600));
         }
         if let Some(writer) = p.writer.take() {
-            Self::collect(&mut p, writer);
+            self.collect(&mut p, writer);
         }
         self.publish_status(&p);
         if let Some(done) = done {
@@ -125,7 +131,7 @@ impl<W: Weight> Worker<W> {
         }
     }
 
-    fn learn(&mut self, p: &mut Progress, tick: &HordeTick) {
+    fn learn(&mut self, p: &mut Progress<W>, tick: &HordeTick) {
         if p.last_seq.is_some_and(|s| tick.seq != s + 1) {
             self.horde.break_chain();
             p.breaks += 1;
@@ -142,7 +148,13 @@ impl<W: Weight> Worker<W> {
         p.learned += 1;
     }
 
-    fn begin_checkpoint(&mut self, p: &mut Progress, target: Target) {
+    fn begin_checkpoint(&mut self, p: &mut Progress<W>, target: Target) {
+        // A write that has finished gives its memory back for this copy.
+        if p.writer.as_ref().is_some_and(JoinHandle::is_finished)
+            && let Some(writer) = p.writer.take()
+        {
+            self.collect(p, writer);
+        }
         if p.copying.is_some() || !self.horde.begin_snapshot() {
             tracing::debug!("a Horde checkpoint is already being copied; this one is skipped");
             return;
@@ -154,7 +166,7 @@ impl<W: Weight> Worker<W> {
     /// Copies checkpoint rows until `until`, and at least [`COPY_CHUNK`] of them (a step that takes
     /// more than half a tick would otherwise leave a checkpoint uncopied as long as ticks keep coming);
     /// hands a completed checkpoint to a writer thread.
-    fn copy_for(&mut self, p: &mut Progress, until: Instant) {
+    fn copy_for(&mut self, p: &mut Progress<W>, until: Instant) {
         if p.copying.is_none() {
             return;
         }
@@ -171,9 +183,9 @@ impl<W: Weight> Worker<W> {
         };
         if let Some(previous) = p.writer.take() {
             // One write at a time: the previous one has had the whole copy's time to finish.
-            Self::collect(p, previous);
+            self.collect(p, previous);
         }
-        match spawn_write(target, tick, snapshot) {
+        match spawn_write(target, tick, snapshot, self.idle) {
             Ok(writer) => p.writer = Some(writer),
             Err(e) => {
                 p.errors += 1;
@@ -182,15 +194,20 @@ impl<W: Weight> Worker<W> {
         }
     }
 
-    fn collect(p: &mut Progress, writer: JoinHandle<Result<PathBuf, String>>) {
+    fn collect(&mut self, p: &mut Progress<W>, writer: Writer<W>) {
         match writer.join() {
-            Ok(Ok(path)) => {
-                p.written += 1;
-                p.last_file = Some(path.display().to_string());
-            }
-            Ok(Err(e)) => {
-                p.errors += 1;
-                tracing::error!("Horde checkpoint not written: {e}");
+            Ok((written, snapshot)) => {
+                self.horde.keep_snapshot_buffers(snapshot);
+                match written {
+                    Ok(path) => {
+                        p.written += 1;
+                        p.last_file = Some(path.display().to_string());
+                    }
+                    Err(e) => {
+                        p.errors += 1;
+                        tracing::error!("Horde checkpoint not written: {e}");
+                    }
+                }
             }
             Err(_) => {
                 p.errors += 1;
@@ -205,7 +222,7 @@ impl<W: Weight> Worker<W> {
         let _ = self.values.send(Arc::new(HordeValues { seq, values }));
     }
 
-    fn publish_status(&self, p: &Progress) {
+    fn publish_status(&self, p: &Progress<W>) {
         let shape = self.horde.shape();
         let _ = self.status.send(HordeStatus {
             predictions: shape.predictions,
@@ -230,16 +247,22 @@ fn spawn_write<W: Weight>(
     target: Target,
     tick: u64,
     snapshot: HordeSnapshot<W>,
-) -> std::io::Result<JoinHandle<Result<PathBuf, String>>> {
+    idle: bool,
+) -> std::io::Result<Writer<W>> {
     std::thread::Builder::new()
         .name("pavlov-horde-write".into())
         .spawn(move || {
-            let path = horde_file::write_atomic(&target.dir, tick, &snapshot)
-                .map_err(|e| format!("{}: {e}", target.dir.display()))?;
-            if let Err(e) = horde_file::prune(&target.dir, target.keep) {
+            if idle {
+                super::background::give_way_to_the_tick();
+            }
+            let written = horde_file::write_atomic(&target.dir, tick, &snapshot)
+                .map_err(|e| format!("{}: {e}", target.dir.display()));
+            if written.is_ok()
+                && let Err(e) = horde_file::prune(&target.dir, target.keep)
+            {
                 tracing::warn!("could not prune old Horde checkpoints: {e}");
             }
-            Ok(path)
+            (written, snapshot)
         })
 }
 
@@ -275,6 +298,7 @@ mod tests {
         let (values_tx, _values_rx) = watch::channel(Arc::new(HordeValues::default()));
         let worker = Worker {
             horde,
+            idle: false,
             ticks: tick_rx,
             commands: command_rx,
             offers: Arc::new(OfferCounters::default()),

@@ -18,6 +18,8 @@ const RUN_BEFORE_OPENING: Duration = Duration::from_secs(3);
 const HORDE: &str = r#"
 [horde]
 precision = "f32"
+# The tests share two loaded cores: under SCHED_IDLE (the default) the Horde would get no CPU.
+scheduling = "normal"
 [[horde.families]]
 name = "nexting"
 cumulants = ["obs/*"]

@@ -19,6 +19,8 @@ const HORIZON: u64 = 113;
 const HORDE: &str = r#"
 [horde]
 precision = "f32"
+# The tests share two loaded cores: under SCHED_IDLE (the default) the Horde would get no CPU.
+scheduling = "normal"
 [[horde.families]]
 name = "nexting"
 cumulants = ["obs/*"]

@@ -18,6 +18,8 @@ pub fn small_horde(taus: &str) -> String {
         r#"
 [horde]
 precision = "f32"
+# The tests share two loaded cores: under SCHED_IDLE (the default) the Horde would get no CPU.
+scheduling = "normal"
 [[horde.families]]
 name = "probe"
 cumulants = ["obs/*", "stimulus/*", "bias"]
