@@ -146,8 +146,17 @@ impl TileCoder {
                 tiles,
                 tilings: 1,
             } => {
+                // `bin(x, tiles, 0.0)` inlined for the paper's coder, one bin per input: the same
+                // arithmetic with a 32-bit cast (the bin is at most `tiles`, far below 2³²), which took
+                // the stall step's tile coding from 120 to 85 ns (`cargo bench --bench learn`).
+                if *tiles == 0 {
+                    return;
+                }
+                out.reserve(*dims);
+                let (n, last) = (*tiles as f64, *tiles - 1);
                 for (d, &x) in input.iter().take(*dims).enumerate() {
-                    if let Some(b) = bin(x, *tiles, 0.0) {
+                    if x.is_finite() {
+                        let b = ((x.clamp(0.0, 1.0) * n) as u32 as usize).min(last);
                         out.push(d * tiles + b);
                     }
                 }
@@ -324,6 +333,22 @@ mod tests {
                 prop_assert!(i >= k * 100 && i < (k + 1) * 100, "feature {} of tiling {}", i, k);
             }
             prop_assert!(out.windows(2).all(|w| w[0] < w[1]));
+        }
+
+        #[test]
+        fn the_paper_coders_fast_path_is_the_documented_rule(
+            input in prop::collection::vec(prop::num::f64::ANY, 44),
+            tiles in 1usize..=1000,
+        ) {
+            let coder = TileCoder::one_dim(44, tiles).unwrap();
+            let mut out = Vec::new();
+            coder.active(&input, &mut out);
+            let expected: Vec<usize> = input
+                .iter()
+                .enumerate()
+                .filter_map(|(d, &x)| bin(x, tiles, 0.0).map(|b| d * tiles + b))
+                .collect();
+            prop_assert_eq!(out, expected);
         }
 
         #[test]
