@@ -2,18 +2,21 @@
 //! - stall: 44 observation dimensions × 10 tiles = 440 features, 44 active, identity σ, λ = 0.5;
 //! - command: 5 pair tilings × 100 tiles = 500 features, 5 active, logistic σ, λ = 0.8.
 //!
-//! Each is measured three ways: through [`PredictionSet`] (gather inputs, tile, predict, learn, and the
+//! Each is measured five ways: through [`PredictionSet`] (gather inputs, tile, predict, learn, and the
 //! per-tick output vector, i.e. what the learning actor pays per tick); on the bare step that runs
-//! (`step/`: [`TileCoder::active`] + [`TraceGroup`] predict and learn, no allocation); and on the same
-//! step with the dense reference learner (`reference/`: [`TdLambda`], which walks every feature).
+//! (`step/`: [`TileCoder::active`] + the [`TdLearner`] the set picks for the shape, predict and learn, no
+//! allocation); on the same step with each learner it picks from (`dense/`: [`DenseTd`]; `group/`:
+//! [`TraceGroup`], a group of one, the Horde's deferred learner) and with the dense reference
+//! (`reference/`: [`TdLambda`], which also checks every weight for overflow before each step).
 //! Inputs cycle through 1024 random ticks drawn beforehand from a seeded generator.
 
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use pavlov::learn::set::TdLearner;
 use pavlov::learn::{
-    Column, Cumulant, FeatureInputs, FeatureSpec, PairSpec, PredictionSet, PredictionSpec, Sigma,
-    SignalNames, TdLambda, TdParams, Threshold, TileCoder, TraceGroup,
+    Column, Cumulant, DenseTd, FeatureInputs, FeatureSpec, PairSpec, PredictionSet, PredictionSpec,
+    Sigma, SignalNames, TdLambda, TdParams, Threshold, TileCoder, TraceGroup,
 };
 use pavlov::obs::ObsLayout;
 use pavlov::oi::Model;
@@ -130,6 +133,62 @@ fn bench_step(c: &mut Criterion, label: &str, coder: &TileCoder, params: TdParam
         alpha: params.alpha,
         initial_weight: params.initial_weight,
     };
+    let mut td = TdLearner::new(
+        coder.num_features(),
+        coder.num_tilings(),
+        params.lambda,
+        params.sigma,
+        column,
+    )
+    .expect("valid params");
+    let (inputs, stimuli) = stream(len, 0.05, 2);
+    let gamma = |e: bool| if e { 0.0 } else { 0.96 };
+    let mut x = Vec::with_capacity(coder.num_tilings());
+    let mut t = 1;
+    c.bench_function(label, |b| {
+        b.iter(|| {
+            coder.active(black_box(&inputs[t % TICKS]), &mut x);
+            let v = td.predict_value(&x);
+            let e = stimuli[t % TICKS];
+            let delta = td.learn(gamma(e), f64::from(u8::from(e)));
+            t += 1;
+            black_box((v, delta))
+        })
+    });
+}
+
+/// The dense learner alone, whatever the shape.
+fn bench_dense(c: &mut Criterion, label: &str, coder: &TileCoder, params: TdParams, len: usize) {
+    let column = Column {
+        alpha: params.alpha,
+        initial_weight: params.initial_weight,
+    };
+    let mut td = DenseTd::new(coder.num_features(), params.lambda, params.sigma, column)
+        .expect("valid params");
+    let (inputs, stimuli) = stream(len, 0.05, 2);
+    let gamma = |e: bool| if e { 0.0 } else { 0.96 };
+    let mut x = Vec::with_capacity(coder.num_tilings());
+    let mut t = 1;
+    c.bench_function(label, |b| {
+        b.iter(|| {
+            coder.active(black_box(&inputs[t % TICKS]), &mut x);
+            td.predict(&x);
+            let v = td.value();
+            let e = stimuli[t % TICKS];
+            let delta = td
+                .learn(gamma(e), f64::from(u8::from(e)))
+                .expect("predicted first");
+            t += 1;
+            black_box((v, delta))
+        })
+    });
+}
+
+fn bench_group(c: &mut Criterion, label: &str, coder: &TileCoder, params: TdParams, len: usize) {
+    let column = Column {
+        alpha: params.alpha,
+        initial_weight: params.initial_weight,
+    };
     let mut group: TraceGroup<f64> = TraceGroup::new(
         coder.num_features(),
         params.lambda,
@@ -237,6 +296,34 @@ fn learning_step(c: &mut Criterion) {
     bench_step(
         c,
         "step/command_500_5_logistic_l0.8",
+        &command_coder,
+        command,
+        4,
+    );
+    bench_dense(
+        c,
+        "dense/stall_440_44_identity_l0.5",
+        &stall_coder,
+        stall,
+        44,
+    );
+    bench_dense(
+        c,
+        "dense/command_500_5_logistic_l0.8",
+        &command_coder,
+        command,
+        4,
+    );
+    bench_group(
+        c,
+        "group/stall_440_44_identity_l0.5",
+        &stall_coder,
+        stall,
+        44,
+    );
+    bench_group(
+        c,
+        "group/command_500_5_logistic_l0.8",
         &command_coder,
         command,
         4,

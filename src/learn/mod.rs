@@ -9,7 +9,9 @@
 //! - [`gtd`]: [`Gtd`], off-policy GTD(λ) (Maei 2011) with importance sampling ratios, for predictions about
 //!   a target policy other than the behaviour run (`learner = "gtd"`).
 //! - [`group`]: [`TraceGroup`], the same update for predictions sharing a trace, deferred so that a tick
-//!   costs the active features only: what runs.
+//!   costs the active features only: what the Horde runs.
+//! - [`dense`]: [`DenseTd`], one prediction's update in one vectorized pass over its few hundred
+//!   weights: what each on-policy prediction of a [`PredictionSet`] runs.
 //! - [`spec`]: [`PredictionSpec`], one prediction as configuration (TOML).
 //! - [`inputs`]: [`SignalNames`] and [`FeatureInputs`], the named signals predictions read.
 //! - [`set`]: [`PredictionSet`], many predictions learned side by side, act first then learn.
@@ -20,6 +22,7 @@
 
 pub mod bounds;
 pub mod checkpoint;
+pub mod dense;
 pub mod error;
 pub mod group;
 pub mod gtd;
@@ -33,6 +36,7 @@ pub mod td;
 pub mod tiles;
 
 pub use bounds::ParamBounds;
+pub use dense::DenseTd;
 pub use error::LearnError;
 pub use group::{Column, GroupState, TraceGroup};
 pub use gtd::{Gtd, GtdParams};

@@ -16,9 +16,9 @@
 //! acted on, `σ(wᵀx_t)`, is exactly the bootstrap term of the δ computed in step 2 of the same tick:
 //! acting never waits for learning, and nothing is computed with stale features.
 //!
-//! Each prediction is a [`TraceGroup`] of one in `f64`: the deferred learner, which matches the dense
-//! reference [`super::TdLambda`] to rounding (about 1e-12 over a stall run) at a cost per tick in
-//! proportion to the active features.
+//! Each on-policy prediction is a [`TdLearner`] in `f64`: dense ([`super::DenseTd`]) or a deferred
+//! group of one ([`super::TraceGroup`]), whichever its shape makes faster; both match the dense
+//! reference [`super::TdLambda`] to rounding (about 1e-12 over a stall run).
 //!
 //! # Divergence
 //!
@@ -37,7 +37,7 @@
 
 use super::LearnError;
 use super::bounds::{ParamBounds, check_lambda, check_set_size, check_threshold};
-use super::group::{Column, TraceGroup};
+use super::group::Column;
 use super::gtd::{Gtd, GtdChain};
 use super::inputs::{FeatureInputs, SignalNames, resolve};
 use super::spec::{Cumulant, LearnerKind, PredictionSpec, Threshold};
@@ -74,8 +74,8 @@ impl PredictionOut {
 #[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub(crate) enum Engine {
-    /// On-policy TD(λ): a group of one prediction, in f64 (it matches the dense reference to rounding).
-    Td(TraceGroup<f64>),
+    /// On-policy TD(λ), dense or deferred ([`TdLearner`]), in f64.
+    Td(TdLearner),
     /// Off-policy GTD(λ) ([`super::gtd`]).
     Gtd(Box<GtdChain>),
 }
@@ -112,14 +112,15 @@ impl Learner {
             Some(params) if spec.learner == LearnerKind::Gtd => Engine::Gtd(Box::new(
                 GtdChain::new(Gtd::new(resolved.coder.num_features(), params)?),
             )),
-            _ => Engine::Td(TraceGroup::new(
+            _ => Engine::Td(TdLearner::new(
                 resolved.coder.num_features(),
+                resolved.coder.num_tilings(),
                 spec.lambda,
                 spec.sigma,
-                vec![Column {
+                Column {
                     alpha: spec.alpha,
                     initial_weight: spec.initial_weight,
-                }],
+                },
             )?),
         };
         let tilings = resolved.coder.num_tilings();
@@ -140,7 +141,7 @@ impl Learner {
     /// Whether the prediction stopped learning (see the module documentation).
     pub fn diverged(&self) -> bool {
         match &self.engine {
-            Engine::Td(g) => g.diverged(0),
+            Engine::Td(g) => g.diverged(),
             Engine::Gtd(c) => c.diverged(),
         }
     }
@@ -153,14 +154,14 @@ impl Learner {
         self.scratch
             .extend(self.gather.iter().map(|&i| inputs.get(i)));
         self.coder.active(&self.scratch, &mut self.x_now);
-        let y = match &mut self.engine {
-            Engine::Td(g) => g.predict(&self.x_now)[0],
-            Engine::Gtd(c) => c.predict(&self.x_now),
+        let value = match &mut self.engine {
+            Engine::Td(g) => g.predict_value(&self.x_now),
+            Engine::Gtd(c) => self.spec.sigma.value(c.predict(&self.x_now)),
         };
         self.fresh = true;
         PredictionOut {
             name: self.spec.name.clone(),
-            value: self.spec.sigma.value(y),
+            value,
             threshold: self.threshold,
             active_features: self.x_now.len(),
             tilings: self.coder.num_tilings(),
@@ -176,12 +177,7 @@ impl Learner {
         let gamma = self.spec.gamma(stimulus);
         self.fresh = false;
         match &mut self.engine {
-            Engine::Td(g) => {
-                let mut delta = [f64::NAN];
-                // `predict` ran (the set checks it) and one cumulant is given: this cannot fail.
-                let learned = g.learn(gamma, &[reward], &mut delta).is_ok();
-                (learned && delta[0].is_finite()).then_some(delta[0])
-            }
+            Engine::Td(g) => g.learn(gamma, reward),
             Engine::Gtd(c) => c.learn(gamma, reward, rho_prev),
         }
     }
@@ -231,7 +227,7 @@ impl Learner {
         }
         if let Some(a) = alpha {
             match &mut self.engine {
-                Engine::Td(g) => g.set_alpha(0, a)?,
+                Engine::Td(g) => g.set_alpha(a)?,
                 Engine::Gtd(c) => c.gtd_mut().set_alpha(a)?,
             }
             self.spec.alpha = a;
@@ -386,9 +382,9 @@ impl PredictionSet {
         self.learners.iter().map(|l| &l.spec)
     }
 
-    /// The learner of on-policy prediction `name` (a group of one: its weights are `weights(0)`);
-    /// `None` for an off-policy one ([`PredictionSet::off_policy_learner`]).
-    pub fn learner(&self, name: &str) -> Option<&TraceGroup<f64>> {
+    /// The learner of on-policy prediction `name`; `None` for an off-policy one
+    /// ([`PredictionSet::off_policy_learner`]).
+    pub fn learner(&self, name: &str) -> Option<&TdLearner> {
         self.learners
             .iter()
             .find(|l| l.spec.name == name)
@@ -451,6 +447,9 @@ impl PredictionSet {
             .ok_or_else(|| LearnError::UnknownPrediction(name.to_string()))
     }
 }
+
+mod td_learner;
+pub use td_learner::{DENSE_PER_ACTIVE, TdLearner};
 
 #[cfg(test)]
 mod tests;

@@ -74,13 +74,13 @@ impl PredictionSet {
                         alpha: l.spec.alpha,
                         lambda: l.spec.lambda,
                         threshold: l.spec.threshold,
-                        weights: group.weights(0),
+                        weights: group.weights(),
                         traces: group.traces(),
                         previous: group.previous().map(|(active, gamma)| PreviousStep {
                             active: active.to_vec(),
                             gamma,
                         }),
-                        state: Some(group.state()),
+                        state: group.group_state(),
                         secondary: None,
                         beta: None,
                     },
@@ -214,10 +214,10 @@ fn apply(l: &mut super::set::Learner, s: &PredictionSnapshot) -> Result<(), Lear
                 && s.previous
                     .as_ref()
                     .is_none_or(|p| p.gamma == state.gamma_prev);
-            group.restore_state(name, state)?;
+            group.restore_group_state(name, state)?;
             let consistent = same_params
                 && same_previous
-                && agrees(&s.weights, &group.weights(0))
+                && agrees(&s.weights, &group.weights())
                 && agrees(&s.traces, &group.traces());
             if !consistent {
                 return Err(LearnError::BadGroupState {
@@ -229,7 +229,7 @@ fn apply(l: &mut super::set::Learner, s: &PredictionSnapshot) -> Result<(), Lear
             }
         }
         None => group
-            .set_dense(0, &s.weights, &s.traces, previous)
+            .set_dense(&s.weights, &s.traces, previous)
             .map_err(|_| LearnError::NonFiniteSnapshot(name.clone()))?,
     }
     l.clear_pending();

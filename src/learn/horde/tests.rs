@@ -107,7 +107,7 @@ fn every_prediction_matches_its_own_dense_learner() {
 }
 
 #[test]
-fn the_papers_stall_prediction_as_a_family_equals_the_prediction_set_bit_for_bit() {
+fn the_papers_stall_prediction_as_a_family_equals_the_prediction_set_to_rounding() {
     let stall = family(
         r#"
         name = "paper"
@@ -140,6 +140,7 @@ fn the_papers_stall_prediction_as_a_family_equals_the_prediction_set_bit_for_bit
         beta: None,
     };
     let mut set = PredictionSet::new(vec![spec], &names()).unwrap();
+    let mut worst: f64 = 0.0;
     for (obs, raw, _, stall) in stream(3000, 2) {
         let out = set.predict(&FeatureInputs {
             obs: &obs,
@@ -152,8 +153,16 @@ fn the_papers_stall_prediction_as_a_family_equals_the_prediction_set_bit_for_bit
             extra: &[],
             stimuli: &[stall],
         });
-        assert_eq!(out[0].value, h.value(0).unwrap());
+        // The set runs the stall prediction dense, the Horde deferred: the same update, rounded
+        // differently.
+        let (a, b) = (out[0].value, h.value(0).unwrap());
+        worst = worst.max((a - b).abs());
+        assert!((a - b).abs() < 1e-9, "{a} against {b}");
     }
+    assert!(
+        worst > 0.0,
+        "the two learners are different code: some rounding shows"
+    );
 }
 
 #[test]

@@ -67,13 +67,13 @@ fn hand_computed_online_bookkeeping() {
     .unwrap();
     assert_eq!(tick(&mut set, 0.2, false), (0.0, None));
     assert_eq!(tick(&mut set, 0.8, true), (0.0, Some(1.0)));
-    assert_eq!(set.learner("p").unwrap().weights(0), &[0.5, 0.0]);
+    assert_eq!(set.learner("p").unwrap().weights(), &[0.5, 0.0]);
     assert_eq!(tick(&mut set, 0.2, false), (0.5, Some(0.25)));
     assert_eq!(set.learner("p").unwrap().traces(), &[0.0, 1.0]);
-    assert_eq!(set.learner("p").unwrap().weights(0), &[0.5, 0.125]);
+    assert_eq!(set.learner("p").unwrap().weights(), &[0.5, 0.125]);
     assert_eq!(tick(&mut set, 0.8, false), (0.125, Some(-0.4375)));
     assert_eq!(set.learner("p").unwrap().traces(), &[1.0, 0.5]);
-    assert_eq!(set.learner("p").unwrap().weights(0), &[0.28125, 0.015625]);
+    assert_eq!(set.learner("p").unwrap().weights(), &[0.28125, 0.015625]);
 }
 
 /// A deterministic cycle of M = 10 ticks with the stimulus at phase 0 and tabular features (tile s
@@ -193,7 +193,7 @@ fn predictions_learn_side_by_side_independently() {
         );
     }
     assert_eq!(both.learner("slow"), alone.learner("slow"));
-    assert_ne!(both.learner("fast").unwrap().weights(0), &[0.0; 4]);
+    assert_ne!(both.learner("fast").unwrap().weights(), &[0.0; 4]);
 }
 
 #[test]
@@ -314,7 +314,7 @@ fn runtime_changes_apply_and_are_checked() {
     set.set_lambda("p", 0.9).unwrap();
     set.set_threshold("p", Threshold::Steps(15)).unwrap();
     let learner = set.learner("p").unwrap();
-    assert_eq!((learner.columns()[0].alpha, learner.lambda()), (0.3, 0.9));
+    assert_eq!((learner.alpha(), learner.lambda()), (0.3, 0.9));
     let out = set.predict(&FeatureInputs {
         obs: &[],
         extra: &[0.3],
@@ -332,7 +332,7 @@ fn runtime_changes_apply_and_are_checked() {
     let e = set.set_alpha("p", 1.01).unwrap_err().to_string();
     assert!(e.contains("exceeds 1/1"), "{e}");
     assert!(set.set_params("p", Some(0.5), Some(2.0), None).is_err());
-    assert_eq!(set.learner("p").unwrap().columns()[0].alpha, 0.3);
+    assert_eq!(set.learner("p").unwrap().alpha(), 0.3);
     set.set_alpha("p", 1.0).unwrap();
     set.set_alpha("p", 0.3).unwrap();
     assert!(set.set_threshold("p", Threshold::Fixed(f64::NAN)).is_err());
@@ -425,7 +425,7 @@ fn a_diverging_prediction_stops_keeps_its_finite_weights_and_leaves_the_gate() {
     assert_eq!(set.learn(&[false]).unwrap(), vec![None]);
     assert_eq!(set.divergences(), 1);
     assert_eq!(set.diverged().collect::<Vec<_>>(), vec!["p"]);
-    let weights = set.learner("p").unwrap().weights(0).to_vec();
+    let weights = set.learner("p").unwrap().weights().to_vec();
     assert_eq!(
         weights,
         vec![-0.9e308, 0.9e308],
@@ -454,14 +454,14 @@ fn a_diverging_prediction_stops_keeps_its_finite_weights_and_leaves_the_gate() {
         tick(&mut set, if k % 2 == 0 { 0.2 } else { 0.8 }, k % 7 == 0);
     }
     assert_eq!(set.divergences(), 1);
-    assert_eq!(set.learner("p").unwrap().weights(0), &weights[..]);
+    assert_eq!(set.learner("p").unwrap().weights(), &weights[..]);
     // Reset: it learns again.
     set.reset();
     assert_eq!(set.diverged().count(), 0);
     tick(&mut set, 0.2, false);
     assert!(tick(&mut set, 0.8, true).1.is_some());
     // δ = R = 1 with γ = 0 on the stimulus, α = 1: feature 0 (u = 0.2) now predicts it exactly.
-    assert_eq!(set.learner("p").unwrap().weights(0), &[1.0, 0.0]);
+    assert_eq!(set.learner("p").unwrap().weights(), &[1.0, 0.0]);
 }
 
 #[test]
@@ -489,7 +489,7 @@ fn at_the_step_size_bound_the_weights_stay_bounded() {
         set.learn(&[rng.chance(0.05)]).unwrap();
     }
     assert_eq!(set.divergences(), 0);
-    let w = set.learner("p").unwrap().weights(0);
+    let w = set.learner("p").unwrap().weights();
     // The return is at most 1; the weights of 8 features summing to it stay small.
     assert!(w.iter().all(|v| v.abs() < 2.0), "{w:?}");
 }
