@@ -254,24 +254,19 @@ fn check_study(runs: usize, minutes: f64, max_runs: usize) -> Result<()> {
 /// `pavlov experiment merge`: finds the shard files, picks the experiment they belong to, merges.
 fn merge(a: MergeArgs) -> Result<()> {
     let files = shard::shard_files(&a.dirs)?;
-    let experiment = files
-        .first()
-        .map(|f| shard::experiment_of(f))
-        .transpose()?
-        .unwrap_or_default();
-    match experiment.as_str() {
-        stall::sharded::EXPERIMENT => {
-            let table = stall::sharded::merge(&files, a.out.as_deref())?;
-            say!("{}", table.trim_end());
-            Ok(())
-        }
+    let experiment = shard::experiment_of_all(&files)?;
+    let table = match experiment.as_str() {
+        stall::sharded::EXPERIMENT => stall::sharded::merge(&files, a.out.as_deref())?,
         other => anyhow::bail!(
-            "{}: shards of experiment {other:?} cannot be merged (known: stall)",
+            "{}: shards of experiment {other:?} cannot be merged (known: {})",
             files
                 .first()
-                .map_or_else(String::new, |f| f.display().to_string())
+                .map_or_else(String::new, |f| f.display().to_string()),
+            stall::sharded::EXPERIMENT
         ),
-    }
+    };
+    say!("{}", table.trim_end());
+    Ok(())
 }
 
 fn default_threads() -> usize {

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use super::Shard;
-use super::merge::MergeError;
+use super::merge::{Difference, MergeError};
 
 /// The format tag of a shard file.
 pub const SHARD_FORMAT: &str = "pavlov-shard/1";
@@ -26,7 +26,7 @@ pub struct ShardFile<R> {
     pub planned_runs: usize,
     /// The study's configuration.
     pub config: Value,
-    /// The study's options that decide its outcome (not where it writes or how many threads it uses).
+    /// The study's options, all but where it writes its results (`out`).
     pub options: Value,
     /// Wall-clock time of this shard, s.
     pub wall_s: f64,
@@ -34,6 +34,47 @@ pub struct ShardFile<R> {
     pub positions: Vec<usize>,
     /// The runs, in planned order.
     pub runs: Vec<R>,
+}
+
+impl<R> ShardFile<R> {
+    /// What slice `shard` of a study of `planned_runs` runs of `experiment` writes: `runs` are the
+    /// slice's, in planned order; the options are kept but for `out` (each shard writes somewhere else).
+    pub fn new(
+        experiment: &str,
+        shard: Shard,
+        planned_runs: usize,
+        config: &impl Serialize,
+        options: &impl Serialize,
+        wall_s: f64,
+        runs: Vec<R>,
+    ) -> serde_json::Result<Self> {
+        let mut options = serde_json::to_value(options)?;
+        if let Some(o) = options.as_object_mut() {
+            o.remove("out");
+        }
+        Ok(ShardFile {
+            format: SHARD_FORMAT.into(),
+            experiment: experiment.into(),
+            shard,
+            planned_runs,
+            config: serde_json::to_value(config)?,
+            options,
+            wall_s,
+            positions: shard.range(planned_runs).collect(),
+            runs,
+        })
+    }
+
+    /// One line for the terminal: which runs this shard ran and how long it took.
+    pub fn describe(&self) -> String {
+        format!(
+            "shard {}: runs {:?} of {} in {:.1} s wall",
+            self.shard,
+            self.shard.range(self.planned_runs),
+            self.planned_runs,
+            self.wall_s
+        )
+    }
 }
 
 /// The shard files in `paths`: a directory contributes every `shard-*-of-*.json` in it, a file itself.
@@ -81,6 +122,32 @@ pub fn experiment_of(path: &Path) -> Result<String, MergeError> {
     Ok(head.experiment)
 }
 
+/// The one experiment every file of `files` belongs to; refuses, naming both files, a set that mixes
+/// experiments (before any run is parsed, so the refusal does not depend on which experiment comes first).
+pub fn experiment_of_all(files: &[PathBuf]) -> Result<String, MergeError> {
+    let mut first: Option<(&PathBuf, String)> = None;
+    for f in files {
+        let experiment = experiment_of(f)?;
+        match &first {
+            None => first = Some((f, experiment)),
+            Some((a, va)) if *va != experiment => {
+                return Err(MergeError::Mismatch(Box::new(Difference {
+                    what: "experiments",
+                    key: "experiment".into(),
+                    a: (*a).clone(),
+                    va: format!("{va:?}"),
+                    b: f.clone(),
+                    vb: format!("{experiment:?}"),
+                })));
+            }
+            Some(_) => {}
+        }
+    }
+    first
+        .map(|(_, e)| e)
+        .ok_or_else(|| MergeError::NoShards("(no paths)".into()))
+}
+
 fn read(path: &Path) -> Result<String, MergeError> {
     std::fs::read_to_string(path).map_err(|source| MergeError::Read {
         path: path.to_path_buf(),
@@ -116,4 +183,68 @@ pub fn write<R: Serialize>(dir: &Path, file: &ShardFile<R>) -> std::io::Result<P
     let json = serde_json::to_string(file).map_err(std::io::Error::other)?;
     std::fs::write(&path, json)?;
     Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("pavlov-shard-file-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[derive(Serialize)]
+    struct Opts {
+        seed: u64,
+        out: PathBuf,
+    }
+
+    #[test]
+    fn a_written_shard_reads_back_without_its_results_directory() {
+        let dir = tmp("roundtrip");
+        let opts = Opts {
+            seed: 3,
+            out: dir.clone(),
+        };
+        let shard = Shard { index: 1, count: 3 };
+        let file = ShardFile::new("stall", shard, 7, &1u8, &opts, 0.5, vec![0.1f64, 0.2]).unwrap();
+        assert_eq!(file.positions, vec![3, 4]);
+        assert!(file.describe().starts_with("shard 1/3: runs 3..5 of 7"));
+        let path = write(&dir, &file).unwrap();
+        assert_eq!(path, dir.join("shard-1-of-3.json"));
+        let back: ShardFile<f64> = load(&path).unwrap();
+        assert_eq!(back.runs, vec![0.1, 0.2]);
+        assert_eq!(back.options, serde_json::json!({ "seed": 3 }));
+        assert_eq!(experiment_of(&path).unwrap(), "stall");
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn a_set_mixing_experiments_is_refused_naming_both_files() {
+        let dir = tmp("mixed");
+        let opts = Opts {
+            seed: 3,
+            out: dir.clone(),
+        };
+        let stall = ShardFile::new("stall", Shard::WHOLE, 1, &1u8, &opts, 0.5, vec![1u8]).unwrap();
+        let a = write(&dir.join("a"), &stall).unwrap();
+        let other =
+            ShardFile::new("interaction", Shard::WHOLE, 1, &1u8, &opts, 0.5, vec![1u8]).unwrap();
+        let b = write(&dir.join("b"), &other).unwrap();
+        assert_eq!(experiment_of_all(&[a.clone(), a.clone()]).unwrap(), "stall");
+        let e = experiment_of_all(&[a.clone(), b.clone()])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("experiments differ")
+                && e.contains(&a.display().to_string())
+                && e.contains(&b.display().to_string())
+                && e.contains("\"interaction\""),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(dir);
+    }
 }

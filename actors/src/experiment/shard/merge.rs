@@ -3,12 +3,13 @@
 //! ([`MergeError`], [`Difference`] with the first differing key from [`first_difference`]).
 
 use std::ops::Range;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
+use serde::de::DeserializeOwned;
 use serde_json::Value;
 
 use super::Shard;
-use super::file::{SHARD_FORMAT, ShardFile};
+use super::file::{SHARD_FORMAT, ShardFile, load};
 
 /// Why shards could not be merged.
 #[derive(Debug, thiserror::Error)]
@@ -71,6 +72,14 @@ pub enum MergeError {
         /// What it holds.
         found: Vec<usize>,
     },
+    /// The merged options are not the experiment's options.
+    #[error("the shards' options are not {experiment} options: {reason}")]
+    Options {
+        /// The experiment.
+        experiment: String,
+        /// Why.
+        reason: String,
+    },
 }
 
 /// Where two shards disagree.
@@ -96,7 +105,8 @@ pub struct Difference {
 pub struct Merged<R> {
     /// The configuration (as the first shard has it; all agree).
     pub config: Value,
-    /// The options (as the first shard has them; all agree but in [`NOT_OUTCOME`]).
+    /// The options: all shards agree but in [`NOT_OUTCOME`]; `threads` is the largest of the shards' (the
+    /// most any one shard ran on), the rest as the first shard has them.
     pub options: Value,
     /// Every run, in planned order.
     pub runs: Vec<R>,
@@ -234,7 +244,14 @@ pub fn merge<R>(
             runs: runs.join(", "),
         });
     }
-    let (config, options) = (first.config.clone(), first.options.clone());
+    let (config, mut options) = (first.config.clone(), first.options.clone());
+    let threads = shards
+        .iter()
+        .filter_map(|(_, s)| s.options.get("threads").and_then(Value::as_u64))
+        .max();
+    if let (Some(o), Some(threads)) = (options.as_object_mut(), threads) {
+        o.insert("threads".into(), threads.into());
+    }
     let mut shards = shards;
     shards.sort_by_key(|(_, s)| s.shard.index);
     let wall_s = shards.iter().map(|(_, s)| s.wall_s).sum();
@@ -245,6 +262,52 @@ pub fn merge<R>(
         runs,
         wall_s,
     })
+}
+
+/// Reads the shard files `files` of `experiment` and [`merge`]s them.
+pub fn merge_files<R: DeserializeOwned>(
+    experiment: &str,
+    files: &[PathBuf],
+) -> Result<Merged<R>, MergeError> {
+    let mut shards = Vec::with_capacity(files.len());
+    for f in files {
+        shards.push((f.clone(), load::<R>(f)?));
+    }
+    merge(experiment, shards)
+}
+
+impl<R> Merged<R> {
+    /// Where the merged study goes: `out`, or `results/<experiment>-<seed>` as the unsharded study's default.
+    pub fn out_dir(&self, experiment: &str, out: Option<&Path>) -> PathBuf {
+        match out {
+            Some(out) => out.to_path_buf(),
+            None => {
+                let seed = self
+                    .options
+                    .get("seed")
+                    .and_then(Value::as_u64)
+                    .unwrap_or(0);
+                PathBuf::from(format!("results/{experiment}-{seed}"))
+            }
+        }
+    }
+
+    /// The merged options as `experiment`'s options type, with `out` as the results directory.
+    pub fn options_as<O: DeserializeOwned>(
+        &self,
+        experiment: &str,
+        out: &Path,
+    ) -> Result<O, MergeError> {
+        let mut options = self.options.clone();
+        let reason = |e: serde_json::Error| MergeError::Options {
+            experiment: experiment.into(),
+            reason: e.to_string(),
+        };
+        if let Some(o) = options.as_object_mut() {
+            o.insert("out".into(), serde_json::to_value(out).map_err(reason)?);
+        }
+        serde_json::from_value(options).map_err(reason)
+    }
 }
 
 /// Options that do not decide a study's outcome: shards may differ in them.
@@ -291,6 +354,54 @@ mod tests {
         let m = merge("stall", shards).unwrap();
         assert_eq!(m.runs, (0..8).map(|p| p * 10).collect::<Vec<_>>());
         assert_eq!(m.wall_s, 3.0);
+    }
+
+    #[test]
+    fn the_merged_threads_are_the_most_any_shard_ran_on() {
+        let with_threads = |index, threads: u64| {
+            let (p, mut f) = file(index, 3, 1);
+            f.options["threads"] = threads.into();
+            (p, f)
+        };
+        // The first shard given ran on 1 thread; another on 4.
+        let m = merge(
+            "stall",
+            vec![with_threads(0, 1), with_threads(1, 4), with_threads(2, 2)],
+        )
+        .unwrap();
+        assert_eq!(m.options["threads"], 4);
+        assert_eq!(m.options["seed"], 1);
+    }
+
+    #[test]
+    fn the_merged_options_take_the_results_directory_and_the_default_is_the_experiments() {
+        #[derive(serde::Deserialize)]
+        struct Opts {
+            seed: u64,
+            minutes: f64,
+            out: PathBuf,
+        }
+        let m = merge("stall", vec![file(0, 1, 7)]).unwrap();
+        let o: Opts = m.options_as("stall", Path::new("merged")).unwrap();
+        assert_eq!(
+            (o.seed, o.minutes, o.out),
+            (7, 1.0, PathBuf::from("merged"))
+        );
+        assert_eq!(m.out_dir("stall", None), PathBuf::from("results/stall-7"));
+        assert_eq!(m.out_dir("stall", Some(Path::new("x"))), PathBuf::from("x"));
+        #[derive(Debug, serde::Deserialize)]
+        #[allow(dead_code)]
+        struct Other {
+            window_min: f64,
+        }
+        let e = m
+            .options_as::<Other>("interaction", Path::new("x"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("not interaction options") && e.contains("window_min"),
+            "{e}"
+        );
     }
 
     #[test]

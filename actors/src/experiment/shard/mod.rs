@@ -25,8 +25,12 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-pub use file::{SHARD_FORMAT, ShardFile, experiment_of, load, shard_files, write};
-pub use merge::{Difference, MergeError, Merged, NOT_OUTCOME, first_difference, merge};
+pub use file::{
+    SHARD_FORMAT, ShardFile, experiment_of, experiment_of_all, load, shard_files, write,
+};
+pub use merge::{
+    Difference, MergeError, Merged, NOT_OUTCOME, first_difference, merge, merge_files,
+};
 
 /// The I-th (0-based) of N slices of a study.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -13,9 +13,9 @@ use pavlov::control::Mode;
 use pavlov::record::TickRecord;
 use serde::{Deserialize, Serialize};
 
-use super::report::{self, StallStudy};
+use super::report;
 use super::{RunResult, StallOptions, assemble, plan, run_runs};
-use crate::experiment::shard::{self, SHARD_FORMAT, Shard, ShardFile};
+use crate::experiment::shard::{self, Shard, ShardFile};
 
 /// The experiment's name in shard files.
 pub const EXPERIMENT: &str = "stall";
@@ -29,15 +29,6 @@ pub struct ShardRun {
     pub excerpt: Vec<TickRecord>,
 }
 
-/// The options as a shard file keeps them: everything but where the results go.
-fn options_value(opts: &StallOptions) -> serde_json::Result<serde_json::Value> {
-    let mut v = serde_json::to_value(opts)?;
-    if let Some(o) = v.as_object_mut() {
-        o.remove("out");
-    }
-    Ok(v)
-}
-
 /// Runs slice `shard` of the study and writes `opts.out/shard-I-of-N.json` (and the runs' recordings under
 /// `opts.out/runs/`); returns the shard file's path and a one-line summary.
 pub fn run_shard(
@@ -49,7 +40,6 @@ pub fn run_shard(
     let wall = Instant::now();
     let planned = plan(base, opts);
     let planned_runs = planned.len();
-    let positions: Vec<usize> = shard.range(planned_runs).collect();
     let runs = run_runs(base, shard.slice(planned), opts, progress)?;
     let mut seen: Vec<Mode> = Vec::new();
     let runs: Vec<ShardRun> = runs
@@ -67,39 +57,26 @@ pub fn run_shard(
             ShardRun { result: r, excerpt }
         })
         .collect();
-    let file = ShardFile {
-        format: SHARD_FORMAT.into(),
-        experiment: EXPERIMENT.into(),
+    let file = ShardFile::new(
+        EXPERIMENT,
         shard,
         planned_runs,
-        config: serde_json::to_value(base)?,
-        options: options_value(opts)?,
-        wall_s: wall.elapsed().as_secs_f64(),
-        positions,
+        base,
+        opts,
+        wall.elapsed().as_secs_f64(),
         runs,
-    };
+    )?;
     let path = shard::write(&opts.out, &file)?;
-    let line = format!(
-        "shard {shard}: runs {:?} of {planned_runs} in {:.1} s wall",
-        shard.range(planned_runs),
-        file.wall_s
-    );
-    Ok((path, line))
+    Ok((path, file.describe()))
 }
 
-/// Reads the shard files `files`, checks they are exactly the slices of one stall study, and returns the
-/// study as the unsharded run would have produced it, with `out` as its results directory.
-pub fn merge_study(files: &[PathBuf], out: &Path) -> anyhow::Result<StallStudy> {
-    let mut shards = Vec::with_capacity(files.len());
-    for f in files {
-        shards.push((f.clone(), shard::load::<ShardRun>(f)?));
-    }
-    let merged = shard::merge(EXPERIMENT, shards)?;
-    let mut options = merged.options;
-    if let Some(o) = options.as_object_mut() {
-        o.insert("out".into(), serde_json::to_value(out)?);
-    }
-    let options: StallOptions = serde_json::from_value(options)?;
+/// Reads the shard files `files`, checks they are exactly the slices of one stall study, and writes the
+/// study as the unsharded run would have produced it into `out` (default: `results/stall-<seed>`, as the
+/// unsharded study); returns the terminal table.
+pub fn merge(files: &[PathBuf], out: Option<&Path>) -> anyhow::Result<String> {
+    let merged = shard::merge_files::<ShardRun>(EXPERIMENT, files)?;
+    let out = merged.out_dir(EXPERIMENT, out);
+    let options: StallOptions = merged.options_as(EXPERIMENT, &out)?;
     let runs = merged
         .runs
         .into_iter()
@@ -108,18 +85,7 @@ pub fn merge_study(files: &[PathBuf], out: &Path) -> anyhow::Result<StallStudy> 
             ..r.result
         })
         .collect();
-    Ok(assemble(options, runs, merged.wall_s))
-}
-
-/// [`merge_study`], then writes every output into `out` (default: `results/stall-<seed>`, as the unsharded
-/// study); returns the terminal table.
-pub fn merge(files: &[PathBuf], out: Option<&Path>) -> anyhow::Result<String> {
-    let mut study = merge_study(files, out.unwrap_or(Path::new("results")))?;
-    let out = match out {
-        Some(out) => out.to_path_buf(),
-        None => PathBuf::from(format!("results/stall-{}", study.options.seed)),
-    };
-    study.options.out = out.clone();
+    let study = assemble(options, runs, merged.wall_s);
     report::write_all(&out, &study)?;
     let mut table = report::table(&study);
     table.push_str(&format!(
