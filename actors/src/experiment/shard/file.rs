@@ -77,6 +77,38 @@ impl<R> ShardFile<R> {
     }
 }
 
+/// Runs slice `shard` of the `planned` runs of a study of `experiment` with `run` (which gets the slice's
+/// runs and returns their results in the same order), and writes the shard file into `out`; returns its
+/// path and [`ShardFile::describe`]'s line.
+pub fn run_slice<S, R: Serialize, E>(
+    experiment: &str,
+    shard: Shard,
+    planned: Vec<S>,
+    config: &impl Serialize,
+    options: &impl Serialize,
+    out: &Path,
+    run: impl FnOnce(Vec<S>) -> Result<Vec<R>, E>,
+) -> Result<(PathBuf, String), E>
+where
+    E: From<serde_json::Error> + From<std::io::Error>,
+{
+    let wall = std::time::Instant::now();
+    let planned_runs = planned.len();
+    let runs = run(shard.slice(planned))?;
+    let wall_s = wall.elapsed().as_secs_f64();
+    let file = ShardFile::new(
+        experiment,
+        shard,
+        planned_runs,
+        config,
+        options,
+        wall_s,
+        runs,
+    )?;
+    let path = write(out, &file)?;
+    Ok((path, file.describe()))
+}
+
 /// The shard files in `paths`: a directory contributes every `shard-*-of-*.json` in it, a file itself.
 pub fn shard_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, MergeError> {
     let mut files = Vec::new();
@@ -189,34 +221,38 @@ pub fn write<R: Serialize>(dir: &Path, file: &ShardFile<R>) -> std::io::Result<P
 mod tests {
     use super::*;
 
-    fn tmp(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("pavlov-shard-file-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
-    }
-
     #[derive(Serialize)]
     struct Opts {
         seed: u64,
         out: PathBuf,
     }
 
-    #[test]
-    fn a_written_shard_reads_back_without_its_results_directory() {
-        let dir = tmp("roundtrip");
+    /// A fresh directory, and options that write into it.
+    fn setup(name: &str) -> (PathBuf, Opts) {
+        let dir =
+            std::env::temp_dir().join(format!("pavlov-shard-file-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
         let opts = Opts {
             seed: 3,
             out: dir.clone(),
         };
+        (dir, opts)
+    }
+
+    #[test]
+    fn a_slice_run_and_written_reads_back_without_its_results_directory() {
+        let (dir, opts) = setup("roundtrip");
         let shard = Shard { index: 1, count: 3 };
-        let file = ShardFile::new("stall", shard, 7, &1u8, &opts, 0.5, vec![0.1f64, 0.2]).unwrap();
-        assert_eq!(file.positions, vec![3, 4]);
-        assert!(file.describe().starts_with("shard 1/3: runs 3..5 of 7"));
-        let path = write(&dir, &file).unwrap();
+        let planned: Vec<f64> = (0..7).map(|i| f64::from(i) / 10.0).collect();
+        let (path, line) = run_slice("stall", shard, planned, &1u8, &opts, &dir, |slice| {
+            Ok::<_, std::io::Error>(slice.into_iter().map(|x| x + 0.1).collect::<Vec<f64>>())
+        })
+        .unwrap();
         assert_eq!(path, dir.join("shard-1-of-3.json"));
+        assert!(line.starts_with("shard 1/3: runs 3..5 of 7"), "{line}");
         let back: ShardFile<f64> = load(&path).unwrap();
-        assert_eq!(back.runs, vec![0.1, 0.2]);
+        assert_eq!(back.positions, vec![3, 4]);
+        assert_eq!(back.runs, vec![0.3 + 0.1, 0.4 + 0.1]);
         assert_eq!(back.options, serde_json::json!({ "seed": 3 }));
         assert_eq!(experiment_of(&path).unwrap(), "stall");
         let _ = std::fs::remove_dir_all(dir);
@@ -224,11 +260,7 @@ mod tests {
 
     #[test]
     fn a_set_mixing_experiments_is_refused_naming_both_files() {
-        let dir = tmp("mixed");
-        let opts = Opts {
-            seed: 3,
-            out: dir.clone(),
-        };
+        let (dir, opts) = setup("mixed");
         let stall = ShardFile::new("stall", Shard::WHOLE, 1, &1u8, &opts, 0.5, vec![1u8]).unwrap();
         let a = write(&dir.join("a"), &stall).unwrap();
         let other =

@@ -276,6 +276,41 @@ pub fn merge_files<R: DeserializeOwned>(
     merge(experiment, shards)
 }
 
+/// The line a merge adds to the study's terminal table.
+pub fn merged_note(files: usize, out: &Path) -> String {
+    format!("merged {files} shard file(s) into {}\n", out.display())
+}
+
+/// A study put together from its shards, ready for its experiment to assemble.
+#[derive(Debug)]
+pub struct MergedStudy<O, R> {
+    /// Where the merged study goes.
+    pub out: PathBuf,
+    /// Its options (with `out` as the results directory; `threads` as [`Merged::options`] says).
+    pub options: O,
+    /// Every run, in planned order.
+    pub runs: Vec<R>,
+    /// The shards' wall-clock times added up, s.
+    pub wall_s: f64,
+}
+
+/// Reads and [`merge`]s the shard files `files` of `experiment`, with the options as `O`, going into `out`
+/// (default: `results/<experiment>-<seed>`, as the unsharded study's).
+pub fn merge_study<O: DeserializeOwned, R: DeserializeOwned>(
+    experiment: &str,
+    files: &[PathBuf],
+    out: Option<&Path>,
+) -> Result<MergedStudy<O, R>, MergeError> {
+    let merged = merge_files::<R>(experiment, files)?;
+    let out = merged.out_dir(experiment, out);
+    Ok(MergedStudy {
+        options: merged.options_as(experiment, &out)?,
+        out,
+        runs: merged.runs,
+        wall_s: merged.wall_s,
+    })
+}
+
 impl<R> Merged<R> {
     /// Where the merged study goes: `out`, or `results/<experiment>-<seed>` as the unsharded study's default.
     pub fn out_dir(&self, experiment: &str, out: Option<&Path>) -> PathBuf {

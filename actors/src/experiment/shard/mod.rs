@@ -26,10 +26,11 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 pub use file::{
-    SHARD_FORMAT, ShardFile, experiment_of, experiment_of_all, load, shard_files, write,
+    SHARD_FORMAT, ShardFile, experiment_of, experiment_of_all, load, run_slice, shard_files, write,
 };
 pub use merge::{
-    Difference, MergeError, Merged, NOT_OUTCOME, first_difference, merge, merge_files,
+    Difference, MergeError, Merged, MergedStudy, NOT_OUTCOME, first_difference, merge, merge_files,
+    merge_study, merged_note,
 };
 
 /// The I-th (0-based) of N slices of a study.

@@ -6,7 +6,6 @@
 //! one; the unsharded study draws the first such run of each policy, which is always one of those.
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use pavlov::config::Config;
 use pavlov::control::Mode;
@@ -15,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use super::report;
 use super::{RunResult, StallOptions, assemble, plan, run_runs};
-use crate::experiment::shard::{self, Shard, ShardFile};
+use crate::experiment::shard::{self, Shard};
 
 /// The experiment's name in shard files.
 pub const EXPERIMENT: &str = "stall";
@@ -37,47 +36,41 @@ pub fn run_shard(
     shard: Shard,
     progress: bool,
 ) -> anyhow::Result<(PathBuf, String)> {
-    let wall = Instant::now();
-    let planned = plan(base, opts);
-    let planned_runs = planned.len();
-    let runs = run_runs(base, shard.slice(planned), opts, progress)?;
-    let mut seen: Vec<Mode> = Vec::new();
-    let runs: Vec<ShardRun> = runs
-        .into_iter()
-        .map(|mut r| {
-            let keep = !r.excerpt.is_empty() && !seen.contains(&r.mode);
-            if keep {
-                seen.push(r.mode);
-            }
-            let excerpt = if keep {
-                std::mem::take(&mut r.excerpt)
-            } else {
-                Vec::new()
-            };
-            ShardRun { result: r, excerpt }
-        })
-        .collect();
-    let file = ShardFile::new(
+    shard::run_slice(
         EXPERIMENT,
         shard,
-        planned_runs,
+        plan(base, opts),
         base,
         opts,
-        wall.elapsed().as_secs_f64(),
-        runs,
-    )?;
-    let path = shard::write(&opts.out, &file)?;
-    Ok((path, file.describe()))
+        &opts.out,
+        |specs| {
+            let mut seen: Vec<Mode> = Vec::new();
+            let runs = run_runs(base, specs, opts, progress)?;
+            Ok(runs
+                .into_iter()
+                .map(|mut r| {
+                    let keep = !r.excerpt.is_empty() && !seen.contains(&r.mode);
+                    if keep {
+                        seen.push(r.mode);
+                    }
+                    let excerpt = if keep {
+                        std::mem::take(&mut r.excerpt)
+                    } else {
+                        Vec::new()
+                    };
+                    ShardRun { result: r, excerpt }
+                })
+                .collect::<Vec<_>>())
+        },
+    )
 }
 
 /// Reads the shard files `files`, checks they are exactly the slices of one stall study, and writes the
 /// study as the unsharded run would have produced it into `out` (default: `results/stall-<seed>`, as the
 /// unsharded study); returns the terminal table.
 pub fn merge(files: &[PathBuf], out: Option<&Path>) -> anyhow::Result<String> {
-    let merged = shard::merge_files::<ShardRun>(EXPERIMENT, files)?;
-    let out = merged.out_dir(EXPERIMENT, out);
-    let options: StallOptions = merged.options_as(EXPERIMENT, &out)?;
-    let runs = merged
+    let m = shard::merge_study::<StallOptions, ShardRun>(EXPERIMENT, files, out)?;
+    let runs = m
         .runs
         .into_iter()
         .map(|r| RunResult {
@@ -85,13 +78,7 @@ pub fn merge(files: &[PathBuf], out: Option<&Path>) -> anyhow::Result<String> {
             ..r.result
         })
         .collect();
-    let study = assemble(options, runs, merged.wall_s);
-    report::write_all(&out, &study)?;
-    let mut table = report::table(&study);
-    table.push_str(&format!(
-        "merged {} shard file(s) into {}\n",
-        files.len(),
-        out.display()
-    ));
-    Ok(table)
+    let study = assemble(m.options, runs, m.wall_s);
+    report::write_all(&m.out, &study)?;
+    Ok(report::table(&study) + &shard::merged_note(files.len(), &m.out))
 }
