@@ -11,7 +11,8 @@
 //!
 //! - [`run`]: one run; [`analysis`]: the statistics; [`report`]: files and the terminal table;
 //!   [`plots`]: the Figure 3 and Figure 4 analogues and the time course; [`sensitivity`]: the study over
-//!   operator and learner variants.
+//!   operator and learner variants; [`sharded`]: one slice of the study (`--shard I/N`), and merging the
+//!   slices back (`assemble` makes the study from its runs, whoever ran them).
 
 pub(crate) mod analysis;
 pub(crate) mod plots;

@@ -3,7 +3,7 @@
 //! the unsharded study (the wall-clock fields aside: the merged `wall_s` is the shards' wall times added up).
 //!
 //! `summary.json` holds each run without what only the analysis reads (its aligned windows, its timeline and
-//! its tick records); a shard keeps those too ([`ShardRun`]), so the merged study computes its statistics
+//! its tick records); a shard keeps those too (`ShardRun`), so the merged study computes its statistics
 //! and figures from the same numbers. Tick records are kept only by the runs that keep them in the
 //! unsharded study (runs 0 and 1, which the Figure 3 analogue draws), so other shards stay small.
 

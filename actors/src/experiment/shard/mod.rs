@@ -7,15 +7,15 @@
 //!
 //! A shard writes what its runs produced into `shard-I-of-N.json` ([`ShardFile`]): the experiment, the
 //! configuration and the study's options (as JSON, so any experiment's options fit), the number of planned
-//! runs and the runs themselves. [`merge`] reads a set of those files and refuses, with an error naming
+//! runs and the runs themselves. [`merge()`] reads a set of those files and refuses, with an error naming
 //! the files and the difference, shards of different experiments, configurations, options or shard counts,
 //! a shard given twice, missing shards, and runs outside their shard's slice. What it returns is the runs
 //! in planned order, from which the experiment computes the same summary, tables and figures as the
 //! unsharded study.
 //!
 //! - this file: [`Shard`], parsing `--shard I/N` and slicing a plan;
-//! - [`file`]: the shard file, finding, reading and writing it;
-//! - [`merge`]: checking a set of shards and putting their runs together.
+//! - [`mod@file`]: the shard file, finding, reading and writing it;
+//! - [`mod@merge`]: checking a set of shards and putting their runs together.
 
 pub mod file;
 pub mod merge;
