@@ -32,9 +32,9 @@ pub enum Experiment {
     /// The paper's interaction experiment: a simulated operator commands a left spin with the left elbow;
     /// reactive vs Pavlovian response timing, and current / rotation aligned on the command (Figs 3, 4).
     Interaction(InteractionArgs),
-    /// Merge the shard files (shard-I-of-N.json) that `--shard I/N` runs wrote into the study's summary,
-    /// tables and figures, the same as the unsharded study's; refuses missing, repeated or mismatched
-    /// shards (different experiment, configuration, options or shard count).
+    /// Merge the shard files (shard-I-of-N.json) that `stall|interaction --shard I/N` runs wrote into the
+    /// study's summary, tables and figures, the same as the unsharded study's; refuses missing, repeated or
+    /// mismatched shards (different experiment, configuration, options or shard count).
     Merge(MergeArgs),
 }
 
@@ -85,6 +85,10 @@ pub struct InteractionArgs {
     /// Do not write per-tick recordings of the runs (always off with --curve).
     #[arg(long)]
     pub no_record: bool,
+    /// Run only the I-th (0-based) of N disjoint slices of the planned runs and write
+    /// shard-I-of-N.json into the results directory; `pavlov experiment merge` puts the shards together.
+    #[arg(long, value_name = "I/N", conflicts_with = "sensitivity")]
+    pub shard: Option<Shard>,
 }
 
 /// `pavlov experiment stall`.
@@ -221,6 +225,12 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
                 );
                 return Ok(());
             }
+            if let Some(shard) = a.shard {
+                let (path, line) = interaction::sharded::run_shard(&config, &opts, shard, true)?;
+                say!("{line}");
+                say!("wrote {}", path.display());
+                return Ok(());
+            }
             let summary = interaction::run_study_with_progress(&config, &opts, true)?;
             interaction::report::write_all(&opts.out, &summary)?;
             say!("{}", interaction::report::table(&summary).trim_end());
@@ -254,24 +264,21 @@ fn check_study(runs: usize, minutes: f64, max_runs: usize) -> Result<()> {
 /// `pavlov experiment merge`: finds the shard files, picks the experiment they belong to, merges.
 fn merge(a: MergeArgs) -> Result<()> {
     let files = shard::shard_files(&a.dirs)?;
-    let experiment = files
-        .first()
-        .map(|f| shard::experiment_of(f))
-        .transpose()?
-        .unwrap_or_default();
-    match experiment.as_str() {
-        stall::sharded::EXPERIMENT => {
-            let table = stall::sharded::merge(&files, a.out.as_deref())?;
-            say!("{}", table.trim_end());
-            Ok(())
-        }
+    let experiment = shard::experiment_of_all(&files)?;
+    let table = match experiment.as_str() {
+        stall::sharded::EXPERIMENT => stall::sharded::merge(&files, a.out.as_deref())?,
+        interaction::sharded::EXPERIMENT => interaction::sharded::merge(&files, a.out.as_deref())?,
         other => anyhow::bail!(
-            "{}: shards of experiment {other:?} cannot be merged (known: stall)",
+            "{}: shards of experiment {other:?} cannot be merged (known: {}, {})",
             files
                 .first()
-                .map_or_else(String::new, |f| f.display().to_string())
+                .map_or_else(String::new, |f| f.display().to_string()),
+            stall::sharded::EXPERIMENT,
+            interaction::sharded::EXPERIMENT
         ),
-    }
+    };
+    say!("{}", table.trim_end());
+    Ok(())
 }
 
 fn default_threads() -> usize {

@@ -25,12 +25,12 @@
 //! *Anticipation holds* from the first window whose current lead's whole interval lies above 0 and stays so
 //! in every later window ([`holds_from`]).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::analysis::bootstrap::{MeanDifference, RESAMPLES, mean_difference_clustered};
 
 /// One ground-truth command and what each measurement made of it (latencies from its onset, ms).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CommandResult {
     /// The true onset, ms from the run's start.
     pub onset_ms: f64,
@@ -43,7 +43,7 @@ pub struct CommandResult {
 }
 
 /// One run, reduced.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct RunTimeline {
     /// Pavlovian (true) or reactive.
     pub pavlovian: bool,

@@ -17,7 +17,7 @@
 //! - *Time responding outside commands* is the summed duration of responding ticks outside every window (each
 //!   tick counts until the next sample), the cost of unnecessary responses.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Half-width of a command's window in the live figures, ms.
 pub const LIVE_WINDOW_MS: f64 = 1000.0;
@@ -42,7 +42,7 @@ pub struct ResponseSample {
 }
 
 /// One command gesture.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CommandWindow {
     /// When the command began (elbow below 90°), ms.
     pub onset_ms: f64,
@@ -82,7 +82,7 @@ impl Default for MatchParams {
 }
 
 /// What happened for one command.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub enum CommandOutcome {
     /// The response started `latency_ms` after the command onset (negative: before it).
     Answered {
@@ -96,7 +96,7 @@ pub enum CommandOutcome {
 }
 
 /// The metrics of one run.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ResponseTiming {
     /// One outcome per command, in the order given.
     pub outcomes: Vec<CommandOutcome>,

@@ -18,7 +18,7 @@
 //! baseline averages 10 ticks, so a 50 mA drop is over 8 SDs of one reading: noise alone essentially never
 //! crosses it, while a spin draws several hundred mA more than idling. It is fixed, not fitted to any policy.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::{CommandWindow, MatchParams, window};
 
@@ -56,7 +56,7 @@ impl Default for PhysicalParams {
 }
 
 /// The physical onsets of one command, relative to its onset, ms (`None`: no onset in its window).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct PhysicalLatency {
     /// Current onset minus command onset.
     pub current_ms: Option<f64>,

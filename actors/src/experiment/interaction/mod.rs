@@ -11,13 +11,15 @@
 //!
 //! - [`run`]: one run; [`analysis`]: the statistics; [`report`]: files and the terminal table;
 //!   [`plots`]: the Figure 3 and Figure 4 analogues and the time course; [`sensitivity`]: the study over
-//!   operator and learner variants.
+//!   operator and learner variants; [`sharded`]: one slice of the study (`--shard I/N`), and merging the
+//!   slices back (`assemble` makes the study from its runs, whoever ran them).
 
 pub(crate) mod analysis;
 pub(crate) mod plots;
 pub mod report;
 pub(crate) mod run;
 pub mod sensitivity;
+pub mod sharded;
 
 use std::path::PathBuf;
 
@@ -26,7 +28,7 @@ use pavlov::analysis::stats::WelchTest;
 use pavlov::config::Config;
 use pavlov::control::Mode;
 use pavlov::sim::human::HumanParams;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use analysis::{AlignedPoint, PolicyTiming, Shifts, aligned, latency_test, shifts, timing};
 use run::{InteractionRun, RunPlan};
@@ -35,7 +37,7 @@ use super::runner::{RunError, run_all};
 use super::{interleaved_mode, mode_name};
 
 /// The study's settings.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct InteractionOptions {
     /// Runs per policy (the paper: 1).
     pub runs_per_policy: usize,
@@ -115,11 +117,26 @@ pub fn run_study_with_progress(
     progress: bool,
 ) -> Result<InteractionStudy, RunError> {
     let wall = std::time::Instant::now();
+    let runs = run_runs(base, o, plan(o), progress)?;
+    Ok(assemble(o.clone(), runs, wall.elapsed().as_secs_f64()))
+}
+
+/// The interleaved run list: run `i` and its policy, for `2 × runs_per_policy` runs.
+pub(crate) fn plan(o: &InteractionOptions) -> Vec<(usize, Mode)> {
+    (0..2 * o.runs_per_policy)
+        .map(|i| (i, interleaved_mode(i)))
+        .collect()
+}
+
+/// Runs the planned runs `specs` (any part of [`plan`]) on `o.threads` threads, in order.
+pub(crate) fn run_runs(
+    base: &Config,
+    o: &InteractionOptions,
+    specs: Vec<(usize, Mode)>,
+    progress: bool,
+) -> Result<Vec<InteractionRun>, RunError> {
     let period_s = base.tick.period_ms.max(1) as f64 / 1000.0;
     let ticks = (o.minutes * 60.0 / period_s).round().max(1.0) as usize;
-    let specs: Vec<(usize, Mode)> = (0..2 * o.runs_per_policy)
-        .map(|i| (i, interleaved_mode(i)))
-        .collect();
     let bar = super::progress_bar(specs.len(), progress);
     bar.set_message(format!("{} min each", o.minutes));
     bar.tick();
@@ -156,14 +173,23 @@ pub fn run_study_with_progress(
     };
     let runs = run_all(&specs, o.threads, &one, &on_done)?;
     bar.finish_and_clear();
+    Ok(runs)
+}
+
+/// The study from its runs (every planned run, in planned order): the statistics and the bookkeeping. Pure:
+/// the same runs give the same study, whichever processes ran them.
+pub(crate) fn assemble(
+    o: InteractionOptions,
+    runs: Vec<InteractionRun>,
+    wall_s: f64,
+) -> InteractionStudy {
     let timelines: Vec<_> = runs.iter().map(|r| r.timeline.clone()).collect();
     let curve = curve(&timelines, o.window_min, o.seed);
     let holds_from_window = holds_from(&curve);
     let fig3_at_min = holds_from_window
         .and_then(|w| curve.get(w))
         .map_or(o.minutes, |p| (p.from_min + p.to_min) / 2.0);
-    Ok(InteractionStudy {
-        options: o.clone(),
+    InteractionStudy {
         seed_derivation: "run i (even = reactive, odd = Pavlovian): robot seed \
                           Rng::new(seed).fork(i).next_u64(), operator seed of the pair Rng::new(seed).fork(i - i % 2).fork(1).next_u64() \
                           (both runs of a pair see the same operator)"
@@ -176,6 +202,7 @@ pub fn run_study_with_progress(
         fig3_at_min,
         aligned: aligned(&runs),
         runs,
-        wall_s: wall.elapsed().as_secs_f64(),
-    })
+        wall_s,
+        options: o,
+    }
 }

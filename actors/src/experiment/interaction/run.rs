@@ -24,7 +24,7 @@ use pavlov::config::Config;
 use pavlov::control::Mode;
 use pavlov::record::TickRecord;
 use pavlov::sim::human::{HumanParams, SimHuman};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use tokio_util::sync::CancellationToken;
 
 use crate::experiment::run_rng;
@@ -40,8 +40,9 @@ pub(crate) const AFTER_TICKS: i64 = 50;
 /// after, the battery current (mA, `None` when not reported) and the rotation odometry reported (° per tick).
 pub(crate) type AlignedWindow = Vec<(Option<f64>, f64)>;
 
-/// One run's outcome.
-#[derive(Debug, Clone, Serialize)]
+/// One run's outcome (`summary.json` holds it but its aligned windows, timeline and records, which only a
+/// shard file keeps: [`super::sharded`]).
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct InteractionRun {
     /// Position in the interleaved sequence.
     pub(crate) index: usize,

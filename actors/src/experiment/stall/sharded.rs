@@ -6,16 +6,15 @@
 //! one; the unsharded study draws the first such run of each policy, which is always one of those.
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use pavlov::config::Config;
 use pavlov::control::Mode;
 use pavlov::record::TickRecord;
 use serde::{Deserialize, Serialize};
 
-use super::report::{self, StallStudy};
+use super::report;
 use super::{RunResult, StallOptions, assemble, plan, run_runs};
-use crate::experiment::shard::{self, SHARD_FORMAT, Shard, ShardFile};
+use crate::experiment::shard::{self, Shard};
 
 /// The experiment's name in shard files.
 pub const EXPERIMENT: &str = "stall";
@@ -29,15 +28,6 @@ pub struct ShardRun {
     pub excerpt: Vec<TickRecord>,
 }
 
-/// The options as a shard file keeps them: everything but where the results go.
-fn options_value(opts: &StallOptions) -> serde_json::Result<serde_json::Value> {
-    let mut v = serde_json::to_value(opts)?;
-    if let Some(o) = v.as_object_mut() {
-        o.remove("out");
-    }
-    Ok(v)
-}
-
 /// Runs slice `shard` of the study and writes `opts.out/shard-I-of-N.json` (and the runs' recordings under
 /// `opts.out/runs/`); returns the shard file's path and a one-line summary.
 pub fn run_shard(
@@ -46,61 +36,41 @@ pub fn run_shard(
     shard: Shard,
     progress: bool,
 ) -> anyhow::Result<(PathBuf, String)> {
-    let wall = Instant::now();
-    let planned = plan(base, opts);
-    let planned_runs = planned.len();
-    let positions: Vec<usize> = shard.range(planned_runs).collect();
-    let runs = run_runs(base, shard.slice(planned), opts, progress)?;
-    let mut seen: Vec<Mode> = Vec::new();
-    let runs: Vec<ShardRun> = runs
-        .into_iter()
-        .map(|mut r| {
-            let keep = !r.excerpt.is_empty() && !seen.contains(&r.mode);
-            if keep {
-                seen.push(r.mode);
-            }
-            let excerpt = if keep {
-                std::mem::take(&mut r.excerpt)
-            } else {
-                Vec::new()
-            };
-            ShardRun { result: r, excerpt }
-        })
-        .collect();
-    let file = ShardFile {
-        format: SHARD_FORMAT.into(),
-        experiment: EXPERIMENT.into(),
+    shard::run_slice(
+        EXPERIMENT,
         shard,
-        planned_runs,
-        config: serde_json::to_value(base)?,
-        options: options_value(opts)?,
-        wall_s: wall.elapsed().as_secs_f64(),
-        positions,
-        runs,
-    };
-    let path = shard::write(&opts.out, &file)?;
-    let line = format!(
-        "shard {shard}: runs {:?} of {planned_runs} in {:.1} s wall",
-        shard.range(planned_runs),
-        file.wall_s
-    );
-    Ok((path, line))
+        plan(base, opts),
+        base,
+        opts,
+        &opts.out,
+        |specs| {
+            let mut seen: Vec<Mode> = Vec::new();
+            let runs = run_runs(base, specs, opts, progress)?;
+            Ok(runs
+                .into_iter()
+                .map(|mut r| {
+                    let keep = !r.excerpt.is_empty() && !seen.contains(&r.mode);
+                    if keep {
+                        seen.push(r.mode);
+                    }
+                    let excerpt = if keep {
+                        std::mem::take(&mut r.excerpt)
+                    } else {
+                        Vec::new()
+                    };
+                    ShardRun { result: r, excerpt }
+                })
+                .collect::<Vec<_>>())
+        },
+    )
 }
 
-/// Reads the shard files `files`, checks they are exactly the slices of one stall study, and returns the
-/// study as the unsharded run would have produced it, with `out` as its results directory.
-pub fn merge_study(files: &[PathBuf], out: &Path) -> anyhow::Result<StallStudy> {
-    let mut shards = Vec::with_capacity(files.len());
-    for f in files {
-        shards.push((f.clone(), shard::load::<ShardRun>(f)?));
-    }
-    let merged = shard::merge(EXPERIMENT, shards)?;
-    let mut options = merged.options;
-    if let Some(o) = options.as_object_mut() {
-        o.insert("out".into(), serde_json::to_value(out)?);
-    }
-    let options: StallOptions = serde_json::from_value(options)?;
-    let runs = merged
+/// Reads the shard files `files`, checks they are exactly the slices of one stall study, and writes the
+/// study as the unsharded run would have produced it into `out` (default: `results/stall-<seed>`, as the
+/// unsharded study); returns the terminal table.
+pub fn merge(files: &[PathBuf], out: Option<&Path>) -> anyhow::Result<String> {
+    let m = shard::merge_study::<StallOptions, ShardRun>(EXPERIMENT, files, out)?;
+    let runs = m
         .runs
         .into_iter()
         .map(|r| RunResult {
@@ -108,24 +78,7 @@ pub fn merge_study(files: &[PathBuf], out: &Path) -> anyhow::Result<StallStudy> 
             ..r.result
         })
         .collect();
-    Ok(assemble(options, runs, merged.wall_s))
-}
-
-/// [`merge_study`], then writes every output into `out` (default: `results/stall-<seed>`, as the unsharded
-/// study); returns the terminal table.
-pub fn merge(files: &[PathBuf], out: Option<&Path>) -> anyhow::Result<String> {
-    let mut study = merge_study(files, out.unwrap_or(Path::new("results")))?;
-    let out = match out {
-        Some(out) => out.to_path_buf(),
-        None => PathBuf::from(format!("results/stall-{}", study.options.seed)),
-    };
-    study.options.out = out.clone();
-    report::write_all(&out, &study)?;
-    let mut table = report::table(&study);
-    table.push_str(&format!(
-        "merged {} shard file(s) into {}\n",
-        files.len(),
-        out.display()
-    ));
-    Ok(table)
+    let study = assemble(m.options, runs, m.wall_s);
+    report::write_all(&m.out, &study)?;
+    Ok(report::table(&study) + &shard::merged_note(files.len(), &m.out))
 }

@@ -1,138 +1,15 @@
-//! Sweeps on a cluster: run one slice of a study (`--shard I/N`) and merge the slices back into the study.
-//!
-//! A study plans its runs as a list; [`Shard::slice`] keeps the I-th of N contiguous, disjoint blocks of
-//! that list, so the union of all N shards is the planned list and every run keeps the seed the unsharded
-//! study gives it (seeds are derived from the run's index, never from the shard). Whatever the list holds
-//! (e.g. several policies), the slicing is the same, so this composes with any planner.
-//!
-//! A shard writes what its runs produced into `shard-I-of-N.json` ([`ShardFile`]): the experiment, the
-//! configuration and the study's options (as JSON, so any experiment's options fit), the number of planned
-//! runs and the runs themselves. [`merge`] reads a set of those files and refuses, with an error naming
-//! the files and the difference, shards of different experiments, configurations, options or shard counts,
-//! a shard given twice, missing shards, and runs outside their shard's slice. What it returns is the runs
-//! in planned order, from which the experiment computes the same summary, tables and figures as the
-//! unsharded study.
+//! Merging shards: [`merge`] checks that a set of shard files are exactly the N slices of one study and
+//! puts their runs back in planned order; every refusal names the files and what is wrong
+//! ([`MergeError`], [`Difference`] with the first differing key from [`first_difference`]).
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
-use std::str::FromStr;
 
-use serde::{Deserialize, Serialize};
+use serde::de::DeserializeOwned;
 use serde_json::Value;
 
-/// The format tag of a shard file.
-pub const SHARD_FORMAT: &str = "pavlov-shard/1";
-
-/// The I-th (0-based) of N slices of a study.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Shard {
-    /// Which slice, 0-based.
-    pub index: usize,
-    /// How many slices.
-    pub count: usize,
-}
-
-/// Why `--shard` was refused.
-#[derive(Debug, thiserror::Error, PartialEq, Eq)]
-pub enum ShardParseError {
-    /// Not of the form I/N.
-    #[error("--shard {0:?}: expected I/N, e.g. 0/4 (the first of four slices)")]
-    Form(String),
-    /// N is 0.
-    #[error("--shard {0:?}: the number of shards N must be at least 1")]
-    NoShards(String),
-    /// I ≥ N.
-    #[error("--shard {given:?}: the index I must be in 0..{count} (0-based; got {index})")]
-    IndexOutOfRange {
-        /// What was given.
-        given: String,
-        /// I.
-        index: usize,
-        /// N.
-        count: usize,
-    },
-}
-
-impl FromStr for Shard {
-    type Err = ShardParseError;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let form = || ShardParseError::Form(s.to_string());
-        let (i, n) = s.split_once('/').ok_or_else(form)?;
-        let index: usize = i.trim().parse().map_err(|_| form())?;
-        let count: usize = n.trim().parse().map_err(|_| form())?;
-        if count == 0 {
-            return Err(ShardParseError::NoShards(s.to_string()));
-        }
-        if index >= count {
-            return Err(ShardParseError::IndexOutOfRange {
-                given: s.to_string(),
-                index,
-                count,
-            });
-        }
-        Ok(Shard { index, count })
-    }
-}
-
-impl std::fmt::Display for Shard {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}/{}", self.index, self.count)
-    }
-}
-
-impl Shard {
-    /// The whole study as one shard.
-    pub const WHOLE: Shard = Shard { index: 0, count: 1 };
-
-    /// The positions this shard holds in a plan of `planned` runs: the I-th of N contiguous blocks whose
-    /// sizes differ by at most one (the first `planned % N` blocks are one longer).
-    pub fn range(&self, planned: usize) -> Range<usize> {
-        let count = self.count.max(1);
-        let (base, extra) = (planned / count, planned % count);
-        let start = self.index * base + self.index.min(extra);
-        let len = base + usize::from(self.index < extra);
-        start.min(planned)..(start + len).min(planned)
-    }
-
-    /// This shard's runs of the planned list.
-    pub fn slice<T>(&self, planned: Vec<T>) -> Vec<T> {
-        let range = self.range(planned.len());
-        planned
-            .into_iter()
-            .enumerate()
-            .filter(|(i, _)| range.contains(i))
-            .map(|(_, t)| t)
-            .collect()
-    }
-
-    /// The file a shard writes into its results directory.
-    pub fn file_name(&self) -> String {
-        format!("shard-{}-of-{}.json", self.index, self.count)
-    }
-}
-
-/// What one shard wrote: enough to check it belongs with the others, and its runs.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct ShardFile<R> {
-    /// Always [`SHARD_FORMAT`].
-    pub format: String,
-    /// The experiment ("stall", "interaction").
-    pub experiment: String,
-    /// Which slice.
-    pub shard: Shard,
-    /// How many runs the whole study plans.
-    pub planned_runs: usize,
-    /// The study's configuration.
-    pub config: Value,
-    /// The study's options that decide its outcome (not where it writes or how many threads it uses).
-    pub options: Value,
-    /// Wall-clock time of this shard, s.
-    pub wall_s: f64,
-    /// Position in the plan of each run, in order (the same length as `runs`).
-    pub positions: Vec<usize>,
-    /// The runs, in planned order.
-    pub runs: Vec<R>,
-}
+use super::Shard;
+use super::file::{SHARD_FORMAT, ShardFile, load};
 
 /// Why shards could not be merged.
 #[derive(Debug, thiserror::Error)]
@@ -195,6 +72,14 @@ pub enum MergeError {
         /// What it holds.
         found: Vec<usize>,
     },
+    /// The merged options are not the experiment's options.
+    #[error("the shards' options are not {experiment} options: {reason}")]
+    Options {
+        /// The experiment.
+        experiment: String,
+        /// Why.
+        reason: String,
+    },
 }
 
 /// Where two shards disagree.
@@ -215,94 +100,13 @@ pub struct Difference {
     pub vb: String,
 }
 
-/// The shard files in `paths`: a directory contributes every `shard-*-of-*.json` in it, a file itself.
-pub fn shard_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, MergeError> {
-    let mut files = Vec::new();
-    for p in paths {
-        if p.is_dir() {
-            let entries = std::fs::read_dir(p).map_err(|source| MergeError::Read {
-                path: p.clone(),
-                source,
-            })?;
-            let mut here: Vec<PathBuf> = entries
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| {
-                    f.file_name().and_then(|n| n.to_str()).is_some_and(|n| {
-                        n.starts_with("shard-") && n.contains("-of-") && n.ends_with(".json")
-                    })
-                })
-                .collect();
-            here.sort();
-            files.extend(here);
-        } else {
-            files.push(p.clone());
-        }
-    }
-    if files.is_empty() {
-        let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
-        return Err(MergeError::NoShards(names.join(", ")));
-    }
-    Ok(files)
-}
-
-/// The experiment a shard file belongs to (read before its runs, to pick the experiment's merger).
-pub fn experiment_of(path: &Path) -> Result<String, MergeError> {
-    #[derive(Deserialize)]
-    struct Head {
-        format: String,
-        experiment: String,
-    }
-    let head: Head = serde_json::from_str(&read(path)?).map_err(|e| MergeError::Parse {
-        path: path.to_path_buf(),
-        reason: e.to_string(),
-    })?;
-    check_format(path, &head.format)?;
-    Ok(head.experiment)
-}
-
-fn read(path: &Path) -> Result<String, MergeError> {
-    std::fs::read_to_string(path).map_err(|source| MergeError::Read {
-        path: path.to_path_buf(),
-        source,
-    })
-}
-
-fn check_format(path: &Path, format: &str) -> Result<(), MergeError> {
-    if format == SHARD_FORMAT {
-        Ok(())
-    } else {
-        Err(MergeError::Parse {
-            path: path.to_path_buf(),
-            reason: format!("format is {format:?}"),
-        })
-    }
-}
-
-/// Reads one shard file.
-pub fn load<R: for<'de> Deserialize<'de>>(path: &Path) -> Result<ShardFile<R>, MergeError> {
-    let file: ShardFile<R> = serde_json::from_str(&read(path)?).map_err(|e| MergeError::Parse {
-        path: path.to_path_buf(),
-        reason: e.to_string(),
-    })?;
-    check_format(path, &file.format)?;
-    Ok(file)
-}
-
-/// Writes `file` as `dir/shard-I-of-N.json` and returns the path.
-pub fn write<R: Serialize>(dir: &Path, file: &ShardFile<R>) -> std::io::Result<PathBuf> {
-    std::fs::create_dir_all(dir)?;
-    let path = dir.join(file.shard.file_name());
-    let json = serde_json::to_string(file).map_err(std::io::Error::other)?;
-    std::fs::write(&path, json)?;
-    Ok(path)
-}
-
 /// The shards of one study, checked and put together.
 #[derive(Debug)]
 pub struct Merged<R> {
     /// The configuration (as the first shard has it; all agree).
     pub config: Value,
-    /// The options (as the first shard has them; all agree but in [`NOT_OUTCOME`]).
+    /// The options: all shards agree but in [`NOT_OUTCOME`]; `threads` is the largest of the shards' (the
+    /// most any one shard ran on), the rest as the first shard has them.
     pub options: Value,
     /// Every run, in planned order.
     pub runs: Vec<R>,
@@ -440,7 +244,14 @@ pub fn merge<R>(
             runs: runs.join(", "),
         });
     }
-    let (config, options) = (first.config.clone(), first.options.clone());
+    let (config, mut options) = (first.config.clone(), first.options.clone());
+    let threads = shards
+        .iter()
+        .filter_map(|(_, s)| s.options.get("threads").and_then(Value::as_u64))
+        .max();
+    if let (Some(o), Some(threads)) = (options.as_object_mut(), threads) {
+        o.insert("threads".into(), threads.into());
+    }
     let mut shards = shards;
     shards.sort_by_key(|(_, s)| s.shard.index);
     let wall_s = shards.iter().map(|(_, s)| s.wall_s).sum();
@@ -451,6 +262,87 @@ pub fn merge<R>(
         runs,
         wall_s,
     })
+}
+
+/// Reads the shard files `files` of `experiment` and [`merge`]s them.
+pub fn merge_files<R: DeserializeOwned>(
+    experiment: &str,
+    files: &[PathBuf],
+) -> Result<Merged<R>, MergeError> {
+    let mut shards = Vec::with_capacity(files.len());
+    for f in files {
+        shards.push((f.clone(), load::<R>(f)?));
+    }
+    merge(experiment, shards)
+}
+
+/// The line a merge adds to the study's terminal table.
+pub fn merged_note(files: usize, out: &Path) -> String {
+    format!("merged {files} shard file(s) into {}\n", out.display())
+}
+
+/// A study put together from its shards, ready for its experiment to assemble.
+#[derive(Debug)]
+pub struct MergedStudy<O, R> {
+    /// Where the merged study goes.
+    pub out: PathBuf,
+    /// Its options (with `out` as the results directory; `threads` as [`Merged::options`] says).
+    pub options: O,
+    /// Every run, in planned order.
+    pub runs: Vec<R>,
+    /// The shards' wall-clock times added up, s.
+    pub wall_s: f64,
+}
+
+/// Reads and [`merge`]s the shard files `files` of `experiment`, with the options as `O`, going into `out`
+/// (default: `results/<experiment>-<seed>`, as the unsharded study's).
+pub fn merge_study<O: DeserializeOwned, R: DeserializeOwned>(
+    experiment: &str,
+    files: &[PathBuf],
+    out: Option<&Path>,
+) -> Result<MergedStudy<O, R>, MergeError> {
+    let merged = merge_files::<R>(experiment, files)?;
+    let out = merged.out_dir(experiment, out);
+    Ok(MergedStudy {
+        options: merged.options_as(experiment, &out)?,
+        out,
+        runs: merged.runs,
+        wall_s: merged.wall_s,
+    })
+}
+
+impl<R> Merged<R> {
+    /// Where the merged study goes: `out`, or `results/<experiment>-<seed>` as the unsharded study's default.
+    pub fn out_dir(&self, experiment: &str, out: Option<&Path>) -> PathBuf {
+        match out {
+            Some(out) => out.to_path_buf(),
+            None => {
+                let seed = self
+                    .options
+                    .get("seed")
+                    .and_then(Value::as_u64)
+                    .unwrap_or(0);
+                PathBuf::from(format!("results/{experiment}-{seed}"))
+            }
+        }
+    }
+
+    /// The merged options as `experiment`'s options type, with `out` as the results directory.
+    pub fn options_as<O: DeserializeOwned>(
+        &self,
+        experiment: &str,
+        out: &Path,
+    ) -> Result<O, MergeError> {
+        let mut options = self.options.clone();
+        let reason = |e: serde_json::Error| MergeError::Options {
+            experiment: experiment.into(),
+            reason: e.to_string(),
+        };
+        if let Some(o) = options.as_object_mut() {
+            o.insert("out".into(), serde_json::to_value(out).map_err(reason)?);
+        }
+        serde_json::from_value(options).map_err(reason)
+    }
 }
 
 /// Options that do not decide a study's outcome: shards may differ in them.
@@ -473,53 +365,6 @@ fn head<R>(s: &ShardFile<R>) -> Value {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn shards_parse_and_refuse_with_the_bound() {
-        assert_eq!("2/4".parse(), Ok(Shard { index: 2, count: 4 }));
-        assert!(matches!(
-            "4/4".parse::<Shard>(),
-            Err(ShardParseError::IndexOutOfRange {
-                index: 4,
-                count: 4,
-                ..
-            })
-        ));
-        assert!(matches!(
-            "0/0".parse::<Shard>(),
-            Err(ShardParseError::NoShards(_))
-        ));
-        assert!(matches!(
-            "3".parse::<Shard>(),
-            Err(ShardParseError::Form(_))
-        ));
-        assert!(matches!(
-            "-1/4".parse::<Shard>(),
-            Err(ShardParseError::Form(_))
-        ));
-    }
-
-    #[test]
-    fn the_slices_are_disjoint_balanced_and_cover_the_plan() {
-        for planned in 0..30 {
-            for count in 1..9 {
-                let mut all = Vec::new();
-                let mut sizes = Vec::new();
-                for index in 0..count {
-                    let part = Shard { index, count }.slice((0..planned).collect::<Vec<_>>());
-                    sizes.push(part.len());
-                    all.extend(part);
-                }
-                assert_eq!(
-                    all,
-                    (0..planned).collect::<Vec<_>>(),
-                    "{planned} in {count}"
-                );
-                let (lo, hi) = (sizes.iter().min(), sizes.iter().max());
-                assert!(hi.zip(lo).is_some_and(|(h, l)| h - l <= 1), "{sizes:?}");
-            }
-        }
-    }
 
     fn file(index: usize, count: usize, seed: u64) -> (PathBuf, ShardFile<usize>) {
         let shard = Shard { index, count };
@@ -544,6 +389,54 @@ mod tests {
         let m = merge("stall", shards).unwrap();
         assert_eq!(m.runs, (0..8).map(|p| p * 10).collect::<Vec<_>>());
         assert_eq!(m.wall_s, 3.0);
+    }
+
+    #[test]
+    fn the_merged_threads_are_the_most_any_shard_ran_on() {
+        let with_threads = |index, threads: u64| {
+            let (p, mut f) = file(index, 3, 1);
+            f.options["threads"] = threads.into();
+            (p, f)
+        };
+        // The first shard given ran on 1 thread; another on 4.
+        let m = merge(
+            "stall",
+            vec![with_threads(0, 1), with_threads(1, 4), with_threads(2, 2)],
+        )
+        .unwrap();
+        assert_eq!(m.options["threads"], 4);
+        assert_eq!(m.options["seed"], 1);
+    }
+
+    #[test]
+    fn the_merged_options_take_the_results_directory_and_the_default_is_the_experiments() {
+        #[derive(serde::Deserialize)]
+        struct Opts {
+            seed: u64,
+            minutes: f64,
+            out: PathBuf,
+        }
+        let m = merge("stall", vec![file(0, 1, 7)]).unwrap();
+        let o: Opts = m.options_as("stall", Path::new("merged")).unwrap();
+        assert_eq!(
+            (o.seed, o.minutes, o.out),
+            (7, 1.0, PathBuf::from("merged"))
+        );
+        assert_eq!(m.out_dir("stall", None), PathBuf::from("results/stall-7"));
+        assert_eq!(m.out_dir("stall", Some(Path::new("x"))), PathBuf::from("x"));
+        #[derive(Debug, serde::Deserialize)]
+        #[allow(dead_code)]
+        struct Other {
+            window_min: f64,
+        }
+        let e = m
+            .options_as::<Other>("interaction", Path::new("x"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("not interaction options") && e.contains("window_min"),
+            "{e}"
+        );
     }
 
     #[test]

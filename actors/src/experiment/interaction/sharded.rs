@@ -1,0 +1,163 @@
+//! The interaction study in shards: [`run_shard`] runs one slice of the plan and writes
+//! `shard-I-of-N.json`; [`merge`] reads the shards back and writes the same summary, tables and figures as
+//! the unsharded study (the wall-clock fields aside: the merged `wall_s` is the shards' wall times added up).
+//!
+//! `summary.json` holds each run without what only the analysis reads (its aligned windows, its timeline and
+//! its tick records); a shard keeps those too (`ShardRun`), so the merged study computes its statistics
+//! and figures from the same numbers. Tick records are kept only by the runs that keep them in the
+//! unsharded study (runs 0 and 1, which the Figure 3 analogue draws), so other shards stay small.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use pavlov::analysis::interaction::curve::RunTimeline;
+use pavlov::config::Config;
+use pavlov::record::TickRecord;
+use serde::{Deserialize, Serialize};
+
+use super::run::{AlignedWindow, InteractionRun};
+use super::{InteractionOptions, assemble, plan, report, run_runs};
+use crate::experiment::shard::{self, Shard};
+
+/// The experiment's name in shard files.
+pub const EXPERIMENT: &str = "interaction";
+
+/// One run as a shard file keeps it: the run as `summary.json` has it, and what the analysis reads of it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub(crate) struct ShardRun {
+    /// The run (without the fields below, which it does not serialise).
+    run: InteractionRun,
+    /// Its aligned windows (Figure 4).
+    aligned_windows: Vec<AlignedWindow>,
+    /// Its timeline (the time course).
+    timeline: RunTimeline,
+    /// Its tick records, when the study keeps them (runs 0 and 1, for Figure 3); else empty.
+    records: Vec<TickRecord>,
+}
+
+impl From<InteractionRun> for ShardRun {
+    fn from(mut run: InteractionRun) -> Self {
+        ShardRun {
+            aligned_windows: std::mem::take(&mut run.aligned_windows),
+            timeline: std::mem::take(&mut run.timeline),
+            records: std::mem::take(&mut run.records)
+                .into_iter()
+                .map(Arc::unwrap_or_clone)
+                .collect(),
+            run,
+        }
+    }
+}
+
+impl From<ShardRun> for InteractionRun {
+    fn from(s: ShardRun) -> Self {
+        InteractionRun {
+            aligned_windows: s.aligned_windows,
+            timeline: s.timeline,
+            records: s.records.into_iter().map(Arc::new).collect(),
+            ..s.run
+        }
+    }
+}
+
+/// Runs slice `shard` of the study and writes `opts.out/shard-I-of-N.json` (and, when recording, the runs'
+/// recordings under `opts.out/runs/`); returns the shard file's path and a one-line summary.
+pub fn run_shard(
+    base: &Config,
+    opts: &InteractionOptions,
+    shard: Shard,
+    progress: bool,
+) -> anyhow::Result<(PathBuf, String)> {
+    shard::run_slice(
+        EXPERIMENT,
+        shard,
+        plan(opts),
+        base,
+        opts,
+        &opts.out,
+        |specs| {
+            let runs = run_runs(base, opts, specs, progress)?;
+            Ok(runs.into_iter().map(ShardRun::from).collect::<Vec<_>>())
+        },
+    )
+}
+
+/// Reads the shard files `files`, checks they are exactly the slices of one interaction study, and writes
+/// the study as the unsharded run would have produced it into `out` (default: `results/interaction-<seed>`);
+/// returns the terminal table.
+pub fn merge(files: &[PathBuf], out: Option<&Path>) -> anyhow::Result<String> {
+    let m = shard::merge_study::<InteractionOptions, ShardRun>(EXPERIMENT, files, out)?;
+    let runs = m.runs.into_iter().map(InteractionRun::from).collect();
+    let study = assemble(m.options, runs, m.wall_s);
+    report::write_all(&m.out, &study)?;
+    Ok(report::table(&study) + &shard::merged_note(files.len(), &m.out))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pavlov::analysis::interaction::curve::CommandResult;
+    use pavlov::analysis::interaction::{CommandOutcome, CommandWindow, ResponseTiming};
+    use pavlov::control::Mode;
+
+    fn run() -> InteractionRun {
+        InteractionRun {
+            index: 1,
+            mode: Mode::Pavlovian,
+            robot_seed: 11,
+            human_seed: 12,
+            metrics: ResponseTiming {
+                outcomes: vec![CommandOutcome::Answered { latency_ms: -0.1 }],
+                false_starts: 1,
+                false_starts_ms: vec![1234.5],
+                responding_outside_ms: 0.1 + 0.2,
+                duration_ms: 60_000.0,
+            },
+            commands: vec![CommandWindow {
+                onset_ms: 100.0,
+                end_ms: 900.0,
+            }],
+            physical: Vec::new(),
+            aligned_onsets: vec![40],
+            aligned_windows: vec![vec![(Some(-1234.25), 0.1 + 0.7), (None, -3.0)]],
+            timeline: RunTimeline {
+                pavlovian: true,
+                duration_ms: 60_000.0,
+                commands: vec![CommandResult {
+                    onset_ms: 100.0,
+                    decision_ms: Some(-0.1),
+                    current_ms: None,
+                    motion_ms: Some(1.0 / 3.0),
+                }],
+                false_starts_ms: vec![1234.5],
+            },
+            recording: None,
+            wall_s: 0.5,
+            records: vec![Arc::new(TickRecord::at_rest(7, 140.0, Mode::Pavlovian))],
+        }
+    }
+
+    #[test]
+    fn a_run_travels_through_a_shard_file_exactly() {
+        let before = run();
+        let json = serde_json::to_string(&ShardRun::from(before.clone())).unwrap();
+        let after = InteractionRun::from(serde_json::from_str::<ShardRun>(&json).unwrap());
+        // What summary.json shows, and what only the analysis reads, bit for bit.
+        assert_eq!(
+            serde_json::to_value(&before).unwrap(),
+            serde_json::to_value(&after).unwrap()
+        );
+        assert_eq!(before.aligned_windows, after.aligned_windows);
+        assert_eq!(before.timeline, after.timeline);
+        assert_eq!(before.records, after.records);
+    }
+
+    #[test]
+    fn a_run_that_keeps_no_records_writes_none() {
+        let mut r = run();
+        r.records.clear();
+        let v = serde_json::to_value(ShardRun::from(r)).unwrap();
+        assert_eq!(v["records"], serde_json::json!([]));
+        assert!(v["run"].get("records").is_none(), "not twice");
+    }
+}
