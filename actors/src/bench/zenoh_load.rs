@@ -32,6 +32,8 @@ pub struct Side {
 pub struct ZenohComparison {
     off: Side,
     on: Side,
+    /// Each run in order: with the bridge or not, its tick → command p99 (µs), its skipped ticks.
+    runs: Vec<(bool, u64, u64)>,
 }
 
 /// A loopback-only Zenoh peer configuration: listen on `listen`, connect to `connect`, no scouting.
@@ -59,8 +61,10 @@ pub async fn run_zenoh_comparison(
 ) -> anyhow::Result<ZenohComparison> {
     let quarter = duration / 4;
     let (mut off, mut on) = (Side::default(), Side::default());
+    let mut runs = Vec::new();
     for with in [false, true, true, false] {
         let run = run_one(&config, with, quarter).await?;
+        runs.push((with, run.to_command.quantiles().p99_us, run.skipped));
         let side = if with { &mut on } else { &mut off };
         side.duration += run.duration;
         side.ticks += run.ticks;
@@ -76,7 +80,7 @@ pub async fn run_zenoh_comparison(
         a.events_missed += b.events_missed;
         a.put_errors += b.put_errors;
     }
-    Ok(ZenohComparison { off, on })
+    Ok(ZenohComparison { off, on, runs })
 }
 
 async fn run_one(config: &Config, with: bool, duration: Duration) -> anyhow::Result<Side> {
@@ -186,6 +190,49 @@ impl fmt::Display for ZenohComparison {
             };
             writeln!(f, "{name:<26}{a:>10}{b:>10}{ratio:>12}")?;
         }
-        Ok(())
+        self.fmt_goal(f)
+    }
+}
+
+impl ZenohComparison {
+    /// Each run's p99, the spread between the two runs without the bridge (the measurement's own noise),
+    /// and the goal: no skipped tick added and p99 on / off ≤ 1.10.
+    fn fmt_goal(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let each: Vec<String> = self
+            .runs
+            .iter()
+            .map(|(with, p99, skipped)| {
+                format!(
+                    "{} {p99} µs ({skipped} skipped)",
+                    if *with { "on" } else { "off" }
+                )
+            })
+            .collect();
+        writeln!(f, "tick → command p99 of each run: {}", each.join(", "))?;
+        let offs: Vec<u64> = self.runs.iter().filter(|r| !r.0).map(|r| r.1).collect();
+        if let (Some(&lo), Some(&hi)) = (offs.iter().min(), offs.iter().max())
+            && lo > 0
+        {
+            writeln!(
+                f,
+                "the two runs without the bridge differ by {:.0} % in p99: the noise of this measurement",
+                (hi as f64 / lo as f64 - 1.0) * 100.0
+            )?;
+        }
+        let (off, on) = (
+            self.off.to_command.quantiles().p99_us,
+            self.on.to_command.quantiles().p99_us,
+        );
+        let ratio = if off == 0 {
+            f64::NAN
+        } else {
+            on as f64 / off as f64
+        };
+        let met = self.on.skipped <= self.off.skipped && ratio <= 1.10;
+        writeln!(
+            f,
+            "goal no skipped tick added and tick → command p99 on / off ≤ 1.10: {ratio:.2}, {}",
+            if met { "met" } else { "MISSED" }
+        )
     }
 }
