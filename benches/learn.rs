@@ -128,91 +128,75 @@ fn bench_set(c: &mut Criterion, label: &str, spec: PredictionSpec, obs_len: usiz
     });
 }
 
-fn bench_step(c: &mut Criterion, label: &str, coder: &TileCoder, params: TdParams, len: usize) {
-    let column = Column {
-        alpha: params.alpha,
-        initial_weight: params.initial_weight,
-    };
-    let mut td = TdLearner::new(
-        coder.num_features(),
-        coder.num_tilings(),
-        params.lambda,
-        params.sigma,
-        column,
-    )
-    .expect("valid params");
+/// Times `step` (given a tick's active features and its stimulus) after the tile coding of each tick.
+fn bench_ticks(
+    c: &mut Criterion,
+    label: &str,
+    coder: &TileCoder,
+    len: usize,
+    mut step: impl FnMut(&[usize], bool) -> (f64, f64),
+) {
     let (inputs, stimuli) = stream(len, 0.05, 2);
-    let gamma = |e: bool| if e { 0.0 } else { 0.96 };
     let mut x = Vec::with_capacity(coder.num_tilings());
     let mut t = 1;
     c.bench_function(label, |b| {
         b.iter(|| {
             coder.active(black_box(&inputs[t % TICKS]), &mut x);
-            let v = td.predict_value(&x);
-            let e = stimuli[t % TICKS];
-            let delta = td.learn(gamma(e), f64::from(u8::from(e)));
+            let out = step(&x, stimuli[t % TICKS]);
             t += 1;
-            black_box((v, delta))
+            black_box(out)
         })
+    });
+}
+
+fn gamma(stimulus: bool) -> f64 {
+    if stimulus { 0.0 } else { 0.96 }
+}
+
+fn column(params: &TdParams) -> Column {
+    Column {
+        alpha: params.alpha,
+        initial_weight: params.initial_weight,
+    }
+}
+
+/// What the set runs for the shape: [`TdLearner`].
+fn bench_step(c: &mut Criterion, label: &str, coder: &TileCoder, params: TdParams, len: usize) {
+    let (n, tilings) = (coder.num_features(), coder.num_tilings());
+    let mut td = TdLearner::new(n, tilings, params.lambda, params.sigma, column(&params))
+        .expect("valid params");
+    bench_ticks(c, label, coder, len, |x, e| {
+        let v = td.predict_value(x);
+        let delta = td.learn(gamma(e), f64::from(u8::from(e)));
+        (v, delta.unwrap_or(f64::NAN))
     });
 }
 
 /// The dense learner alone, whatever the shape.
 fn bench_dense(c: &mut Criterion, label: &str, coder: &TileCoder, params: TdParams, len: usize) {
-    let column = Column {
-        alpha: params.alpha,
-        initial_weight: params.initial_weight,
-    };
-    let mut td = DenseTd::new(coder.num_features(), params.lambda, params.sigma, column)
-        .expect("valid params");
-    let (inputs, stimuli) = stream(len, 0.05, 2);
-    let gamma = |e: bool| if e { 0.0 } else { 0.96 };
-    let mut x = Vec::with_capacity(coder.num_tilings());
-    let mut t = 1;
-    c.bench_function(label, |b| {
-        b.iter(|| {
-            coder.active(black_box(&inputs[t % TICKS]), &mut x);
-            td.predict(&x);
-            let v = td.value();
-            let e = stimuli[t % TICKS];
-            let delta = td
-                .learn(gamma(e), f64::from(u8::from(e)))
-                .expect("predicted first");
-            t += 1;
-            black_box((v, delta))
-        })
+    let n = coder.num_features();
+    let mut td =
+        DenseTd::new(n, params.lambda, params.sigma, column(&params)).expect("valid params");
+    bench_ticks(c, label, coder, len, |x, e| {
+        td.predict(x);
+        let delta = td.learn(gamma(e), f64::from(u8::from(e)));
+        (td.value(), delta.expect("predicted first"))
     });
 }
 
+/// The deferred group of one alone, whatever the shape.
 fn bench_group(c: &mut Criterion, label: &str, coder: &TileCoder, params: TdParams, len: usize) {
-    let column = Column {
-        alpha: params.alpha,
-        initial_weight: params.initial_weight,
-    };
-    let mut group: TraceGroup<f64> = TraceGroup::new(
-        coder.num_features(),
-        params.lambda,
-        params.sigma,
-        vec![column],
-    )
-    .expect("valid params");
-    let (inputs, stimuli) = stream(len, 0.05, 2);
-    let gamma = |e: bool| if e { 0.0 } else { 0.96 };
-    let mut x = Vec::with_capacity(coder.num_tilings());
+    let n = coder.num_features();
+    let mut group: TraceGroup<f64> =
+        TraceGroup::new(n, params.lambda, params.sigma, vec![column(&params)])
+            .expect("valid params");
     let mut delta = [0.0];
-    let mut t = 1;
-    c.bench_function(label, |b| {
-        b.iter(|| {
-            coder.active(black_box(&inputs[t % TICKS]), &mut x);
-            let y = group.predict(&x)[0];
-            let v = params.sigma.value(y);
-            let e = stimuli[t % TICKS];
-            let stopped = group
-                .learn(gamma(e), &[f64::from(u8::from(e))], &mut delta)
-                .expect("one cumulant");
-            t += 1;
-            black_box((v, delta[0], stopped))
-        })
+    bench_ticks(c, label, coder, len, |x, e| {
+        let v = params.sigma.value(group.predict(x)[0]);
+        group
+            .learn(gamma(e), &[f64::from(u8::from(e))], &mut delta)
+            .expect("one cumulant");
+        (v, delta[0])
     });
 }
 
@@ -224,44 +208,20 @@ fn bench_reference(
     len: usize,
 ) {
     let mut td = TdLambda::new(coder.num_features(), params).expect("valid params");
-    let (inputs, stimuli) = stream(len, 0.05, 2);
-    let gamma = |e: bool| if e { 0.0 } else { 0.96 };
-    let mut x_prev = Vec::with_capacity(coder.num_tilings());
-    let mut x_now = Vec::with_capacity(coder.num_tilings());
-    coder.active(&inputs[0], &mut x_prev);
+    let mut x_prev: Vec<usize> = Vec::with_capacity(coder.num_tilings());
     let mut gamma_prev = 0.96;
-    let mut t = 1;
-    c.bench_function(label, |b| {
-        b.iter(|| {
-            coder.active(black_box(&inputs[t % TICKS]), &mut x_now);
-            let v = td.predict(&x_now);
-            let e = stimuli[t % TICKS];
-            let delta = td.update(
-                &x_prev,
-                gamma_prev,
-                f64::from(u8::from(e)),
-                gamma(e),
-                &x_now,
-            );
-            std::mem::swap(&mut x_prev, &mut x_now);
-            gamma_prev = gamma(e);
-            t += 1;
-            black_box((v, delta))
-        })
+    bench_ticks(c, label, coder, len, |x, e| {
+        let v = td.predict(x);
+        let delta = td.update(&x_prev, gamma_prev, f64::from(u8::from(e)), gamma(e), x);
+        x_prev.clear();
+        x_prev.extend_from_slice(x);
+        gamma_prev = gamma(e);
+        (v, delta)
     });
 }
 
 fn bench_tiles(c: &mut Criterion, label: &str, coder: &TileCoder, len: usize) {
-    let (inputs, _) = stream(len, 0.05, 2);
-    let mut x = Vec::with_capacity(coder.num_tilings());
-    let mut t = 1;
-    c.bench_function(label, |b| {
-        b.iter(|| {
-            coder.active(black_box(&inputs[t % TICKS]), &mut x);
-            t += 1;
-            black_box(x.len())
-        })
-    });
+    bench_ticks(c, label, coder, len, |x, _| (x.len() as f64, 0.0));
 }
 
 fn learning_step(c: &mut Criterion) {

@@ -140,6 +140,28 @@ pub fn check_tau(name: &str, tau: f64) -> Result<(), LearnError> {
     }
 }
 
+/// Dense weights and traces of a checkpoint: one finite entry per feature of `features`.
+pub fn check_dense_state(
+    name: &str,
+    features: usize,
+    weights: &[f64],
+    traces: &[f64],
+) -> Result<(), LearnError> {
+    for v in [weights, traces] {
+        if v.len() != features {
+            return Err(LearnError::FeatureCountMismatch {
+                name: name.into(),
+                expected: features,
+                got: v.len(),
+            });
+        }
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(LearnError::NonFiniteSnapshot(name.into()));
+        }
+    }
+    Ok(())
+}
+
 /// The initial weight finite.
 pub fn check_initial_weight(name: &str, value: f64) -> Result<(), LearnError> {
     if value.is_finite() {

@@ -19,7 +19,7 @@
 //!
 //! Its weights and trace *are* its exact state: a snapshot of them continues bit for bit.
 
-use super::bounds::{check_alpha_positive, check_initial_weight, check_lambda};
+use super::bounds::{check_alpha_positive, check_dense_state, check_initial_weight, check_lambda};
 use super::group::{Column, GroupState, TraceGroup};
 use super::{LearnError, Sigma};
 
@@ -285,19 +285,7 @@ impl DenseTd {
         traces: &[f64],
         previous: Option<(&[usize], f64)>,
     ) -> Result<(), LearnError> {
-        let n = self.features();
-        for v in [weights, traces] {
-            if v.len() != n {
-                return Err(LearnError::FeatureCountMismatch {
-                    name: "prediction".into(),
-                    expected: n,
-                    got: v.len(),
-                });
-            }
-            if !v.iter().all(|x| x.is_finite()) {
-                return Err(LearnError::NonFiniteSnapshot("prediction".into()));
-            }
-        }
+        check_dense_state("prediction", self.features(), weights, traces)?;
         self.weights.copy_from_slice(weights);
         self.traces.copy_from_slice(traces);
         self.diverged = false;

@@ -33,6 +33,8 @@ pub mod sigma;
 pub mod snapshot;
 pub mod spec;
 pub mod td;
+#[cfg(test)]
+pub(crate) mod test_stream;
 pub mod tiles;
 
 pub use bounds::ParamBounds;

@@ -3,24 +3,8 @@
 
 use super::*;
 use crate::learn::{TdLambda, TdParams, TileCoder};
-use crate::rng::Rng;
 
-/// `ticks` inputs of `dims` dimensions that hold their value for a while, and stimuli of probability
-/// `p`.
-fn stream(ticks: usize, dims: usize, p: f64, seed: u64) -> Vec<(Vec<f64>, bool)> {
-    let mut rng = Rng::new(seed);
-    let mut x: Vec<f64> = (0..dims).map(|_| rng.next_f64()).collect();
-    (0..ticks)
-        .map(|_| {
-            for v in &mut x {
-                if rng.chance(0.1) {
-                    *v = rng.next_f64();
-                }
-            }
-            (x.clone(), rng.chance(p))
-        })
-        .collect()
-}
+use crate::learn::test_stream::held_stream as stream;
 
 struct Paper {
     coder: TileCoder,

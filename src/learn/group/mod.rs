@@ -329,19 +329,7 @@ impl<W: Weight> TraceGroup<W> {
         traces: &[f64],
         previous: Option<(&[usize], f64)>,
     ) -> Result<(), LearnError> {
-        let n = self.features();
-        for v in [weights, traces] {
-            if v.len() != n {
-                return Err(LearnError::FeatureCountMismatch {
-                    name: "group".into(),
-                    expected: n,
-                    got: v.len(),
-                });
-            }
-            if !v.iter().all(|x| x.is_finite()) {
-                return Err(LearnError::NonFiniteSnapshot("group".into()));
-            }
-        }
+        super::bounds::check_dense_state("group", self.features(), weights, traces)?;
         if col >= self.columns.len() {
             return Err(LearnError::UnknownPrediction(format!("column {col}")));
         }

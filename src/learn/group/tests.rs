@@ -2,24 +2,8 @@
 
 use super::*;
 use crate::learn::{TdLambda, TdParams, TileCoder};
-use crate::rng::Rng;
 
-/// A random stream of `ticks` inputs of `dims` dimensions with stimuli of probability `p_stim`;
-/// dimensions hold their value for a while (features persist over ticks, as a robot's do).
-fn stream(ticks: usize, dims: usize, p_stim: f64, seed: u64) -> Vec<(Vec<f64>, bool)> {
-    let mut rng = Rng::new(seed);
-    let mut x: Vec<f64> = (0..dims).map(|_| rng.next_f64()).collect();
-    (0..ticks)
-        .map(|_| {
-            for v in &mut x {
-                if rng.chance(0.1) {
-                    *v = rng.next_f64();
-                }
-            }
-            (x.clone(), rng.chance(p_stim))
-        })
-        .collect()
-}
+use crate::learn::test_stream::held_stream as stream;
 
 struct Case {
     lambda: f64,
