@@ -7,11 +7,9 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use super::SHARD_FORMAT;
 use super::Shard;
-use super::merge::{Difference, MergeError};
-
-/// The format tag of a shard file.
-pub const SHARD_FORMAT: &str = "pavlov-shard/1";
+use super::error::{Difference, MergeError};
 
 /// What one shard wrote: enough to check it belongs with the others, and its runs.
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -25,9 +25,12 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-pub use file::{
-    SHARD_FORMAT, ShardFile, experiment_of, experiment_of_all, load, run_slice, shard_files, write,
-};
+mod error;
+
+/// The format tag of a shard file.
+pub const SHARD_FORMAT: &str = "pavlov-shard/1";
+
+pub use file::{ShardFile, experiment_of, experiment_of_all, load, run_slice, shard_files, write};
 pub use merge::{
     Difference, MergeError, Merged, MergedStudy, NOT_OUTCOME, first_difference, merge, merge_files,
     merge_study, merged_note,
