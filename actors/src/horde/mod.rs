@@ -20,7 +20,7 @@ mod worker;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
-use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
@@ -37,8 +37,12 @@ use worker::{Target, Worker};
 /// waiting, so a step that runs long once costs nothing, and a Horde that is too slow is seen at once.
 pub(crate) const QUEUE: usize = 1;
 
-/// One tick's signals, as the Horde reads them.
-#[derive(Debug, Clone)]
+/// The most tick buffers in use at once: one being learned, [`QUEUE`] waiting.
+const BUFFERS: usize = QUEUE + 1;
+
+/// One tick's signals, as the Horde reads them. The buffers go round: learning fills one, the Horde
+/// learns from it and sends it back, so an offer allocates nothing once [`BUFFERS`] exist.
+#[derive(Debug, Clone, Default)]
 pub(crate) struct HordeTick {
     pub(crate) seq: u64,
     pub(crate) obs: Vec<f64>,
@@ -93,6 +97,12 @@ pub enum HordeError {
 /// The running Horde.
 pub(crate) struct HordeHandle {
     ticks: SyncSender<HordeTick>,
+    /// Buffers the Horde has learned from, back for the next offers.
+    returned: Receiver<HordeTick>,
+    /// Buffers here, ready to fill.
+    spare: Vec<HordeTick>,
+    /// Buffers allocated so far (at most [`BUFFERS`]).
+    allocated: usize,
     commands: SyncSender<HordeCommand>,
     offers: Arc<OfferCounters>,
     status: watch::Receiver<HordeStatus>,
@@ -154,6 +164,7 @@ impl HordeHandle {
         );
         let names = Arc::new(horde.predictions().iter().map(|p| p.name.clone()).collect());
         let (tick_tx, tick_rx) = sync_channel(QUEUE);
+        let (return_tx, return_rx) = sync_channel(BUFFERS);
         let (command_tx, command_rx) = sync_channel(16);
         let (status_tx, status_rx) = watch::channel(HordeStatus {
             predictions: shape.predictions,
@@ -169,6 +180,7 @@ impl HordeHandle {
             idle,
             horde,
             ticks: tick_rx,
+            returns: return_tx,
             commands: command_rx,
             offers: offers.clone(),
             status: status_tx,
@@ -188,6 +200,9 @@ impl HordeHandle {
             .map_err(HordeError::Thread)?;
         Ok(HordeHandle {
             ticks: tick_tx,
+            returned: return_rx,
+            spare: Vec::with_capacity(BUFFERS),
+            allocated: 0,
             commands: command_tx,
             offers,
             status: status_rx,
@@ -198,24 +213,43 @@ impl HordeHandle {
     }
 
     /// Hands tick `seq`'s signals over without waiting: refused (and counted) while the Horde is busy.
-    pub(crate) fn offer(&self, seq: u64, signals: &TickSignals) {
+    /// Allocates nothing once its buffers exist: while the Horde holds every buffer it is busy, and the
+    /// tick is refused without being copied.
+    pub(crate) fn offer(&mut self, seq: u64, signals: &TickSignals) {
         self.offers.offered.fetch_add(1, Ordering::Relaxed);
-        let tick = HordeTick {
-            seq,
-            obs: signals.obs.to_vec(),
-            raw: signals.raw.to_vec(),
-            extra: signals.extra.to_vec(),
-            stimuli: signals.stimuli.to_vec(),
+        self.spare.extend(self.returned.try_iter());
+        let mut tick = match self.spare.pop() {
+            Some(tick) => tick,
+            None if self.allocated < BUFFERS => {
+                self.allocated += 1;
+                HordeTick::default()
+            }
+            None => {
+                self.offers.skipped_busy.fetch_add(1, Ordering::Relaxed);
+                return;
+            }
         };
+        tick.seq = seq;
+        fill(&mut tick.obs, signals.obs);
+        fill(&mut tick.raw, signals.raw);
+        fill(&mut tick.extra, signals.extra);
+        fill(&mut tick.stimuli, signals.stimuli);
         match self.ticks.try_send(tick) {
             Ok(()) => {}
-            Err(TrySendError::Full(_)) => {
+            Err(TrySendError::Full(tick)) => {
+                self.spare.push(tick);
                 self.offers.skipped_busy.fetch_add(1, Ordering::Relaxed);
             }
             Err(TrySendError::Disconnected(_)) => {
                 tracing::debug!("the Horde thread has stopped");
             }
         }
+    }
+
+    /// How many tick buffers exist (for tests: never more than [`BUFFERS`]).
+    #[cfg(test)]
+    pub(crate) fn buffers(&self) -> usize {
+        self.allocated
     }
 
     fn command(&self, command: HordeCommand) {
@@ -269,5 +303,53 @@ impl HordeHandle {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
+    }
+}
+
+/// `to` becomes a copy of `from`, in the memory `to` has (no allocation once it is large enough).
+fn fill<T: Copy>(to: &mut Vec<T>, from: &[T]) {
+    to.clear();
+    to.extend_from_slice(from);
+}
+
+#[cfg(test)]
+mod tests {
+    use pavlov::config::Config;
+
+    use super::*;
+
+    #[test]
+    fn offers_reuse_two_buffers_and_a_tick_refused_while_busy_is_counted() {
+        let text = format!(
+            "{}\n[horde]\nscheduling = \"normal\"\n[[horde.families]]\nname = \"p\"\n\
+             cumulants = [\"obs/*\"]\ntaus = [2.0]\nlambda = 0.5\nalpha = 0.01\n\
+             features = {{ kind = \"one_dim\", all_obs = true, tiles = 4 }}\n",
+            include_str!("../../../config/stall.toml")
+        );
+        let cfg = Config::from_toml(&text).unwrap();
+        let mut handle = HordeHandle::spawn(&cfg, None, 0).unwrap().unwrap();
+        let obs = vec![0.5; cfg.signal_names().obs.len()];
+        let signals = TickSignals {
+            obs: &obs,
+            raw: &obs,
+            extra: &[],
+            stimuli: &[false],
+        };
+        // Offered back to back, faster than the Horde learns: some are refused as busy.
+        for seq in 0..2000 {
+            handle.offer(seq, &signals);
+            if seq % 100 == 0 {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
+        assert!(handle.buffers() <= BUFFERS, "{} buffers", handle.buffers());
+        let status = handle.status();
+        handle.finish(None);
+        let s = status.borrow().clone();
+        assert!(s.ticks_learned > 0, "{s:?}");
+        // Every offer is learned or counted as refused, but those still queued when it was finished.
+        let seen = s.ticks_learned + s.skipped_busy;
+        assert!((2000 - BUFFERS as u64..=2000).contains(&seen), "{s:?}");
+        assert!(s.skipped_busy > 0, "offered faster than it learns: {s:?}");
     }
 }

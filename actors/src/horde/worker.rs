@@ -36,6 +36,8 @@ pub(crate) struct Worker<W> {
     /// Whether the checkpoint writer runs under `SCHED_IDLE` (`[horde] scheduling = "idle"`).
     pub(crate) idle: bool,
     pub(crate) ticks: Receiver<HordeTick>,
+    /// Where a tick's buffer goes back once learned.
+    pub(crate) returns: std::sync::mpsc::SyncSender<HordeTick>,
     pub(crate) commands: Receiver<HordeCommand>,
     pub(crate) offers: Arc<OfferCounters>,
     pub(crate) status: watch::Sender<HordeStatus>,
@@ -100,9 +102,12 @@ impl<W: Weight> Worker<W> {
                 Ok(tick) => {
                     let started = Instant::now();
                     self.learn(&mut p, &tick);
+                    let seq = tick.seq;
+                    // Back to learning for another tick (a full queue cannot be: it holds every buffer).
+                    let _ = self.returns.try_send(tick);
                     self.copy_for(&mut p, started + self.period / 2);
                     if p.learned % VALUES_EVERY == 0 {
-                        self.publish_values(tick.seq);
+                        self.publish_values(seq);
                     }
                     if p.learned % STATUS_EVERY == 0 {
                         self.publish_status(&p);
@@ -300,6 +305,8 @@ mod tests {
             horde,
             idle: false,
             ticks: tick_rx,
+            // The tests hand ticks in themselves: the buffers need not come back.
+            returns: sync_channel(super::super::BUFFERS).0,
             commands: command_rx,
             offers: Arc::new(OfferCounters::default()),
             status: status_tx,

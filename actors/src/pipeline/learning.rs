@@ -482,7 +482,7 @@ pub(crate) async fn run(
                     tracing::debug!("gating is behind; a prediction was dropped");
                 }
                 if fresh {
-                    if let Some(h) = &learning.horde {
+                    if let Some(h) = &mut learning.horde {
                         h.offer(seq, &learning.stage.signals());
                     }
                     match learning.stage.learn() {
