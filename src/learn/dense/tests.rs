@@ -215,3 +215,38 @@ fn a_long_unvisited_trace_ends_at_zero_not_in_subnormal_numbers() {
     );
     assert!(td.traces().iter().all(|e| *e == 0.0 || e.is_normal()));
 }
+
+#[test]
+fn skipping_zero_blocks_changes_no_result() {
+    for paper in [stall(), command()] {
+        let n = paper.coder.num_features();
+        let mut plain = DenseTd::new(n, paper.lambda, paper.sigma, paper.column).unwrap();
+        let mut skipping = plain.clone().skipping_zero_blocks(true);
+        let mut x = Vec::new();
+        for (input, stim) in &stream(5000, paper.dims, 0.05, 11) {
+            paper.coder.active(input, &mut x);
+            assert_eq!(plain.predict(&x), skipping.predict(&x));
+            let r = f64::from(u8::from(*stim));
+            let (a, b) = (
+                plain.learn(gamma(*stim), r).unwrap(),
+                skipping.learn(gamma(*stim), r).unwrap(),
+            );
+            assert!(a == b || (a.is_nan() && b.is_nan()), "{a} against {b}");
+        }
+        // Equal as numbers (a skipped block may keep a weight's −0 where the full pass makes it +0).
+        assert!(
+            plain
+                .weights()
+                .iter()
+                .zip(skipping.weights())
+                .all(|(a, b)| a == b)
+        );
+        assert!(
+            plain
+                .traces()
+                .iter()
+                .zip(skipping.traces())
+                .all(|(a, b)| a == b)
+        );
+    }
+}

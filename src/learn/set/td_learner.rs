@@ -2,19 +2,24 @@
 //! deferred, whichever is faster for its shape.
 //!
 //! A pass over every weight ([`DenseTd`]) costs the features; the deferred group ([`TraceGroup`]) costs
-//! the active features, each several times over. Measured with `cargo bench --bench learn` (`step/` and
+//! the active features, each several times over. Measured with `cargo bench --bench learn` (`dense/`,
 //! `group/`, quiet machine with AVX2): at the paper's stall prediction (440 features, 44 active) the dense
 //! pass is 2.6× faster (0.26 against 0.68 µs); at its command prediction (500 features, 5 active) the
-//! two are within 10 % (0.165 against 0.176 µs, and the other way round under load), and the group's
-//! cost grows with the active features only. A prediction with at most [`DENSE_PER_ACTIVE`] features
-//! per active feature runs dense. Both compute the paper's update and
-//! agree with the reference to rounding (1e-9 over 30,000 ticks in the tests).
+//! dense pass that skips blocks of zero traces takes 0.148 µs against the group's 0.176. A prediction
+//! with at most [`DENSE_PER_ACTIVE`] features per active feature runs dense, up to
+//! [`SPARSE_DENSE_PER_ACTIVE`] dense skipping zero blocks, and beyond that (where looking at every block
+//! would cost more than the group's work on the active rows) as a group. All of them compute the paper's
+//! update and agree with the reference to rounding (1e-9 over 30,000 ticks in the tests).
 
 use super::super::group::{Column, GroupState, TraceGroup};
 use super::super::{DenseTd, LearnError, Sigma};
 
-/// The most features per active feature for which the dense learner runs.
+/// The most features per active feature for which the dense learner passes over every weight.
 pub const DENSE_PER_ACTIVE: usize = 32;
+
+/// The most features per active feature for which the dense learner runs at all, skipping blocks of
+/// zero traces; beyond it, the group.
+pub const SPARSE_DENSE_PER_ACTIVE: usize = 256;
 
 /// One on-policy prediction's learner (see the module documentation).
 // One per prediction (a handful at most), built once: the variants' sizes do not matter.
@@ -36,10 +41,12 @@ impl TdLearner {
         sigma: Sigma,
         column: Column,
     ) -> Result<Self, LearnError> {
-        if features <= DENSE_PER_ACTIVE.saturating_mul(active.max(1)) {
-            Ok(TdLearner::Dense(DenseTd::new(
-                features, lambda, sigma, column,
-            )?))
+        let per_active = features / active.max(1);
+        if per_active <= SPARSE_DENSE_PER_ACTIVE {
+            let sparse = per_active > DENSE_PER_ACTIVE;
+            Ok(TdLearner::Dense(
+                DenseTd::new(features, lambda, sigma, column)?.skipping_zero_blocks(sparse),
+            ))
         } else {
             Ok(TdLearner::Group(TraceGroup::new(
                 features,
