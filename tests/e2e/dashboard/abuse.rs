@@ -119,8 +119,14 @@ struct AbuseLog {
 }
 
 /// Phase one: clients that never read (one silent, some that also send); phase two, with the silent one
-/// still connected: the floods, the storm and the over-size messages, all at once.
-async fn abusers(addr: SocketAddr, phase_two: tokio::sync::oneshot::Sender<()>) -> AbuseLog {
+/// still connected: the floods, the storm and the over-size messages, all at once. Between the two it
+/// says phase one is over and waits for `go`, so the test's snapshot of the counters holds phase one only
+/// (on a loaded machine the floods could otherwise start before the test takes it).
+async fn abusers(
+    addr: SocketAddr,
+    phase_two: tokio::sync::oneshot::Sender<()>,
+    go: tokio::sync::oneshot::Receiver<()>,
+) -> AbuseLog {
     let mut log = AbuseLog::default();
     let silent = abuse::never_reading(addr).await;
     let pingers: Vec<_> = (0..PINGERS)
@@ -138,6 +144,7 @@ async fn abusers(addr: SocketAddr, phase_two: tokio::sync::oneshot::Sender<()>) 
         log.pingers_dropped.push(p.await.expect("pinger"));
     }
     let _ = phase_two.send(());
+    let _ = go.await;
     log.phase_two_started = Some(Instant::now());
     let malformed_ws = abuse::connect(addr).await.expect("connect");
     let mut flooders = Vec::new();
@@ -270,9 +277,11 @@ async fn abusers_neither_delay_the_tick_nor_starve_a_well_behaved_client() {
     let t0 = Instant::now();
     let (fired0, skipped0) = fired(&server);
     let (phase_tx, phase_rx) = tokio::sync::oneshot::channel();
-    let abuse = abuse_rt.spawn(abusers(addr, phase_tx));
+    let (go_tx, go_rx) = tokio::sync::oneshot::channel();
+    let abuse = abuse_rt.spawn(abusers(addr, phase_tx, go_rx));
     phase_rx.await.expect("phase one ends");
     let after_phase_one = dash.stats();
+    go_tx.send(()).expect("the abusers wait for phase two");
     let log = tokio::time::timeout(Duration::from_secs(120), abuse)
         .await
         .expect("the abuse ends within 2 min")
