@@ -18,8 +18,9 @@
 //! of this build) to mean anything on a shared lab network, and a second set of credentials to manage.
 //!
 //! Nothing here can delay the tick: the publisher reads the feed's and the event log's lossy broadcasts
-//! (bounded rings that drop the oldest; what it loses is counted as `pavlov_zenoh_missed_total`), and the
-//! bridge runs on a runtime of its own (one worker thread, `zenoh-bridge`) besides Zenoh's own threads.
+//! (bounded rings that drop the oldest; what it loses is counted as `pavlov_zenoh_missed_total`) without
+//! waiting on them, waking half a tick period away from the tick ([`publish`]), and the bridge runs on a
+//! runtime of its own (one worker thread, `zenoh-bridge`) besides Zenoh's own threads.
 
 pub(crate) mod commands;
 pub(crate) mod publish;
@@ -165,8 +166,13 @@ impl ZenohBridge {
             .await
             .map_err(|e| ZenohError::Open(e.to_string()))??;
         let cancel = bridge.cancel.clone();
+        let phase = publish::Phase {
+            first_tick: server.started,
+            period: Duration::from_millis(server.config.tick.period_ms.max(1)),
+        };
         bridge.tasks.push(runtime.spawn(publisher.run(
             status,
+            phase,
             Duration::from_millis(settings.status_every_ms),
             cancel.clone(),
         )));

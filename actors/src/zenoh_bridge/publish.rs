@@ -1,6 +1,13 @@
 //! The publisher: reads the tick feed and the event log and puts them on `pavlov/<robot>/tick` and
 //! `pavlov/<robot>/event`, and puts the status on `pavlov/<robot>/status` at a fixed period.
 //!
+//! **It works half a period away from the tick.** The publisher does not wait on the broadcasts (a
+//! waiting receiver would be woken by actuation's send, on the tick's own path, at the moment the link
+//! writer is putting the command on the wire). It wakes on its own clock instead, at the middle of each
+//! tick period ([`Phase`]), takes what the broadcasts hold without waiting (`try_recv`), and puts it; so
+//! the bridge's thread, Zenoh's transmit thread and any local subscriber run while the tick is idle. A
+//! record reaches Zenoh half a period (10 ms) after its tick.
+//!
 //! It holds receivers of the feed's and the event log's lossy broadcasts: bounded rings that drop their
 //! oldest entry when the publisher falls behind, so it can never delay the tick; what it loses is counted
 //! (`pavlov_zenoh_missed_total`). Puts use Zenoh's default congestion control for data (drop, not block).
@@ -11,7 +18,8 @@ use std::time::Duration;
 
 use pavlov::event::Event;
 use pavlov::record::TickRecord;
-use tokio::sync::broadcast::{self, error::RecvError};
+use tokio::sync::broadcast::{self, error::TryRecvError};
+use tokio::time::{Instant, MissedTickBehavior};
 use tokio_util::sync::CancellationToken;
 use zenoh::Session;
 use zenoh::pubsub::Publisher as ZPublisher;
@@ -26,6 +34,57 @@ pub(crate) struct Inputs {
     pub(crate) ticks: broadcast::Receiver<Arc<TickRecord>>,
     /// The event log.
     pub(crate) events: broadcast::Receiver<Arc<Event>>,
+}
+
+/// When the publisher wakes: the tick schedule shifted by half a period.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Phase {
+    /// When the first tick was due.
+    pub(crate) first_tick: Instant,
+    /// The tick period.
+    pub(crate) period: Duration,
+}
+
+impl Phase {
+    /// The first wake-up at or after `now`: half a period after some tick's deadline.
+    pub(crate) fn first_wake(&self, now: Instant) -> Instant {
+        let half = self.period / 2;
+        let first = self.first_tick + half;
+        if now <= first || self.period.is_zero() {
+            return first;
+        }
+        let since = now.duration_since(first).as_nanos();
+        let period = self.period.as_nanos();
+        let periods = since.div_ceil(period);
+        let offset = u64::try_from(periods.saturating_mul(period)).unwrap_or(u64::MAX);
+        first + Duration::from_nanos(offset)
+    }
+}
+
+/// One broadcast read without waiting: what it held, what it lost, whether it is still open.
+struct Drained<T> {
+    items: Vec<T>,
+    lost: u64,
+    open: bool,
+}
+
+fn drain<T: Clone>(rx: &mut broadcast::Receiver<T>) -> Drained<T> {
+    let mut out = Drained {
+        items: Vec::new(),
+        lost: 0,
+        open: true,
+    };
+    loop {
+        match rx.try_recv() {
+            Ok(item) => out.items.push(item),
+            Err(TryRecvError::Lagged(n)) => out.lost += n,
+            Err(TryRecvError::Empty) => return out,
+            Err(TryRecvError::Closed) => {
+                out.open = false;
+                return out;
+            }
+        }
+    }
 }
 
 /// The three publishers and what they read.
@@ -79,48 +138,109 @@ impl Publisher {
         }
     }
 
-    /// Publishes until `cancel`; the status every `period`, from `status`.
+    /// Publishes until `cancel`, waking at `phase`; the status every `status_every`, from `status`.
     pub(crate) async fn run(
         mut self,
         mut status: StatusSource,
-        period: Duration,
+        phase: Phase,
+        status_every: Duration,
         cancel: CancellationToken,
     ) {
-        let mut every = tokio::time::interval(period);
-        every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-        let mut ticks_open = true;
-        let mut events_open = true;
+        let mut wake = tokio::time::interval_at(phase.first_wake(Instant::now()), phase.period);
+        wake.set_missed_tick_behavior(MissedTickBehavior::Skip);
+        let mut next_status = Instant::now();
+        let (mut ticks_open, mut events_open) = (true, true);
         loop {
             tokio::select! {
                 _ = cancel.cancelled() => break,
-                r = self.inputs.ticks.recv(), if ticks_open => match r {
-                    Ok(record) => {
-                        status.saw(&record);
-                        if let Ok(bytes) = serde_json::to_vec(&*record) {
-                            self.put(&self.tick, bytes, &self.counters.ticks_published).await;
-                        }
+                _ = wake.tick() => {}
+            }
+            if ticks_open {
+                let d = drain(&mut self.inputs.ticks);
+                self.counters
+                    .ticks_missed
+                    .fetch_add(d.lost, Ordering::Relaxed);
+                ticks_open = d.open;
+                for record in d.items {
+                    status.saw(&record);
+                    if let Ok(bytes) = serde_json::to_vec(&*record) {
+                        self.put(&self.tick, bytes, &self.counters.ticks_published)
+                            .await;
                     }
-                    Err(RecvError::Lagged(n)) => {
-                        self.counters.ticks_missed.fetch_add(n, Ordering::Relaxed);
-                    }
-                    Err(RecvError::Closed) => ticks_open = false,
-                },
-                r = self.inputs.events.recv(), if events_open => match r {
-                    Ok(event) => {
-                        if let Ok(bytes) = serde_json::to_vec(&*event) {
-                            self.put(&self.event, bytes, &self.counters.events_published).await;
-                        }
-                    }
-                    Err(RecvError::Lagged(n)) => {
-                        self.counters.events_missed.fetch_add(n, Ordering::Relaxed);
-                    }
-                    Err(RecvError::Closed) => events_open = false,
-                },
-                _ = every.tick() => {
-                    let bytes = status.message();
-                    self.put(&self.status, bytes, &self.counters.status_published).await;
                 }
             }
+            if events_open {
+                let d = drain(&mut self.inputs.events);
+                self.counters
+                    .events_missed
+                    .fetch_add(d.lost, Ordering::Relaxed);
+                events_open = d.open;
+                for event in d.items {
+                    if let Ok(bytes) = serde_json::to_vec(&*event) {
+                        self.put(&self.event, bytes, &self.counters.events_published)
+                            .await;
+                    }
+                }
+            }
+            let now = Instant::now();
+            if now >= next_status {
+                next_status = now + status_every;
+                let bytes = status.message();
+                self.put(&self.status, bytes, &self.counters.status_published)
+                    .await;
+            }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn phase(start: Instant) -> Phase {
+        Phase {
+            first_tick: start,
+            period: Duration::from_millis(20),
+        }
+    }
+
+    #[test]
+    fn the_first_wake_is_half_a_period_after_a_tick() {
+        let start = Instant::now();
+        let p = phase(start);
+        let ms = |n| Duration::from_millis(n);
+        assert_eq!(p.first_wake(start - ms(5)), start + ms(10));
+        assert_eq!(p.first_wake(start), start + ms(10));
+        assert_eq!(p.first_wake(start + ms(10)), start + ms(10));
+        assert_eq!(p.first_wake(start + ms(11)), start + ms(30));
+        assert_eq!(p.first_wake(start + ms(1_000_005)), start + ms(1_000_010));
+        assert_eq!(p.first_wake(start + ms(1_000_010)), start + ms(1_000_010));
+    }
+
+    #[test]
+    fn a_zero_period_wakes_at_the_first_tick() {
+        let start = Instant::now();
+        let p = Phase {
+            first_tick: start,
+            period: Duration::ZERO,
+        };
+        assert_eq!(p.first_wake(start + Duration::from_secs(1)), start);
+    }
+
+    #[test]
+    fn a_drain_takes_everything_counts_the_lost_and_sees_the_close() {
+        let (tx, mut rx) = broadcast::channel(4);
+        for i in 0..6 {
+            tx.send(i).ok();
+        }
+        let d = drain(&mut rx);
+        assert_eq!(d.items, vec![2, 3, 4, 5]);
+        assert_eq!(d.lost, 2);
+        assert!(d.open);
+        tx.send(6).ok();
+        drop(tx);
+        let d = drain(&mut rx);
+        assert_eq!(d.items, vec![6]);
+        assert!(!d.open);
     }
 }
