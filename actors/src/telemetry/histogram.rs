@@ -140,6 +140,22 @@ impl LatencyHistogram {
         self.sum_us += other.sum_us;
     }
 
+    /// The samples recorded since `earlier`, a snapshot of this same histogram (a measurement that
+    /// leaves out a warm-up). The largest is the larger bound of its bucket, at most the largest overall.
+    pub(crate) fn since(&self, earlier: &LatencyHistogram) -> LatencyHistogram {
+        let mut out = LatencyHistogram::new();
+        for (i, (now, then)) in self.counts.iter().zip(earlier.counts.iter()).enumerate() {
+            let c = now.saturating_sub(*then);
+            out.counts[i] = c;
+            out.total += c;
+            if c > 0 {
+                out.max_us = bucket_upper(i).min(self.max_us);
+            }
+        }
+        out.sum_us = self.sum_us.saturating_sub(earlier.sum_us);
+        out
+    }
+
     /// Sum of all samples, µs.
     pub(crate) fn sum_us(&self) -> u128 {
         self.sum_us
@@ -149,6 +165,25 @@ impl LatencyHistogram {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn since_keeps_only_the_later_samples() {
+        let mut h = LatencyHistogram::new();
+        for us in [10, 20, 5000] {
+            h.record(Duration::from_micros(us));
+        }
+        let snapshot = h.clone();
+        for us in [30, 40, 200] {
+            h.record(Duration::from_micros(us));
+        }
+        let later = h.since(&snapshot);
+        let q = later.quantiles();
+        assert_eq!(q.count, 3);
+        assert_eq!(later.sum_us(), 270);
+        assert!((200..=211).contains(&q.max_us), "max {}", q.max_us);
+        assert_eq!(later.quantile_us(0.5), 40);
+        assert_eq!(h.since(&h).quantiles().count, 0);
+    }
 
     #[test]
     fn buckets_are_monotonic_and_cover_their_values() {
