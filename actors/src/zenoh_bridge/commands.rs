@@ -7,10 +7,14 @@
 //! `{"ok": false, "error": CODE, "message": …}` with CODE one of `off` (`[zenoh] commands = false`),
 //! `token` (missing or wrong), `invalid` (not such a message), or the websocket's `busy`, `rejected`,
 //! `unavailable`. Every outcome is counted (`pavlov_zenoh_commands_total{outcome}`).
+//!
+//! A checkpoint is read and sent by a task of its own, one at a time, so a large file never holds up a
+//! command (an e-stop) behind it: a checkpoint query while one is being sent is answered `busy`, and a
+//! file larger than [`MAX_CHECKPOINT_REPLY_BYTES`] with an error naming its size.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 use serde::Deserialize;
@@ -31,6 +35,9 @@ use crate::telemetry::counters::ZenohCounters;
 const COMMAND_TIMEOUT: Duration = Duration::from_secs(2);
 /// The largest command message, bytes.
 const MAX_COMMAND_BYTES: usize = 4096;
+/// The largest checkpoint file sent in a reply, bytes (an agent's checkpoint with the largest allowed
+/// weight tables is a few MB).
+pub(crate) const MAX_CHECKPOINT_REPLY_BYTES: u64 = 64 * 1024 * 1024;
 
 type Q = Queryable<FifoChannelHandler<Query>>;
 
@@ -82,6 +89,32 @@ struct CommandMessage {
     command: ControlCommand,
 }
 
+/// The newest automatic checkpoint in `dir`, if not larger than [`MAX_CHECKPOINT_REPLY_BYTES`].
+pub(crate) async fn newest_checkpoint(dir: Option<&Path>) -> Result<Vec<u8>, String> {
+    let Some(dir) = dir else {
+        return Err("this server writes no checkpoints".into());
+    };
+    let list = crate::storage::checkpoint_files::list(dir)
+        .map_err(|e| format!("cannot list {}: {e}", dir.display()))?;
+    let Some((_, newest)) = list.last() else {
+        return Err(format!("no checkpoint in {} yet", dir.display()));
+    };
+    let size = tokio::fs::metadata(newest)
+        .await
+        .map_err(|e| format!("cannot read {}: {e}", newest.display()))?
+        .len();
+    if size > MAX_CHECKPOINT_REPLY_BYTES {
+        return Err(format!(
+            "{} is {size} bytes, more than the {MAX_CHECKPOINT_REPLY_BYTES} a reply may carry; copy it \
+             from the robot's disk instead",
+            newest.display()
+        ));
+    }
+    tokio::fs::read(newest)
+        .await
+        .map_err(|e| format!("cannot read {}: {e}", newest.display()))
+}
+
 /// A refusal: its code and message.
 struct Refusal(&'static str, String);
 
@@ -109,6 +142,7 @@ impl Answers {
 
     /// Answers queries until `cancel`.
     pub(crate) async fn run(self, q: Queryables, cancel: CancellationToken) {
+        let sending = Arc::new(AtomicBool::new(false));
         loop {
             tokio::select! {
                 _ = cancel.cancelled() => break,
@@ -118,10 +152,18 @@ impl Answers {
                 }
                 Ok(query) = q.checkpoint.recv_async() => {
                     self.counters.queries.fetch_add(1, Ordering::Relaxed);
-                    match self.newest_checkpoint().await {
-                        Ok(bytes) => { let _ = query.reply(query.key_expr().clone(), bytes).await; }
-                        Err(why) => { let _ = query.reply_err(why).await; }
+                    if sending.swap(true, Ordering::AcqRel) {
+                        let _ = query.reply_err("busy: a checkpoint is being sent; ask again").await;
+                        continue;
                     }
+                    let (dir, sending) = (self.run_dir.clone(), sending.clone());
+                    tokio::spawn(async move {
+                        match newest_checkpoint(dir.as_deref()).await {
+                            Ok(bytes) => { let _ = query.reply(query.key_expr().clone(), bytes).await; }
+                            Err(why) => { let _ = query.reply_err(why).await; }
+                        }
+                        sending.store(false, Ordering::Release);
+                    });
                 }
                 Ok(query) = q.command.recv_async() => {
                     let payload = query.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
@@ -136,20 +178,6 @@ impl Answers {
                 }
             }
         }
-    }
-
-    async fn newest_checkpoint(&self) -> Result<Vec<u8>, String> {
-        let Some(dir) = &self.run_dir else {
-            return Err("this server writes no checkpoints".into());
-        };
-        let list = crate::storage::checkpoint_files::list(dir)
-            .map_err(|e| format!("cannot list {}: {e}", dir.display()))?;
-        let Some((_, newest)) = list.last() else {
-            return Err(format!("no checkpoint in {} yet", dir.display()));
-        };
-        tokio::fs::read(newest)
-            .await
-            .map_err(|e| format!("cannot read {}: {e}", newest.display()))
     }
 
     fn count(&self, c: &AtomicU64) {
@@ -223,5 +251,42 @@ impl Answers {
                 ))
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("pavlov-zenoh-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).expect("temp dir");
+        d
+    }
+
+    #[tokio::test]
+    async fn the_newest_checkpoint_is_sent_and_an_oversized_one_refused() {
+        assert!(
+            newest_checkpoint(None)
+                .await
+                .unwrap_err()
+                .contains("no checkpoints")
+        );
+        let d = dir("checkpoint");
+        let why = newest_checkpoint(Some(&d)).await.unwrap_err();
+        assert!(why.contains("no checkpoint in"), "{why}");
+        std::fs::write(d.join("checkpoint-5.json"), b"old").unwrap();
+        std::fs::write(d.join("checkpoint-12.json"), b"new").unwrap();
+        assert_eq!(newest_checkpoint(Some(&d)).await.unwrap(), b"new");
+        // A sparse file: its length is past the limit without writing 64 MB.
+        let big = std::fs::File::create(d.join("checkpoint-20.json")).unwrap();
+        big.set_len(MAX_CHECKPOINT_REPLY_BYTES + 1).unwrap();
+        let why = newest_checkpoint(Some(&d)).await.unwrap_err();
+        assert!(
+            why.contains(&format!("{} bytes", MAX_CHECKPOINT_REPLY_BYTES + 1)),
+            "{why}"
+        );
+        let _ = std::fs::remove_dir_all(&d);
     }
 }
