@@ -44,7 +44,8 @@ function draw(data) {
     cell(tr, (z.ticks_missed || 0) + (z.events_missed || 0));
     cell(tr, (r.last_seen_ms_ago / 1000).toFixed(1) + " s ago");
     const link = cell(tr, "");
-    if (s.dashboard_url) {
+    // The fleet server keeps only http(s) URLs; checked again here, as anyone on Zenoh can publish a status.
+    if (typeof s.dashboard_url === "string" && /^https?:\/\//i.test(s.dashboard_url)) {
       const a = document.createElement("a");
       a.href = s.dashboard_url;
       a.textContent = "open";
@@ -70,12 +71,21 @@ async function poll() {
 document.getElementById("command").addEventListener("submit", async (ev) => {
   ev.preventDefault();
   const robot = document.getElementById("robot").value;
+  const answer = document.getElementById("answer");
+  if (!robot) {
+    answer.textContent = "no robot to send to";
+    return;
+  }
   const body = JSON.stringify({
     token: document.getElementById("token").value,
     command: JSON.parse(document.getElementById("cmd").value),
   });
-  const res = await fetch("api/command/" + encodeURIComponent(robot), { method: "POST", body });
-  document.getElementById("answer").textContent = res.status + " " + (await res.text());
+  try {
+    const res = await fetch("api/command/" + encodeURIComponent(robot), { method: "POST", body });
+    answer.textContent = res.status + " " + (await res.text());
+  } catch (e) {
+    answer.textContent = "fleet unreachable: " + e;
+  }
 });
 
 poll();

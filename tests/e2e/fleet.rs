@@ -3,7 +3,10 @@
 //! endpoint pinned on 127.0.0.1 and scouting off so the topology is fixed. The fleet sees both robots'
 //! ticks and status; a command with alpha's token reaches alpha and only alpha; a command without a
 //! token, or with another robot's token, is refused with a precise answer and counted in `/metrics`; beta
-//! (commands off) refuses every command, saying so.
+//! (commands off) refuses every command, saying so. Then the fleet page itself, in headless Chromium
+//! (`web/tests/fleet.e2e.mjs`): the live table, a command sent from the page with the typed token, a wrong
+//! token refused, and a hostile peer's status (a `javascript:` dashboard URL) shown without its link
+//! (`target/fleet.png`).
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -329,8 +332,111 @@ fn the_fleet_sees_two_robots_and_commands_need_each_robots_token() {
         ) > 50.0
     );
 
+    // A hostile peer publishes a status for a robot "mallory" whose dashboard link is a script.
+    let mallory = hostile_peer(&zf, &dir);
+    until(&fleet_addr, "mallory's status", |rows| {
+        row(rows, "mallory").is_some()
+    });
+    let (_, body) = http(&fleet_addr, "GET", "/api/robots", "");
+    let table: Value = serde_json::from_str(&body).expect("robots json");
+    let m = row(table["robots"].as_array().expect("rows"), "mallory").expect("mallory");
+    assert_eq!(m["status"]["dashboard_url"], Value::Null, "{m}");
+    assert!(table["dashboard_urls_removed"].as_u64().unwrap_or(0) >= 1);
+
+    // The page, in a browser: the same robots, a command from its form, a wrong token refused.
+    browser_check(&fleet_addr, alpha_token);
+    assert_eq!(count(&alpha_dash, "applied"), 2.0);
+    assert_eq!(count(&alpha_dash, "refused_token"), 3.0);
+    until(&fleet_addr, "alpha reactive, not e-stopped", |rows| {
+        row(rows, "alpha").is_some_and(|r| r["mode"] == "reactive" && r["estop"] == false)
+    });
+
+    drop(mallory);
     drop(fleet);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A Zenoh peer that publishes a hostile status for `mallory` every 500 ms until dropped.
+struct HostilePeer {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Drop for HostilePeer {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Connects where the fleet listens (its `fleet_config`) and starts publishing.
+fn hostile_peer(fleet_config: &Path, dir: &Path) -> HostilePeer {
+    use zenoh::Wait;
+    let text = std::fs::read_to_string(fleet_config).expect("fleet config");
+    let fleet: Value = serde_json::from_str(&text).expect("json");
+    let listen: Vec<String> =
+        serde_json::from_value(fleet["listen"]["endpoints"].clone()).expect("endpoints");
+    let config = zenoh_config(dir, "mallory", &[], &listen);
+    let config = zenoh::Config::from_file(&config).expect("zenoh config");
+    let session = zenoh::open(config).wait().expect("a zenoh session");
+    let status = serde_json::json!({
+        "robot": "mallory",
+        "dashboard_url": "javascript:alert(document.cookie)",
+        "ok": true,
+        "health": "ok",
+    })
+    .to_string();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let thread = std::thread::spawn({
+        let stop = stop.clone();
+        move || {
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                let _ = session.put("pavlov/mallory/status", status.clone()).wait();
+                std::thread::sleep(Duration::from_millis(500));
+            }
+            let _ = session.close().wait();
+        }
+    });
+    HostilePeer {
+        stop,
+        thread: Some(thread),
+    }
+}
+
+/// Runs `web/tests/fleet.e2e.mjs` against the fleet page; fails the test when it fails.
+fn browser_check(fleet_addr: &str, token: &str) {
+    let repo = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    assert!(
+        repo.join("web/node_modules/playwright-core/package.json")
+            .is_file(),
+        "web/node_modules/playwright-core is missing: run `npm ci --prefix web`"
+    );
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo.join("target"));
+    let screenshot = target.join("fleet.png");
+    let _ = std::fs::remove_file(&screenshot);
+    let out = Command::new("node")
+        .arg(repo.join("web/tests/fleet.e2e.mjs"))
+        .arg(format!("http://{fleet_addr}/"))
+        .arg(&screenshot)
+        .env("FLEET_TOKEN", token)
+        .current_dir(repo.join("web"))
+        .output()
+        .expect("cannot run node");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "fleet.e2e.mjs failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        screenshot.is_file(),
+        "no screenshot at {}",
+        screenshot.display()
+    );
 }
 
 /// `pavlov serve` with `args` in `dir`; its exit code and stderr (it must stop by itself).

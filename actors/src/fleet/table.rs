@@ -1,7 +1,11 @@
 //! The fleet's table: one row per robot, updated from every sample on `pavlov/<robot>/{tick,event,status}`.
 //!
-//! A sample whose key is not `pavlov/<robot>/<leaf>` with a valid robot name, or whose payload does not
-//! parse, is counted and dropped; at most [`MAX_ROBOTS`] robots are kept (further names are counted).
+//! Anyone on the Zenoh network can publish under `pavlov/…`, so every sample is treated as hostile input:
+//! a sample whose key is not `pavlov/<robot>/<leaf>` with a valid robot name, whose payload is larger than
+//! [`MAX_SAMPLE_BYTES`], or whose payload does not parse, is counted and dropped; a status whose
+//! `dashboard_url` is not an `http://` or `https://` URL keeps its row but loses the link (counted), so the
+//! page never links a `javascript:` or other scheme; at most [`MAX_ROBOTS`] robots are kept (further names
+//! are counted).
 
 use std::collections::BTreeMap;
 use std::time::{SystemTime, UNIX_EPOCH};
@@ -11,6 +15,19 @@ use serde_json::{Value, json};
 
 /// The most robots the table keeps.
 pub const MAX_ROBOTS: usize = 256;
+
+/// The largest sample the table reads: a status is about 1.5 kB, a tick record a few kB (with a Horde's
+/// predictions, tens of kB).
+pub const MAX_SAMPLE_BYTES: usize = 256 * 1024;
+
+/// Whether `url` may be linked from the page: `http://` or `https://`, at most 2048 bytes, no whitespace
+/// or control characters.
+fn linkable(url: &str) -> bool {
+    let lower = url.get(..8).unwrap_or(url).to_ascii_lowercase();
+    (lower.starts_with("http://") || lower.starts_with("https://"))
+        && url.len() <= 2048
+        && !url.chars().any(|c| c.is_whitespace() || c.is_control())
+}
 
 /// Which stream a sample came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -64,6 +81,8 @@ pub(crate) struct RobotTable {
     ignored: u64,
     /// Robots not kept because the table was full.
     overflow: u64,
+    /// Status messages whose dashboard URL was not linkable (removed).
+    bad_urls: u64,
 }
 
 fn now_ms() -> u64 {
@@ -87,6 +106,10 @@ impl RobotTable {
                 return;
             }
         };
+        if payload.len() > MAX_SAMPLE_BYTES {
+            self.ignored += 1;
+            return;
+        }
         if !self.rows.contains_key(robot) && self.rows.len() >= MAX_ROBOTS {
             self.overflow += 1;
             return;
@@ -97,10 +120,17 @@ impl RobotTable {
             }
             _ => serde_json::from_slice::<Value>(payload).map(|v| (None, v)),
         };
-        let Ok((tick, value)) = parsed else {
+        let Ok((tick, mut value)) = parsed else {
             self.ignored += 1;
             return;
         };
+        if leaf == Leaf::Status
+            && let Some(url) = value.get_mut("dashboard_url")
+            && !url.as_str().is_some_and(linkable)
+        {
+            *url = Value::Null;
+            self.bad_urls += 1;
+        }
         let row = self.rows.entry(robot.to_string()).or_default();
         row.last_seen_unix_ms = now_ms();
         match (leaf, tick) {
@@ -139,7 +169,12 @@ impl RobotTable {
                 })
             })
             .collect();
-        json!({ "robots": robots, "ignored_samples": self.ignored, "robots_not_kept": self.overflow })
+        json!({
+            "robots": robots,
+            "ignored_samples": self.ignored,
+            "robots_not_kept": self.overflow,
+            "dashboard_urls_removed": self.bad_urls,
+        })
     }
 }
 
@@ -175,6 +210,45 @@ mod tests {
         assert_eq!(robots[0]["mode"], "reactive");
         assert_eq!(robots[0]["status"]["ok"], true);
         assert_eq!(j["ignored_samples"], 3);
+    }
+
+    #[test]
+    fn only_http_dashboard_urls_are_kept() {
+        let mut t = RobotTable::default();
+        for (robot, url) in [
+            ("a", "http://10.0.0.5:8080/"),
+            ("b", "HTTPS://robot-b.lab/"),
+            ("c", "javascript:alert(1)"),
+            ("d", "data:text/html,<script>alert(1)</script>"),
+            ("e", "http://x y/"),
+        ] {
+            let status = serde_json::json!({ "ok": true, "dashboard_url": url });
+            t.observe(
+                &format!("pavlov/{robot}/status"),
+                Leaf::Status,
+                status.to_string().as_bytes(),
+            );
+        }
+        t.observe("pavlov/f/status", Leaf::Status, br#"{"dashboard_url": 7}"#);
+        let j = t.to_json();
+        let url = |i: usize| j["robots"][i]["status"]["dashboard_url"].clone();
+        assert_eq!(url(0), "http://10.0.0.5:8080/");
+        assert_eq!(url(1), "HTTPS://robot-b.lab/");
+        for i in 2..6 {
+            assert_eq!(url(i), Value::Null, "robot {i}");
+        }
+        assert_eq!(j["dashboard_urls_removed"], 4);
+        assert_eq!(j["robots"].as_array().unwrap().len(), 6);
+    }
+
+    #[test]
+    fn an_oversized_sample_is_dropped() {
+        let mut t = RobotTable::default();
+        let huge = format!(r#"{{"pad": "{}"}}"#, "x".repeat(MAX_SAMPLE_BYTES));
+        t.observe("pavlov/a/status", Leaf::Status, huge.as_bytes());
+        let j = t.to_json();
+        assert_eq!(j["robots"].as_array().unwrap().len(), 0);
+        assert_eq!(j["ignored_samples"], 1);
     }
 
     #[test]
