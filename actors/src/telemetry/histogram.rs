@@ -142,6 +142,8 @@ impl LatencyHistogram {
 
     /// The samples recorded since `earlier`, a snapshot of this same histogram (a measurement that
     /// leaves out a warm-up). The largest is the larger bound of its bucket, at most the largest overall.
+    /// Used by `bench --zenoh` only, so built with that feature (and in tests).
+    #[cfg(any(test, feature = "zenoh"))]
     pub(crate) fn since(&self, earlier: &LatencyHistogram) -> LatencyHistogram {
         let mut out = LatencyHistogram::new();
         for (i, (now, then)) in self.counts.iter().zip(earlier.counts.iter()).enumerate() {
