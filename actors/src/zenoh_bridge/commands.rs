@@ -10,7 +10,11 @@
 //!
 //! A checkpoint is read and sent by a task of its own, one at a time, so a large file never holds up a
 //! command (an e-stop) behind it: a checkpoint query while one is being sent is answered `busy`, and a
-//! file larger than [`MAX_CHECKPOINT_REPLY_BYTES`] with an error naming its size.
+//! file larger than [`MAX_CHECKPOINT_REPLY_BYTES`] with an error naming its size. Commands are
+//! checked and handed to their owner in the order they arrive, and only the wait for the owner's outcome
+//! (up to [`COMMAND_TIMEOUT`]) runs in a task of its own, at most [`MAX_COMMANDS_IN_FLIGHT`] at once (a
+//! command beyond them is answered `busy` and not applied): a slow command never holds up the next one,
+//! e.g. an e-stop, and two commands are never applied out of order.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -19,14 +23,16 @@ use std::time::Duration;
 
 use serde::Deserialize;
 use serde_json::json;
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, oneshot};
 use tokio_util::sync::CancellationToken;
 use zenoh::Session;
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::query::{Query, Queryable};
 
 use super::{ZenohError, key};
-use crate::command::{ControlCommand, ControlRequest};
+#[cfg(test)]
+use crate::command::{CommandError, LatchCommand};
+use crate::command::{ControlCommand, ControlRequest, Outcome};
 use crate::dashboard::auth::constant_time_eq;
 use crate::server::Server;
 use crate::telemetry::counters::ZenohCounters;
@@ -35,6 +41,8 @@ use crate::telemetry::counters::ZenohCounters;
 const COMMAND_TIMEOUT: Duration = Duration::from_secs(2);
 /// The largest command message, bytes.
 const MAX_COMMAND_BYTES: usize = 4096;
+/// Commands being answered at once; a command beyond them is answered `busy`.
+const MAX_COMMANDS_IN_FLIGHT: usize = 8;
 /// The largest checkpoint file sent in a reply, bytes (an agent's checkpoint with the largest allowed
 /// weight tables is a few MB).
 pub(crate) const MAX_CHECKPOINT_REPLY_BYTES: u64 = 64 * 1024 * 1024;
@@ -143,20 +151,22 @@ impl Answers {
     /// Answers queries until `cancel`.
     pub(crate) async fn run(self, q: Queryables, cancel: CancellationToken) {
         let sending = Arc::new(AtomicBool::new(false));
+        let in_flight = Arc::new(tokio::sync::Semaphore::new(MAX_COMMANDS_IN_FLIGHT));
+        let this = Arc::new(self);
         loop {
             tokio::select! {
                 _ = cancel.cancelled() => break,
                 Ok(query) = q.config.recv_async() => {
-                    self.counters.queries.fetch_add(1, Ordering::Relaxed);
-                    let _ = query.reply(query.key_expr().clone(), self.config.clone()).await;
+                    this.counters.queries.fetch_add(1, Ordering::Relaxed);
+                    let _ = query.reply(query.key_expr().clone(), this.config.clone()).await;
                 }
                 Ok(query) = q.checkpoint.recv_async() => {
-                    self.counters.queries.fetch_add(1, Ordering::Relaxed);
+                    this.counters.queries.fetch_add(1, Ordering::Relaxed);
                     if sending.swap(true, Ordering::AcqRel) {
                         let _ = query.reply_err("busy: a checkpoint is being sent; ask again").await;
                         continue;
                     }
-                    let (dir, sending) = (self.run_dir.clone(), sending.clone());
+                    let (dir, sending) = (this.run_dir.clone(), sending.clone());
                     tokio::spawn(async move {
                         match newest_checkpoint(dir.as_deref()).await {
                             Ok(bytes) => { let _ = query.reply(query.key_expr().clone(), bytes).await; }
@@ -166,16 +176,41 @@ impl Answers {
                     });
                 }
                 Ok(query) = q.command.recv_async() => {
+                    // Checked and handed to the owner here, in arrival order; only the wait for the
+                    // owner's outcome runs apart, so a slow one never holds up the next command.
+                    let Ok(permit) = in_flight.clone().try_acquire_owned() else {
+                        this.count(&this.counters.commands_failed);
+                        let busy = format!("{MAX_COMMANDS_IN_FLIGHT} commands are being answered; try again");
+                        Self::answer(&query, Err(Refusal("busy", busy))).await;
+                        continue;
+                    };
                     let payload = query.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
-                    match self.command(&payload).await {
-                        Ok(answer) => { let _ = query.reply(query.key_expr().clone(), answer).await; }
-                        Err(Refusal(code, message)) => {
-                            tracing::info!("zenoh: command refused ({code}): {message}");
-                            let body = json!({ "ok": false, "error": code, "message": message });
-                            let _ = query.reply_err(body.to_string()).await;
+                    match this.submit(&payload) {
+                        Err(refusal) => Self::answer(&query, Err(refusal)).await,
+                        Ok(reply) => {
+                            let this = this.clone();
+                            tokio::spawn(async move {
+                                let outcome = this.outcome(reply).await;
+                                Self::answer(&query, outcome).await;
+                                drop(permit);
+                            });
                         }
                     }
                 }
+            }
+        }
+    }
+
+    /// Answers `query` with `answer`: a reply, or an error reply with the refusal's code and message.
+    async fn answer(query: &Query, answer: Result<String, Refusal>) {
+        match answer {
+            Ok(answer) => {
+                let _ = query.reply(query.key_expr().clone(), answer).await;
+            }
+            Err(Refusal(code, message)) => {
+                tracing::info!("zenoh: command refused ({code}): {message}");
+                let body = json!({ "ok": false, "error": code, "message": message });
+                let _ = query.reply_err(body.to_string()).await;
             }
         }
     }
@@ -184,7 +219,9 @@ impl Answers {
         c.fetch_add(1, Ordering::Relaxed);
     }
 
-    async fn command(&self, payload: &[u8]) -> Result<String, Refusal> {
+    /// Checks a command query's payload and hands the command to its owner, in the order queries arrive;
+    /// the receiver of the owner's outcome.
+    fn submit(&self, payload: &[u8]) -> Result<oneshot::Receiver<Outcome>, Refusal> {
         if !self.commands_on {
             self.count(&self.counters.commands_refused_off);
             return Err(Refusal(
@@ -234,6 +271,11 @@ impl Answers {
                 "the command queue is full; try again".into(),
             ));
         }
+        Ok(reply)
+    }
+
+    /// Waits for the owner's outcome of a submitted command.
+    async fn outcome(&self, reply: oneshot::Receiver<Outcome>) -> Result<String, Refusal> {
         match tokio::time::timeout(COMMAND_TIMEOUT, reply).await {
             Ok(Ok(Ok(applied))) => {
                 self.count(&self.counters.commands_applied);
@@ -288,5 +330,93 @@ mod tests {
             "{why}"
         );
         let _ = std::fs::remove_dir_all(&d);
+    }
+
+    /// A Zenoh session on its own: no endpoints, no scouting (queries reach its own queryables).
+    async fn lone_session() -> Session {
+        let text = r#"{ mode: "peer", listen: { endpoints: [] },
+            scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }"#;
+        let config = zenoh::Config::from_json5(text).expect("config");
+        zenoh::open(config).await.expect("session")
+    }
+
+    /// Sends `command` with `token` to robot `t`; the reply's text, or the error reply's.
+    async fn ask(
+        session: &Session,
+        token: &str,
+        command: serde_json::Value,
+    ) -> Result<String, String> {
+        let body = json!({ "token": token, "command": command }).to_string();
+        let replies = session
+            .get("pavlov/t/command")
+            .payload(body)
+            .timeout(Duration::from_secs(10))
+            .await
+            .expect("query");
+        let reply = replies.recv_async().await.expect("a reply");
+        let text = |b: Vec<u8>| String::from_utf8_lossy(&b).into_owned();
+        match reply.result() {
+            Ok(sample) => Ok(text(sample.payload().to_bytes().into_owned())),
+            Err(e) => Err(text(e.payload().to_bytes().into_owned())),
+        }
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_slow_command_holds_up_neither_the_next_nor_their_order() {
+        let session = lone_session().await;
+        let queryables = declare(session.clone(), "t".into()).await.expect("declare");
+        let (tx, mut owner) = mpsc::channel::<ControlRequest>(8);
+        let answers = Answers {
+            config: Vec::new(),
+            run_dir: None,
+            token: Some("the-right-token-0123".into()),
+            commands_on: true,
+            commands: tx,
+            counters: Arc::new(ZenohCounters::default()),
+        };
+        let cancel = CancellationToken::new();
+        tokio::spawn(answers.run(queryables, cancel.clone()));
+        let token = "the-right-token-0123";
+
+        // The first command reaches its owner, which does not answer yet.
+        let first = tokio::spawn({
+            let s = session.clone();
+            async move { ask(&s, token, json!({ "cmd": "estop" })).await }
+        });
+        let held = owner.recv().await.expect("the first command");
+        assert_eq!(held.command, LatchCommand::Estop {}.into());
+        // The second is answered while the first still waits, and reached the owner after it.
+        let second = tokio::spawn({
+            let s = session.clone();
+            async move { ask(&s, token, json!({ "cmd": "release" })).await }
+        });
+        let next = tokio::time::timeout(Duration::from_secs(10), owner.recv())
+            .await
+            .expect("the second command waited behind the first")
+            .expect("the second command");
+        assert_eq!(next.command, LatchCommand::Release {}.into());
+        let _ = next
+            .reply
+            .send(Err(CommandError::Rejected("second, refused".into())));
+        let answer = second.await.expect("task").unwrap_err();
+        assert!(answer.contains("second, refused"), "{answer}");
+        assert!(
+            !first.is_finished(),
+            "the first was answered before its owner did"
+        );
+        // A wrong token is refused at once, and never reaches the owner.
+        let wrong = ask(&session, "wrong", json!({ "cmd": "estop" }))
+            .await
+            .unwrap_err();
+        assert!(wrong.contains("the token is wrong"), "{wrong}");
+        assert!(owner.try_recv().is_err());
+        // The first is answered when its owner answers.
+        let _ = held
+            .reply
+            .send(Err(CommandError::Rejected("first, refused".into())));
+        let answer = first.await.expect("task").unwrap_err();
+        assert!(answer.contains("first, refused"), "{answer}");
+        cancel.cancel();
+        let _ = session.close().await;
     }
 }
