@@ -493,5 +493,15 @@ fn bad_zenoh_settings_stop_start_up_naming_the_problem() {
     let (code, err) = serve_refused(&dir, &["--config", &open, "--zenoh"]);
     assert_ne!(code, Some(0));
     assert!(err.contains("commands = true needs a token"), "{err}");
+    // Commands over Zenoh with a token short enough to guess.
+    let (code, err) = serve_refused(
+        &dir,
+        &["--config", &open, "--token", "short-token", "--zenoh"],
+    );
+    assert_ne!(code, Some(0));
+    assert!(
+        err.contains("needs a token of at least 16 characters, got 11"),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

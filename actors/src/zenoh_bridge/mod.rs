@@ -61,6 +61,17 @@ pub enum ZenohError {
          limited to this machine, so commands over Zenoh always need one"
     )]
     CommandsNeedToken,
+    /// Commands are on but the token is short enough to guess.
+    #[error(
+        "[zenoh] commands = true needs a token of at least {min} characters, got {got}: Zenoh peers \
+         are not limited to this machine, and wrong tokens are counted, not throttled"
+    )]
+    CommandsNeedLongToken {
+        /// The least.
+        min: usize,
+        /// The token's.
+        got: usize,
+    },
     /// The session could not be opened (e.g. a listen endpoint in use).
     #[error("cannot open the Zenoh session: {0}")]
     Open(String),
@@ -117,8 +128,18 @@ impl ZenohBridge {
         dashboard_url: String,
     ) -> Result<ZenohBridge, ZenohError> {
         let settings = server.config.zenoh.clone();
-        if settings.commands && server.config.dashboard.token.is_none() {
-            return Err(ZenohError::CommandsNeedToken);
+        if settings.commands {
+            let min = pavlov::config::MIN_PUBLIC_TOKEN_CHARS;
+            match &server.config.dashboard.token {
+                None => return Err(ZenohError::CommandsNeedToken),
+                Some(t) if t.chars().count() < min => {
+                    return Err(ZenohError::CommandsNeedLongToken {
+                        min,
+                        got: t.chars().count(),
+                    });
+                }
+                Some(_) => {}
+            }
         }
         pavlov::config::check_robot_name(&settings.robot).map_err(|reason| {
             ZenohError::Declare {
