@@ -3,6 +3,8 @@
 
 use std::process::Command;
 
+use crate::common::TestDir;
+
 const PAVLOV: &str = env!("CARGO_BIN_EXE_pavlov");
 
 fn stall_toml() -> String {
@@ -12,12 +14,11 @@ fn stall_toml() -> String {
 
 /// Runs `pavlov serve` on `config`; its exit code (`None` when killed by a signal, e.g. an abort) and stderr.
 fn serve_with(config: &str) -> (Option<i32>, String) {
-    let dir = std::env::temp_dir().join(format!("pavlov-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let path = dir.join(format!(
-        "{:x}.toml",
+    let dir = TestDir::new(&format!(
+        "cli-{:x}",
         config.len() * 31 + config.bytes().map(usize::from).sum::<usize>()
     ));
+    let path = dir.join("config.toml");
     std::fs::write(&path, config).expect("write config");
     let out = Command::new(PAVLOV)
         .args(["serve", "--bind", "127.0.0.1:0", "--config"])

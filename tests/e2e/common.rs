@@ -1,12 +1,55 @@
 //! Helpers shared by the end-to-end tests: configurations and record collection.
 #![allow(dead_code)]
 
+use std::ops::Deref;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use pavlov::config::Config;
 use pavlov::record::TickRecord;
 use pavlov_actors::server::Server;
 use tokio::sync::broadcast;
+
+/// A fresh, empty folder under the system's temporary folder for one test, removed when dropped (also
+/// when the test fails and unwinds), so runs of the suite leave nothing behind.
+pub struct TestDir(PathBuf);
+
+impl TestDir {
+    /// `pavlov-<name>-<pid>-<n>`, `n` counting the folders of this process (so two tests never share
+    /// one), emptied first.
+    pub fn new(name: &str) -> TestDir {
+        static MADE: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let n = MADE.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let dir = std::env::temp_dir().join(format!("pavlov-{name}-{}-{n}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("a temporary folder");
+        TestDir(dir)
+    }
+
+    /// The folder.
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Deref for TestDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for TestDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TestDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
 
 /// The shipped stall configuration.
 pub fn stall_config() -> Config {

@@ -10,14 +10,11 @@ use pavlov::config::Config;
 use pavlov::learn::checkpoint::Checkpoint;
 use pavlov_actors::storage::checkpoint_files::write_atomic;
 
-use crate::common::stall_config;
+use crate::common::{TestDir, stall_config};
 
-/// A fresh, empty directory for one test.
-pub fn fresh_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("pavlov-storage-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh, empty directory for one test, removed when dropped.
+pub fn fresh_dir(name: &str) -> TestDir {
+    TestDir::new(&format!("storage-{name}"))
 }
 
 /// The stall configuration checkpointing into `dir` every 2 s of ticks, keeping 2.

@@ -43,7 +43,7 @@ fn a_recording_started_mid_run_with_changes_during_it_replays_exactly() {
     let recorder = Recorder::spawn(
         RecordingHeader::new(&cfg, "mid-run"),
         None,
-        root.clone(),
+        root.to_path_buf(),
         20_000,
     )
     .expect("recorder");
@@ -213,7 +213,7 @@ fn a_recording_with_an_off_policy_prediction_replays_exactly() {
     let recorder = Recorder::spawn(
         RecordingHeader::new(&cfg, "gtd"),
         None,
-        root.clone(),
+        root.to_path_buf(),
         20_000,
     )
     .expect("recorder");
