@@ -138,6 +138,24 @@ impl Publisher {
         }
     }
 
+    /// Puts every drained item on `publisher` as JSON and counts what was lost; whether the input is
+    /// still open.
+    async fn publish<T: serde::Serialize>(
+        &self,
+        drained: Drained<Arc<T>>,
+        publisher: &ZPublisher<'static>,
+        sent: &AtomicU64,
+        missed: &AtomicU64,
+    ) -> bool {
+        missed.fetch_add(drained.lost, Ordering::Relaxed);
+        for item in &drained.items {
+            if let Ok(bytes) = serde_json::to_vec(&**item) {
+                self.put(publisher, bytes, sent).await;
+            }
+        }
+        drained.open
+    }
+
     /// Publishes until `cancel`, waking at `phase`; the status every `status_every`, from `status`.
     pub(crate) async fn run(
         mut self,
@@ -157,30 +175,20 @@ impl Publisher {
             }
             if ticks_open {
                 let d = drain(&mut self.inputs.ticks);
-                self.counters
-                    .ticks_missed
-                    .fetch_add(d.lost, Ordering::Relaxed);
-                ticks_open = d.open;
-                for record in d.items {
-                    status.saw(&record);
-                    if let Ok(bytes) = serde_json::to_vec(&*record) {
-                        self.put(&self.tick, bytes, &self.counters.ticks_published)
-                            .await;
-                    }
+                if let Some(newest) = d.items.last() {
+                    status.saw(newest);
                 }
+                let c = &self.counters;
+                ticks_open = self
+                    .publish(d, &self.tick, &c.ticks_published, &c.ticks_missed)
+                    .await;
             }
             if events_open {
                 let d = drain(&mut self.inputs.events);
-                self.counters
-                    .events_missed
-                    .fetch_add(d.lost, Ordering::Relaxed);
-                events_open = d.open;
-                for event in d.items {
-                    if let Ok(bytes) = serde_json::to_vec(&*event) {
-                        self.put(&self.event, bytes, &self.counters.events_published)
-                            .await;
-                    }
-                }
+                let c = &self.counters;
+                events_open = self
+                    .publish(d, &self.event, &c.events_published, &c.events_missed)
+                    .await;
             }
             let now = Instant::now();
             if now >= next_status {
