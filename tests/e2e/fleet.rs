@@ -405,33 +405,22 @@ fn hostile_peer(fleet_config: &Path, dir: &Path) -> HostilePeer {
     }
 }
 
-/// Runs `web/tests/fleet.e2e.mjs` against the fleet page; fails the test when it fails.
+/// Runs `web/tests/fleet.e2e.mjs` against the fleet page with the dashboard tests' harness; fails the
+/// test when it fails.
 fn browser_check(fleet_addr: &str, token: &str) {
-    let repo = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
-    assert!(
-        repo.join("web/node_modules/playwright-core/package.json")
-            .is_file(),
-        "web/node_modules/playwright-core is missing: run `npm ci --prefix web`"
-    );
-    let target = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| repo.join("target"));
-    let screenshot = target.join("fleet.png");
-    let _ = std::fs::remove_file(&screenshot);
-    let out = Command::new("node")
-        .arg(repo.join("web/tests/fleet.e2e.mjs"))
-        .arg(format!("http://{fleet_addr}/"))
-        .arg(&screenshot)
-        .env("FLEET_TOKEN", token)
-        .current_dir(repo.join("web"))
-        .output()
-        .expect("cannot run node");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "fleet.e2e.mjs failed:\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    use crate::dashboard::browser::{preflight, run_browser_script_with, target_dir};
+    preflight();
+    let screenshot = target_dir().join("fleet.png");
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("a runtime for the browser script");
+    runtime.block_on(run_browser_script_with(
+        "fleet.e2e.mjs",
+        &format!("http://{fleet_addr}/"),
+        &screenshot,
+        &[("FLEET_TOKEN", token)],
+    ));
     assert!(
         screenshot.is_file(),
         "no screenshot at {}",

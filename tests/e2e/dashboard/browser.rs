@@ -29,7 +29,7 @@ pub(super) fn repo() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
 }
 
-pub(super) fn target_dir() -> PathBuf {
+pub(crate) fn target_dir() -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| repo().join("target"))
@@ -57,7 +57,7 @@ impl Drop for Serve {
     }
 }
 
-pub(super) fn preflight() {
+pub(crate) fn preflight() {
     let web = repo().join("web");
     for pkg in ["playwright-core", "uplot"] {
         assert!(
@@ -124,7 +124,7 @@ async fn run_browser_script(script: &str, url: &str, screenshot: &std::path::Pat
 }
 
 /// [`run_browser_script`] with extra environment variables for the script.
-async fn run_browser_script_with(
+pub(crate) async fn run_browser_script_with(
     script: &str,
     url: &str,
     screenshot: &std::path::Path,

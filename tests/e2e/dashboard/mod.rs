@@ -4,7 +4,7 @@
 mod abuse;
 mod abusers;
 mod analysis;
-mod browser;
+pub(crate) mod browser;
 mod browser_analysis;
 mod browser_learning;
 mod learning_bounds;
