@@ -346,9 +346,6 @@ fn floored(e: f64) -> f64 {
 }
 
 /// `e ← floored(decay·e); w ← w + step·e` over every feature: the one pass a tick makes over them all.
-/// On a CPU with AVX2 the same loop is compiled for it (four weights an instruction instead of two);
-/// the results are the same bits, as each element is computed by the same IEEE operations (Rust never
-/// `e ← floored(decay·e); w ← w + step·e` over every feature: the one pass a tick makes over them all.
 /// With `skip`, a block of [`CHUNK`] zero traces is passed over (it stays zero and moves no weight): worth
 /// it for a sparse prediction whose trace ends at its stimulus, a cost for a dense one. On a CPU with AVX2
 /// the same loop is compiled for it (four weights an instruction instead of two); the results are the
@@ -370,6 +367,8 @@ fn decay_and_step_avx2(traces: &mut [f64], weights: &mut [f64], decay: f64, step
     decay_and_step_portable(traces, weights, decay, step, skip);
 }
 
+// The element update is written out in each loop rather than shared through a closure: with a closure
+// the passes measured 315 against 295 ns (stall) and 186 against 148 ns (command) a step.
 #[inline(always)]
 fn decay_and_step_portable(
     traces: &mut [f64],
