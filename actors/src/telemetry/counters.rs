@@ -262,6 +262,42 @@ pub struct ZenohFigures {
     pub commands_failed: u64,
 }
 
+/// Figures are counts since the server started, so two can be subtracted (what happened between them)
+/// and added (two runs as one); `bench --zenoh` does both.
+#[cfg(feature = "zenoh")]
+impl ZenohFigures {
+    /// Each count combined with the same count of `other` by `f`.
+    fn zip_with(self, other: ZenohFigures, f: impl Fn(u64, u64) -> u64) -> ZenohFigures {
+        ZenohFigures {
+            ticks_published: f(self.ticks_published, other.ticks_published),
+            events_published: f(self.events_published, other.events_published),
+            status_published: f(self.status_published, other.status_published),
+            ticks_missed: f(self.ticks_missed, other.ticks_missed),
+            events_missed: f(self.events_missed, other.events_missed),
+            put_errors: f(self.put_errors, other.put_errors),
+            queries: f(self.queries, other.queries),
+            commands_applied: f(self.commands_applied, other.commands_applied),
+            commands_refused_token: f(self.commands_refused_token, other.commands_refused_token),
+            commands_refused_off: f(self.commands_refused_off, other.commands_refused_off),
+            commands_refused_invalid: f(
+                self.commands_refused_invalid,
+                other.commands_refused_invalid,
+            ),
+            commands_failed: f(self.commands_failed, other.commands_failed),
+        }
+    }
+
+    /// What was counted after `earlier`, a copy of the same counters.
+    pub(crate) fn since(self, earlier: ZenohFigures) -> ZenohFigures {
+        self.zip_with(earlier, u64::saturating_sub)
+    }
+
+    /// The counts of both.
+    pub(crate) fn plus(self, other: ZenohFigures) -> ZenohFigures {
+        self.zip_with(other, u64::saturating_add)
+    }
+}
+
 impl ZenohCounters {
     /// The figures now.
     pub(crate) fn figures(&self) -> ZenohFigures {
@@ -280,5 +316,34 @@ impl ZenohCounters {
             commands_refused_invalid: get(&self.commands_refused_invalid),
             commands_failed: get(&self.commands_failed),
         }
+    }
+}
+
+#[cfg(all(test, feature = "zenoh"))]
+mod zenoh_figures_tests {
+    use super::*;
+
+    #[test]
+    fn figures_subtract_and_add_count_by_count() {
+        let earlier = ZenohFigures {
+            ticks_published: 10,
+            put_errors: 1,
+            commands_failed: 2,
+            ..ZenohFigures::default()
+        };
+        let later = ZenohFigures {
+            ticks_published: 35,
+            put_errors: 1,
+            commands_failed: 5,
+            queries: 4,
+            ..ZenohFigures::default()
+        };
+        let between = later.since(earlier);
+        assert_eq!(between.ticks_published, 25);
+        assert_eq!(between.put_errors, 0);
+        assert_eq!(between.commands_failed, 3);
+        assert_eq!(between.queries, 4);
+        assert_eq!(between.plus(earlier), later);
+        assert_eq!(earlier.since(later).ticks_published, 0);
     }
 }
