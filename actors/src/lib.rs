@@ -26,6 +26,7 @@ pub mod foxglove;
 pub mod horde;
 pub mod link;
 pub mod pipeline;
+pub mod provenance;
 pub mod server;
 pub mod simulated;
 pub mod storage;

@@ -357,7 +357,23 @@ pub struct Config {
     pub zenoh: ZenohConfig,
 }
 
+/// What every artifact (a recording, a summary, a log line, what a client without the token receives)
+/// shows in place of a secret.
+pub const REDACTED: &str = "<redacted>";
+
 impl Config {
+    /// This configuration with its secrets replaced by [`REDACTED`]: what may leave the process (a
+    /// recording, a Foxglove or Zenoh client, an operator's `hello`). The dashboard's token is the only
+    /// secret a configuration holds; an absent or empty token stays as it is (there is nothing to hide,
+    /// and a reader can still tell that none was set).
+    pub fn redacted(&self) -> Config {
+        let mut config = self.clone();
+        if config.dashboard.token().is_some() {
+            config.dashboard.token = Some(REDACTED.to_string());
+        }
+        config
+    }
+
     /// The signals predictions and the Horde may read: this robot model's observation dimensions,
     /// [`ELBOW_INPUTS`], and the configured stimulus.
     pub fn signal_names(&self) -> crate::learn::SignalNames {
@@ -578,5 +594,20 @@ mod tests {
             "{STALL}\n[dashboard]\nbind = \"0.0.0.0:8080\"\ntoken = \"0123456789abcdef\"\n"
         );
         assert!(Config::from_toml(&ok).is_ok());
+    }
+
+    #[test]
+    fn redacted_hides_the_token_and_nothing_else() {
+        let with = format!(
+            "{STALL}\n[dashboard]\nbind = \"0.0.0.0:8080\"\ntoken = \"0123456789abcdef\"\n"
+        );
+        let config = Config::from_toml(&with).expect("valid");
+        let redacted = config.redacted();
+        assert_eq!(redacted.dashboard.token.as_deref(), Some(REDACTED));
+        let mut back = redacted.clone();
+        back.dashboard.token = config.dashboard.token.clone();
+        assert_eq!(back, config, "only the token differs");
+        let without = Config::from_toml(STALL).expect("valid");
+        assert_eq!(without.redacted(), without, "no token: nothing to hide");
     }
 }

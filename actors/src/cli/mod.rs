@@ -15,13 +15,20 @@ pub mod replay;
 pub mod serve;
 pub mod sim;
 
+use std::sync::LazyLock;
+
 use clap::{Parser, Subcommand};
+
+/// `pavlov --version`: the version, the commit and dirty flag, features, compiler, target and profile.
+static LONG_VERSION: LazyLock<String> =
+    LazyLock::new(|| pavlov_actors::provenance::BUILD.long_version());
 
 /// `pavlov`.
 #[derive(Parser)]
 #[command(
     name = "pavlov",
-    version,
+    version = pavlov_actors::provenance::BUILD.version,
+    long_version = LONG_VERSION.as_str(),
     about = "Pavlovian control of an iRobot Create: online TD(λ) predictions driving fixed responses",
     long_about = "A lab server that runs Pavlovian control (Modayil & Sutton, \"Prediction Driven Behavior\") on an \
 iRobot Create 1 or 2: every 20 ms it reads the robot's sensors, learns TD(λ) predictions online, and lets a fixed \

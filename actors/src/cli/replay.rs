@@ -22,6 +22,16 @@ pub fn run(args: ReplayArgs) -> Result<()> {
             rec.records.len()
         );
     }
+    if let Some(p) = &rec.header.provenance
+        && let Some(other) = p.other_commit()
+    {
+        tracing::warn!(
+            "the recording was made by commit {other} ({}), this pavlov is commit {}: a difference may come \
+             from the code, not the run",
+            p.program,
+            pavlov_actors::provenance::BUILD.commit
+        );
+    }
     let report = replay::replay(&rec)?;
     say!("{}", replay::describe(&report));
     anyhow::ensure!(report.exact(), "the replay differs from the recording");

@@ -13,11 +13,7 @@ use serde_json::{Value, json};
 
 /// The configuration an operator sees: all of it, the token shown as `<redacted>`.
 pub(crate) fn for_operator(config: &Config) -> Value {
-    let mut config = config.clone();
-    if config.dashboard.token.is_some() {
-        config.dashboard.token = Some("<redacted>".into());
-    }
-    serde_json::to_value(&config).unwrap_or(Value::Null)
+    serde_json::to_value(config.redacted()).unwrap_or(Value::Null)
 }
 
 /// The configuration a watcher sees: only what the page needs to draw.

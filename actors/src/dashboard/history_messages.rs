@@ -21,7 +21,7 @@ use super::history::{
 };
 
 /// What a watcher sees of a file path.
-pub(crate) const REDACTED: &str = "<redacted>";
+pub(crate) use pavlov::config::REDACTED;
 
 /// The largest `history` message, bytes (smaller when `max_message_bytes` is).
 pub(crate) const HISTORY_MESSAGE_BYTES: usize = 32 * 1024;
@@ -61,7 +61,7 @@ pub(crate) fn event_time_s(event: &Event, period_ms: u64) -> f64 {
 }
 
 /// `event` as a watcher may see it: without file paths.
-fn for_watcher(event: &Event) -> Cow<'_, Event> {
+pub(crate) fn for_watcher(event: &Event) -> Cow<'_, Event> {
     let hidden = || REDACTED.to_string();
     let kind = match &event.kind {
         EventKind::WeightsSaved { .. } => EventKind::WeightsSaved { path: hidden() },

@@ -356,7 +356,7 @@ impl Hello {
         Hello {
             kind: "hello",
             protocol: PROTOCOL_VERSION,
-            server: format!("pavlov {}", env!("CARGO_PKG_VERSION")),
+            server: crate::provenance::BUILD.program(),
             tick_period_ms,
             rate_hz: 1000.0 / tick_period_ms.max(1) as f64,
             status_every_ticks: STATUS_EVERY_TICKS,

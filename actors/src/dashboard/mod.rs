@@ -48,6 +48,9 @@ pub(crate) mod strict_json;
 pub mod token_throttle;
 
 pub use auth::generate_token;
+/// The watcher's reduced configuration and event view, for the other endpoints that may have watchers.
+pub(crate) use hello_config::for_watcher as watcher_config;
+pub(crate) use history_messages::for_watcher as event_for_watcher;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;

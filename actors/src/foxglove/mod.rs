@@ -7,8 +7,10 @@
 //! - `/pavlov/ticks`: every [`TickRecord`](pavlov::record::TickRecord), as the recorder writes it, logged
 //!   at the tick's scheduled time;
 //! - `/pavlov/signals`: the same tick flat, observations and predictions by name, flags as 0/1;
-//! - `/pavlov/events`: every [`Event`](pavlov::event::Event) (a late subscriber gets the recent ones);
-//! - `/pavlov/config`: the configuration in force (token redacted), the program and the observation names.
+//! - `/pavlov/events`: every [`Event`](pavlov::event::Event) (a late subscriber gets the recent ones; file
+//!   paths redacted when a client may connect without the token, as the dashboard does for a watcher);
+//! - `/pavlov/config`: the configuration in force (token redacted; only what a watcher may see when a
+//!   client may connect without the token), the program and the observation names.
 //!
 //! Foxglove clients only read. The endpoint advertises no capability to publish, set parameters or call
 //! services, so the SDK refuses all of those, and nothing from Foxglove reaches `server.commands`. The
@@ -132,14 +134,18 @@ impl Drop for Foxglove {
     }
 }
 
-/// The configuration as `/pavlov/config` carries it, token redacted.
-fn config_message(server: &Server) -> Vec<u8> {
-    let mut config = server.config.clone();
-    if config.dashboard.token.is_some() {
-        config.dashboard.token = Some("<redacted>".into());
-    }
+/// The configuration as `/pavlov/config` carries it: when a client without the token may connect
+/// (`watchers`), the watcher's reduced configuration (what the dashboard shows a watcher); otherwise every
+/// client presented the token (or none is set, on loopback), and it gets the whole configuration with
+/// its secrets redacted.
+fn config_message(server: &Server, watchers: bool) -> Vec<u8> {
+    let config = if watchers {
+        crate::dashboard::watcher_config(&server.config)
+    } else {
+        serde_json::to_value(server.config.redacted()).unwrap_or_default()
+    };
     let message = serde_json::json!({
-        "program": format!("pavlov {}", env!("CARGO_PKG_VERSION")),
+        "program": crate::provenance::BUILD.program(),
         "config": config,
         "obs_names": server.obs_names,
     });
@@ -248,6 +254,8 @@ impl Foxglove {
                 });
             }
         };
+        // A client may connect without the token: what every client gets is what a watcher may see.
+        let watchers = policy.has_token() && !policy.token_required();
         let gate = Arc::new(Gate {
             policy,
             upstream,
@@ -261,7 +269,8 @@ impl Foxglove {
             channels,
             RunClock::new(server.started, server.config.tick.period_ms),
             server.obs_names.clone(),
-            config_message(server),
+            config_message(server, watchers),
+            watchers,
             counters,
         );
         let inputs = Inputs {

@@ -159,6 +159,8 @@ pub(crate) struct Publisher {
     clock: RunClock,
     obs_names: Vec<String>,
     config_message: Vec<u8>,
+    /// Clients without the token may connect: events go out as a watcher may see them.
+    watchers: bool,
     recent_events: VecDeque<(Vec<u8>, u64)>,
     counters: Arc<FoxgloveCounters>,
 }
@@ -177,12 +179,14 @@ pub(crate) fn subscribe_listener() -> (Arc<SubscribeListener>, mpsc::Receiver<Su
 }
 
 impl Publisher {
-    /// A publisher of `channels`; `config_message` is the `/pavlov/config` message.
+    /// A publisher of `channels`; `config_message` is the `/pavlov/config` message; `watchers`: clients
+    /// without the token may connect, so events lose their file paths.
     pub(crate) fn new(
         channels: Channels,
         clock: RunClock,
         obs_names: Vec<String>,
         config_message: Vec<u8>,
+        watchers: bool,
         counters: Arc<FoxgloveCounters>,
     ) -> Self {
         Publisher {
@@ -190,6 +194,7 @@ impl Publisher {
             clock,
             obs_names,
             config_message,
+            watchers,
             recent_events: VecDeque::with_capacity(RECENT_EVENTS),
             counters,
         }
@@ -245,7 +250,12 @@ impl Publisher {
     }
 
     fn event(&mut self, event: &Event) {
-        let Ok(bytes) = serde_json::to_vec(event) else {
+        let event = if self.watchers {
+            crate::dashboard::event_for_watcher(event)
+        } else {
+            std::borrow::Cow::Borrowed(event)
+        };
+        let Ok(bytes) = serde_json::to_vec(&*event) else {
             tracing::debug!(id = event.id, "foxglove: event not serialised");
             return;
         };

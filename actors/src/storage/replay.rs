@@ -56,7 +56,10 @@ pub struct ReplayReport {
     pub rules_compared: usize,
     /// Ticks where `seq` jumped (records missing from the recording).
     pub seq_gaps: usize,
-    /// Recorded events applied to learning or gating.
+    /// Every event the recording holds (what `pavlov convert` counts too).
+    pub events: usize,
+    /// Of those, the events applied to learning or gating (the others, e.g. a recording started, change
+    /// nothing replay computes).
     pub events_applied: usize,
     /// Total mismatching fields.
     pub mismatch_count: usize,
@@ -127,7 +130,10 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
     let compare_rules =
         rec.records.iter().any(|r| r.rule.is_some()) || !rec.records.iter().any(|r| r.gate);
     let mut estop = false;
-    let mut report = ReplayReport::default();
+    let mut report = ReplayReport {
+        events: rec.events.len(),
+        ..ReplayReport::default()
+    };
     let mut last_seq: Option<u64> = None;
     for r in &rec.records {
         let inputs = r.inputs.as_ref().ok_or(ReplayError::NoInputs(r.seq))?;
@@ -318,8 +324,9 @@ fn fmt_action(a: Action) -> String {
 /// The report as text for the terminal.
 pub fn describe(report: &ReplayReport) -> String {
     let mut s = format!(
-        "replayed {} ticks and {} events: {} prediction values, {} safety stops and {} commands compared, {} seq gaps: ",
+        "replayed {} ticks and {} events ({} applied to learning or gating): {} prediction values, {} safety stops and {} commands compared, {} seq gaps: ",
         report.ticks,
+        report.events,
         report.events_applied,
         report.predictions_compared,
         report.stops_compared,

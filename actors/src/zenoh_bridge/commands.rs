@@ -129,12 +129,9 @@ struct Refusal(&'static str, String);
 impl Answers {
     /// The answers for `server`.
     pub(crate) fn new(server: &Server, counters: Arc<ZenohCounters>) -> Answers {
-        let mut config = server.config.clone();
-        if config.dashboard.token.is_some() {
-            config.dashboard.token = Some("<redacted>".into());
-        }
+        let config = server.config.redacted();
         let message = json!({
-            "program": format!("pavlov {}", env!("CARGO_PKG_VERSION")),
+            "program": crate::provenance::BUILD.program(),
             "config": config,
             "obs_names": server.obs_names,
         });

@@ -90,7 +90,7 @@ impl StatusSource {
         let verdict = self.health.verdict();
         Status {
             robot: self.robot.clone(),
-            program: format!("pavlov {}", env!("CARGO_PKG_VERSION")),
+            program: crate::provenance::BUILD.program(),
             dashboard_url: self.dashboard_url.clone(),
             mode: self.mode,
             estop: self.estop,

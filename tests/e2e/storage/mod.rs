@@ -1,10 +1,11 @@
 //! What the server keeps on disk: recordings (round trip, replay, a rule table's rules, a kill mid-write, names a client may
 //! give, conversion between MCAP and JSON Lines, an independent MCAP reader), checkpoints (periodic, per
-//! run, resumed with fallback) and saves.
+//! run, resumed with fallback) and saves; no artifact carrying the token.
 
 mod checkpoint;
 mod checkpoint_runs;
 pub(crate) mod fixtures;
+mod no_secrets;
 mod recording_convert;
 mod recording_crash;
 mod recording_names;

@@ -10,7 +10,7 @@ use pavlov::event::Event;
 use pavlov::record::TickRecord;
 use serde::{Deserialize, Serialize};
 
-use super::{FORMAT, Recording, RecordingError, RecordingHeader, Step, in_order};
+use super::{FORMAT, FORMAT_2, Recording, RecordingError, RecordingHeader, Step, in_order};
 
 /// An event's line: `{"event": …}`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -32,7 +32,7 @@ pub fn parse(text: &str) -> Result<Recording, RecordingError> {
     let (_, first) = lines.next().ok_or(RecordingError::Empty)?;
     let header: RecordingHeader =
         serde_json::from_str(first).map_err(|e| RecordingError::BadHeader(e.to_string()))?;
-    if header.format != FORMAT {
+    if header.format != FORMAT && header.format != FORMAT_2 {
         return Err(RecordingError::BadHeader(format!(
             "format is `{}`",
             header.format

@@ -111,9 +111,12 @@ pub fn parse_mcap(bytes: &[u8]) -> Result<Recording, RecordingError> {
     )
     .map_err(|e| bad(LEARNER, 0, e))?;
     let meta = |key: &str| scan.metadata.get(key).cloned().unwrap_or_default();
-    let mut header = RecordingHeader::new(&config, meta("label"));
+    let mut header = RecordingHeader::read_back(&config, meta("label"));
     header.format = meta("format");
     header.program = meta("program");
+    header.provenance = crate::provenance::Provenance::from_metadata(&header.program, |k| {
+        scan.metadata.get(k).cloned()
+    });
     header.started_utc = meta("started_utc");
     header.start = Some(start);
     let layout = ObsLayout::for_model(config.robot.model);

@@ -83,6 +83,11 @@ fn tick_time_ns(t_ms: f64) -> u64 {
 /// The provenance as metadata: every value a string, as MCAP metadata requires.
 fn provenance(header: &RecordingHeader, start: &StartState) -> BTreeMap<String, String> {
     let opt = |v: Option<u64>| v.map_or_else(String::new, |v| v.to_string());
+    let provenance = header
+        .provenance
+        .as_ref()
+        .map(|p| p.to_metadata())
+        .unwrap_or_default();
     [
         ("format", schema::MCAP_FORMAT.to_string()),
         ("program", header.program.clone()),
@@ -95,6 +100,7 @@ fn provenance(header: &RecordingHeader, start: &StartState) -> BTreeMap<String, 
         ("obs_names", header.obs_names.join(",")),
     ]
     .into_iter()
+    .chain(provenance)
     .map(|(k, v)| (k.to_string(), v))
     .collect()
 }

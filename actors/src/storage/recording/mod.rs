@@ -24,6 +24,8 @@ use pavlov::event::Event;
 use pavlov::record::TickRecord;
 use serde::{Deserialize, Serialize};
 
+use crate::provenance::Provenance;
+
 pub mod jsonl;
 mod mcap_read;
 pub(crate) mod mcap_write;
@@ -44,8 +46,13 @@ pub use mcap_read::parse_mcap;
 pub use mcap_write::{McapWriteError, write_recording};
 pub use tick_pb::TickDecodeError;
 
-/// The format tag of a JSON Lines header line.
-pub(crate) const FORMAT: &str = "pavlov-recording/2";
+/// The format of recordings this code writes, in both encodings: MCAP's metadata `format` key and the
+/// JSON Lines header's `format` field. Version 3 added the MCAP encoding and the provenance
+/// ([`Provenance`]); a JSON Lines file of version 2 (no provenance) still reads.
+pub(crate) const FORMAT: &str = "pavlov-recording/3";
+
+/// The JSON Lines format before provenance, still read.
+pub(crate) const FORMAT_2: &str = "pavlov-recording/2";
 
 /// Where the run stood when a recording began.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -70,13 +77,17 @@ pub const TICKS_FILE: &str = "ticks.jsonl";
 pub struct RecordingHeader {
     /// The format tag ([`FORMAT`] in JSON Lines).
     pub(crate) format: String,
-    /// The program that wrote it (`pavlov <version>`).
+    /// The program that wrote it (`pavlov <version> (<commit>[, dirty])`; older recordings:
+    /// `pavlov <version>`).
     #[serde(default)]
     pub program: String,
+    /// The build and invocation that wrote it (`None`: a recording older than format 3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub provenance: Option<Provenance>,
     /// A free label (e.g. the experiment run), empty if none.
     #[serde(default)]
     pub label: String,
-    /// The configuration in force (its `[sim] seed` is the run's seed).
+    /// The configuration in force (its `[sim] seed` is the run's seed), its secrets redacted.
     pub config: Config,
     /// Names of the `obs` vector's dimensions, in order.
     pub(crate) obs_names: Vec<String>,
@@ -89,15 +100,27 @@ pub struct RecordingHeader {
 }
 
 impl RecordingHeader {
-    /// A header for a run of `config`, with the observation names of its robot model; the recorder
-    /// fills in when and from what state the recording starts.
+    /// A header for a run of `config` by this process (its provenance; the configuration with its
+    /// secrets redacted), with the observation names of its robot model; the recorder fills in when and
+    /// from what state the recording starts.
     pub fn new(config: &Config, label: impl Into<String>) -> Self {
+        let provenance = Provenance::of(config);
+        RecordingHeader {
+            program: provenance.program.clone(),
+            provenance: Some(provenance),
+            ..Self::read_back(config, label)
+        }
+    }
+
+    /// A header as read back from a file: no provenance until the reader finds one.
+    pub(crate) fn read_back(config: &Config, label: impl Into<String>) -> Self {
         let layout = pavlov::obs::ObsLayout::for_model(config.robot.model);
         RecordingHeader {
             format: FORMAT.to_string(),
-            program: concat!("pavlov ", env!("CARGO_PKG_VERSION")).to_string(),
+            program: String::new(),
+            provenance: None,
             label: label.into(),
-            config: config.clone(),
+            config: config.redacted(),
             obs_names: layout.names().map(str::to_string).collect(),
             started_utc: String::new(),
             start: None,

@@ -28,8 +28,8 @@ pub const LEARNER: &str = "learner";
 pub(crate) const TICK_SCHEMA_NAME: &str = "pavlov.Tick";
 /// The name of the metadata record with the provenance.
 pub const METADATA_NAME: &str = "pavlov.recording";
-/// The format written into the metadata (`format` key).
-pub(crate) const MCAP_FORMAT: &str = "pavlov-recording/3";
+/// The format written into the metadata (`format` key): the one format version of both encodings.
+pub(crate) const MCAP_FORMAT: &str = super::FORMAT;
 
 /// The JSON Schema of an `events` message.
 pub(crate) const EVENT_SCHEMA: &str = r#"{"title":"pavlov.Event","description":"A change made at run time (pavlov::event::Event): it applies from the tick after `after`; the other fields depend on `kind`.","type":"object","properties":{"id":{"type":"integer","description":"Position in the order events were made"},"after":{"type":["integer","null"],"description":"The last tick its owner had handled when it took effect (null: before the first)"},"kind":{"type":"string","enum":["mode_set","teleop","e_stop","rearm","human_request","params_set","weights_reset","weights_saved","recording_started","recording_stopped","link","pipeline_stall"]}},"required":["id","after","kind"]}"#;
