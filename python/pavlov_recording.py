@@ -1,8 +1,9 @@
 """Load a pavlov recording into pandas.
 
     import pavlov_recording
-    rec = pavlov_recording.load("results/stall-1/runs/01-reactive/recording.mcap")  # or the folder
-    rec.ticks.plot(x="t_s", y=["battery_current_mA", "prediction_stall"])
+    rec = pavlov_recording.load("DIR/recording.mcap")  # or the folder DIR, or DIR/ticks.jsonl
+    current = rec.ticks.set_index("t_s")["battery_current_mA"]   # a Series over time, in mA
+    stalls = rec.events[rec.events["kind"] == "pipeline_stall"]
 
 `load` reads an MCAP recording (`recording.mcap`, as `pavlov serve --record`, the dashboard and the
 experiments write it), a JSON Lines recording (`ticks.jsonl`, as `pavlov convert --to jsonl` writes it), or
