@@ -41,7 +41,8 @@ a folder holding either (the MCAP file first). It returns a `Recording`:
   passed through, including ones this module does not know.
 - `learner`: where the run stood when the recording began (`after`, `events_before`, the learner's state).
 - `obs_names`, `message_counts` (MCAP: topic -> count from the file's summary statistics), `path`,
-  `format` (`"mcap"` or `"jsonl"`).
+  `format` (`"mcap"` or `"jsonl"`), `torn` (True for an MCAP file without its summary, cut by a kill or copied
+  while being written: it is read from the start up to its last complete chunk, with a warning).
 
 It needs only the `mcap` packages (`mcap`, `mcap-protobuf-support`, `protobuf`, `zstandard`, `lz4`), pandas
 and numpy, pinned in python/requirements.txt; the tick protobuf is decoded from the schema the file
@@ -52,10 +53,11 @@ from __future__ import annotations
 
 import json
 import math
+import struct
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Optional, Union
+from typing import Any, Callable, Iterable, Iterator, Optional, Union
 
 import numpy as np
 import pandas as pd
@@ -181,11 +183,13 @@ class Recording:
     path: Path
     format: str
     message_counts: Optional[dict[str, int]] = field(default=None)
+    torn: bool = False
 
     @property
     def seed(self) -> Optional[int]:
         """The run's seed: the configuration's `[sim] seed`."""
-        return self.config.get("sim", {}).get("seed")
+        seed = self.config.get("sim", {}).get("seed")
+        return None if seed is None else int(seed)
 
 
 def load(path: Union[str, Path]) -> Recording:
@@ -275,13 +279,13 @@ def _frame(c: _Columns, obs_names: list[str], prediction_order: list[str]) -> pd
             if name not in names:
                 names.append(name)
     for name in names:
-        values = np.full(n, np.nan)
+        predicted = np.full(n, np.nan)
         thresholds = np.full(n, np.nan)
         for i, per_tick in enumerate(c.predictions):
             got = per_tick.get(name)
             if got is not None:
-                values[i], thresholds[i] = got
-        data[f"prediction_{name}"] = values
+                predicted[i], thresholds[i] = got
+        data[f"prediction_{name}"] = predicted
         data[f"threshold_{name}"] = thresholds
     # Raw packets: one column per packet any tick carried, <NA> where a tick lacked it.
     ids = sorted({i for r in c.raw if r for i in r})
@@ -355,6 +359,11 @@ def _ordered(columns: list[str]) -> list[str]:
     return fixed + rest + raw + obs
 
 
+def _prediction_names(config: dict[str, Any]) -> list[str]:
+    """The configuration's prediction names, in its order (the order of the prediction columns)."""
+    return [str(p["name"]) for p in config.get("predictions", []) if isinstance(p, dict) and "name" in p]
+
+
 def _enum_name(enum_type: Any, number: int, prefix: str) -> Optional[str]:
     """`MODE_PAVLOVIAN` -> `pavlovian`, as pavlov's JSON spells it; the zero value (unspecified/none)
     -> None; a number the schema does not name -> its number as a string."""
@@ -363,7 +372,7 @@ def _enum_name(enum_type: Any, number: int, prefix: str) -> Optional[str]:
     v = enum_type.values_by_number.get(number)
     if v is None:
         return str(number)
-    name = v.name
+    name = str(v.name)
     return (name[len(prefix):] if name.startswith(prefix) else name).lower()
 
 
@@ -372,28 +381,18 @@ def _enum_name(enum_type: Any, number: int, prefix: str) -> Optional[str]:
 
 
 def _load_mcap(path: Path) -> Recording:
-    from mcap.reader import make_reader
     from mcap_protobuf.decoder import DecoderFactory
 
     factory = DecoderFactory()
     c = _Columns()
-    events: list[tuple[dict[str, Any], int]] = []
+    events: list[tuple[dict[str, Any], Optional[int]]] = []
     config: dict[str, Any] = {}
     learner: Optional[dict[str, Any]] = None
-    metadata: dict[str, Any] = {}
-    counts: Optional[dict[str, int]] = None
+    decode: Optional[Callable[[bytes], Any]] = None
+    enums: Optional[dict[str, Any]] = None
     with open(path, "rb") as f:
-        reader = make_reader(f)
-        summary = reader.get_summary()
-        if summary is not None and summary.statistics is not None:
-            counts = {summary.channels[cid].topic: n
-                      for cid, n in summary.statistics.channel_message_counts.items()}
-        for record in reader.iter_metadata():
-            if record.name == "pavlov.recording":
-                metadata = dict(record.metadata)
-        decode: Optional[Callable[[bytes], Any]] = None
-        enums: Optional[dict[str, Any]] = None
-        for schema, channel, message in reader.iter_messages(log_time_order=False):
+        messages, metadata_records, counts, torn = _mcap_contents(f, path)
+        for schema, channel, message in messages:
             topic = channel.topic
             if topic == "ticks":
                 if decode is None:
@@ -410,9 +409,16 @@ def _load_mcap(path: Path) -> Recording:
                 config = json.loads(message.data)
             elif topic == "learner":
                 learner = json.loads(message.data)
+    if torn:
+        warnings.warn(f"{path} ends early (no summary: the recorder was killed, or it is a copy of a recording "
+                      f"still being written): {c.n} ticks read, up to its last complete chunk", stacklevel=3)
+    metadata: dict[str, Any] = {}
+    for name, values in metadata_records:
+        if name == "pavlov.recording":
+            metadata = values
     names = metadata.get("obs_names", "")
     obs_names = [s for s in names.split(",") if s] if isinstance(names, str) else list(names)
-    order = [p.get("name") for p in config.get("predictions", []) if isinstance(p, dict)]
+    order = _prediction_names(config)
     period_ms = float(config.get("tick", {}).get("period_ms", 20))
     return Recording(
         ticks=_frame(c, obs_names, order),
@@ -424,7 +430,60 @@ def _load_mcap(path: Path) -> Recording:
         path=path,
         format="mcap",
         message_counts=counts,
+        torn=torn,
     )
+
+
+def _mcap_contents(f: Any, path: Path) -> tuple[Iterator[tuple[Any, Any, Any]], list[tuple[str, dict[str, str]]],
+                                                  Optional[dict[str, int]], bool]:
+    """The messages of an MCAP file in file order, its metadata records, its summary's message counts (None
+    without a summary), and whether it ends early.
+
+    A whole file is read through its summary with `mcap`'s reader. A file without a summary or footer (cut
+    by a kill, or copied while it was written) is read from the start with `mcap`'s stream reader, CRCs
+    checked, up to its last complete record, as pavlov's own reader does."""
+    from mcap.exceptions import InvalidMagic, McapError
+    from mcap.reader import make_reader
+    from mcap.stream_reader import CRCValidationError, StreamReader
+
+    reader = make_reader(f)
+    try:
+        summary = reader.get_summary()
+        metadata = [(m.name, dict(m.metadata)) for m in reader.iter_metadata()]
+    except (McapError, ValueError, EOFError, struct.error):
+        summary = None
+    if summary is not None and summary.statistics is not None:
+        counts = {summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()}
+        return reader.iter_messages(log_time_order=False), metadata, counts, False
+
+    from mcap.records import Channel, Message, Metadata, Schema
+
+    f.seek(0)
+    # No record is longer than the file: a corrupt length cannot make the reader allocate more.
+    size = path.stat().st_size
+    stream = StreamReader(f, validate_crcs=True, record_size_limit=size)
+    torn = False
+    found: list[tuple[str, dict[str, str]]] = []
+    schemas: dict[int, Any] = {}
+    channels: dict[int, Any] = {}
+    messages: list[tuple[Any, Any, Any]] = []
+    try:
+        for record in stream.records:
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message):
+                channel = channels[record.channel_id]
+                messages.append((schemas.get(channel.schema_id), channel, record))
+            elif isinstance(record, Metadata):
+                found.append((record.name, dict(record.metadata)))
+    except InvalidMagic as e:
+        raise ValueError(f"{path}: not an MCAP file ({e})") from None
+    except (McapError, CRCValidationError, EOFError, KeyError, struct.error):
+        # Where the stream reader stops before the footer: at the cut (after the last complete record).
+        torn = True
+    return iter(messages), found, None, torn
 
 
 def _tick_enums(tick: Any) -> dict[str, Any]:
@@ -550,7 +609,7 @@ def _load_jsonl(path: Path) -> Recording:
     config = header.get("config") or {}
     metadata = {k: v for k, v in header.items() if k not in ("config", "start", "obs_names")}
     obs_names = list(header.get("obs_names") or [])
-    order = [p.get("name") for p in config.get("predictions", []) if isinstance(p, dict)]
+    order = _prediction_names(config)
     period_ms = float(config.get("tick", {}).get("period_ms", 20))
     return Recording(
         ticks=_frame(c, obs_names, order),
