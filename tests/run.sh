@@ -53,5 +53,14 @@ cargo clippy --workspace --all-targets --features pavlov-actors/zenoh -- -D warn
 step "cargo test (unit and end-to-end; with the zenoh feature, so the fleet test runs)"
 cargo test --workspace --all-targets --features pavlov-actors/zenoh
 
+# --- the Python loader (python/pavlov_recording.py) ------------------------------------------------------
+# Its packages (python/requirements.txt: the mcap pins above plus pandas and numpy) go into the same venv;
+# its test makes a fresh recording with the debug binary `cargo test` just built.
+step "python/pavlov_recording.py against a fresh recording (python/requirements.txt into $PY_VENV; unittest)"
+"$PY_VENV/bin/python" -m pip install --quiet --disable-pip-version-check -r python/requirements.txt
+PAVLOV_BIN="${CARGO_TARGET_DIR:-target}/debug/pavlov" \
+  "$PY_VENV/bin/python" -m unittest discover --start-directory python --pattern 'test_*.py' --verbose
+# --- end of the Python loader ----------------------------------------------------------------------------
+
 step "soak: 24 simulated hours of the whole server with faults injected (release build, ~1 min)"
 cargo test --release -p pavlov-actors --test soak -- --nocapture
