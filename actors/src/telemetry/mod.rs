@@ -15,7 +15,10 @@ pub(crate) mod health_log;
 pub(crate) mod histogram;
 pub mod logging;
 pub(crate) mod prometheus;
-#[cfg(any(test, feature = "test-support"))]
+/// A strict reader of the `/metrics` text, for the end-to-end tests (always built: a feature for it put
+/// the package into its own dev-dependencies, which turned `--features pavlov-actors/zenoh` into a no-op
+/// for the binary).
+#[doc(hidden)]
 pub mod prometheus_check;
 
 use pavlov::config::TickTimer;

@@ -35,7 +35,7 @@ pub(crate) mod tick_pb;
 
 /// What the recording benchmark (`cargo bench -p pavlov-actors --bench recording`) measures: a tick's
 /// protobuf encoding alone, and a whole MCAP tick write (encoding, framing, zstd, CRC).
-#[cfg(feature = "test-support")]
+#[doc(hidden)]
 pub mod bench_support {
     pub use super::mcap_write::McapSink;
     pub use super::tick_encode::TickEncoder;
