@@ -106,6 +106,72 @@ fn help_explains_every_command() {
     }
 }
 
+/// `--version` names the commit and whether the tree was dirty, as every recording does.
+#[test]
+fn version_names_the_commit_the_build_and_its_features() {
+    let out = Command::new(PAVLOV)
+        .arg("--version")
+        .output()
+        .expect("run pavlov");
+    let text = String::from_utf8_lossy(&out.stdout);
+    let build = pavlov_actors::provenance::BUILD;
+    assert!(out.status.success(), "{text}");
+    for line in [
+        format!("commit: {}", build.commit),
+        format!("dirty: {}", build.dirty),
+        format!("rustc: {}", build.rustc),
+    ] {
+        assert!(text.contains(&line), "--version lacks {line:?}:\n{text}");
+    }
+    assert!(build.commit == "unknown" || build.commit.len() == 40, "{text}");
+    assert_eq!(
+        build.features.split(',').any(|f| f == "zenoh"),
+        cfg!(feature = "zenoh"),
+        "the binary's features are the package's: {text}"
+    );
+}
+
+/// A build says what it can do: with the `zenoh` feature `serve --zenoh` starts (and is stopped by a bad
+/// Zenoh configuration file, which only a Zenoh build reads); without it, `--zenoh` and `fleet` say how
+/// to get it, in `--help` and when used.
+#[test]
+fn a_build_says_whether_it_has_zenoh() {
+    let help = Command::new(PAVLOV).arg("--help").output().unwrap();
+    let help = String::from_utf8_lossy(&help.stdout);
+    let fleet_line = help
+        .lines()
+        .find(|l| l.trim_start().starts_with("fleet"))
+        .unwrap_or_else(|| panic!("--help lists fleet:\n{help}"));
+    let dir = crate::common::TestDir::new("zenoh-build");
+    let bad = dir.join("zenoh.json5");
+    std::fs::write(&bad, "{ this is not json5").unwrap();
+    let out = Command::new(PAVLOV)
+        .args(["serve", "--bind", "127.0.0.1:0", "--zenoh"])
+        .arg(&bad)
+        .current_dir(&*dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    if cfg!(feature = "zenoh") {
+        assert!(!fleet_line.contains("needs the zenoh feature"), "{fleet_line}");
+        assert!(
+            !err.contains("built without Zenoh"),
+            "a Zenoh build reads the file: {err}"
+        );
+        assert!(err.to_lowercase().contains("zenoh"), "{err}");
+    } else {
+        assert!(fleet_line.contains("needs the zenoh feature"), "{fleet_line}");
+        assert!(
+            err.contains("built without Zenoh") && err.contains("--features zenoh"),
+            "{err}"
+        );
+        let fleet = Command::new(PAVLOV).arg("fleet").output().unwrap();
+        let fleet_err = String::from_utf8_lossy(&fleet.stderr);
+        assert!(!fleet.status.success() && fleet_err.contains("--features zenoh"), "{fleet_err}");
+    }
+}
+
 #[test]
 fn studies_that_would_run_nothing_or_forever_are_refused_by_name() {
     let cases: [(&[&str], &str); 6] = [

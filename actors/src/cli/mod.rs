@@ -63,5 +63,12 @@ pub enum Command {
     Bench(bench::BenchArgs),
     /// One dashboard page for a lab's robots: subscribes to pavlov/*/… on Zenoh (what `serve --zenoh`
     /// publishes) and lists each robot's mode, link, tick health and counters, linking to its dashboard.
+    #[cfg_attr(
+        not(feature = "zenoh"),
+        command(
+            about = "(needs the zenoh feature: cargo install --path actors --features zenoh) One dashboard \
+                     page for a lab's robots on Zenoh"
+        )
+    )]
     Fleet(fleet::FleetArgs),
 }

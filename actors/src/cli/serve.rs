@@ -53,6 +53,11 @@ pub struct ServeArgs {
     /// answer queries for the configuration, the newest checkpoint and (with [zenoh] commands = true and a
     /// token) commands. CONFIG is a Zenoh configuration file (JSON5: mode, listen/connect endpoints,
     /// scouting); without it, Zenoh's defaults (a peer found by multicast scouting).
+    #[cfg_attr(
+        not(feature = "zenoh"),
+        arg(help = "(needs the zenoh feature: cargo install --path actors --features zenoh) Also \
+                    publish the run on Zenoh under pavlov/<robot>/…")
+    )]
     #[arg(long, value_name = "CONFIG", num_args = 0..=1)]
     zenoh: Option<Option<PathBuf>>,
 }
