@@ -94,7 +94,8 @@ pub struct Provenance {
     pub profile: String,
     /// The process's command line, tokens redacted.
     pub command_line: Vec<String>,
-    /// `sha256:` and the hex SHA-256 of the configuration in force (redacted) as compact JSON.
+    /// `sha256:` and the hex SHA-256 of the configuration in force (redacted) as canonical JSON
+    /// ([`json_sha256`]); empty where an artifact belongs to no one configuration.
     pub config_sha256: String,
 }
 
@@ -200,17 +201,55 @@ pub fn redact_args(args: impl IntoIterator<Item = String>) -> Vec<String> {
     out
 }
 
-/// `sha256:<hex>` of `config`, redacted, as compact JSON (field order is the structs' declaration
-/// order, so the same configuration always hashes the same).
+/// `sha256:<hex>` of `config`, redacted, as canonical JSON ([`json_sha256`]).
 pub fn config_sha256(config: &Config) -> String {
-    let json = serde_json::to_vec(&config.redacted()).unwrap_or_default();
-    let digest = Sha256::digest(&json);
+    json_sha256(&serde_json::to_value(config.redacted()).unwrap_or_default())
+}
+
+/// `sha256:<hex>` of `value` as canonical JSON: compact, object keys in byte order at every depth, so
+/// the same configuration hashes the same whichever way it was built or read back (a shard file's
+/// configuration is the same hash as the recording's).
+pub fn json_sha256(value: &serde_json::Value) -> String {
+    let mut canonical = Vec::new();
+    write_canonical(value, &mut canonical);
+    let digest = Sha256::digest(&canonical);
     let mut hex = String::with_capacity(7 + 64);
     hex.push_str("sha256:");
     for b in digest {
         hex.push_str(&format!("{b:02x}"));
     }
     hex
+}
+
+fn write_canonical(value: &serde_json::Value, out: &mut Vec<u8>) {
+    use serde_json::Value;
+    match value {
+        Value::Object(map) => {
+            let mut entries: Vec<_> = map.iter().collect();
+            entries.sort_by(|a, b| a.0.cmp(b.0));
+            out.push(b'{');
+            for (i, (k, v)) in entries.into_iter().enumerate() {
+                if i > 0 {
+                    out.push(b',');
+                }
+                out.extend(serde_json::to_vec(k).unwrap_or_default());
+                out.push(b':');
+                write_canonical(v, out);
+            }
+            out.push(b'}');
+        }
+        Value::Array(items) => {
+            out.push(b'[');
+            for (i, v) in items.iter().enumerate() {
+                if i > 0 {
+                    out.push(b',');
+                }
+                write_canonical(v, out);
+            }
+            out.push(b']');
+        }
+        scalar => out.extend(serde_json::to_vec(scalar).unwrap_or_default()),
+    }
 }
 
 #[cfg(test)]
@@ -270,6 +309,23 @@ mod tests {
         assert_ne!(config_sha256(&a), config_sha256(&d));
         assert_eq!(config_sha256(&a), config_sha256(&a.clone()));
         assert!(config_sha256(&a).starts_with("sha256:") && config_sha256(&a).len() == 71);
+    }
+
+    #[test]
+    fn canonical_json_ignores_key_order_only() {
+        let a: serde_json::Value =
+            serde_json::from_str(r#"{"b":1,"a":{"y":[1,2],"x":"s"}}"#).unwrap();
+        let b: serde_json::Value =
+            serde_json::from_str(r#"{"a":{"x":"s","y":[1,2]},"b":1}"#).unwrap();
+        let c: serde_json::Value =
+            serde_json::from_str(r#"{"a":{"x":"s","y":[2,1]},"b":1}"#).unwrap();
+        assert_eq!(json_sha256(&a), json_sha256(&b));
+        assert_ne!(json_sha256(&a), json_sha256(&c));
+        // The digest of `{}` is SHA-256 of the two bytes "{}".
+        assert_eq!(
+            json_sha256(&serde_json::json!({})),
+            "sha256:44136fa355b3678a1146ad16f7e8649e94fb4fc21fe77e8310c060f61caaff8a"
+        );
     }
 
     #[test]

@@ -123,7 +123,10 @@ fn version_names_the_commit_the_build_and_its_features() {
     ] {
         assert!(text.contains(&line), "--version lacks {line:?}:\n{text}");
     }
-    assert!(build.commit == "unknown" || build.commit.len() == 40, "{text}");
+    assert!(
+        build.commit == "unknown" || build.commit.len() == 40,
+        "{text}"
+    );
     assert_eq!(
         build.features.split(',').any(|f| f == "zenoh"),
         cfg!(feature = "zenoh"),
@@ -154,21 +157,30 @@ fn a_build_says_whether_it_has_zenoh() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{err}");
     if cfg!(feature = "zenoh") {
-        assert!(!fleet_line.contains("needs the zenoh feature"), "{fleet_line}");
+        assert!(
+            !fleet_line.contains("needs the zenoh feature"),
+            "{fleet_line}"
+        );
         assert!(
             !err.contains("built without Zenoh"),
             "a Zenoh build reads the file: {err}"
         );
         assert!(err.to_lowercase().contains("zenoh"), "{err}");
     } else {
-        assert!(fleet_line.contains("needs the zenoh feature"), "{fleet_line}");
+        assert!(
+            fleet_line.contains("needs the zenoh feature"),
+            "{fleet_line}"
+        );
         assert!(
             err.contains("built without Zenoh") && err.contains("--features zenoh"),
             "{err}"
         );
         let fleet = Command::new(PAVLOV).arg("fleet").output().unwrap();
         let fleet_err = String::from_utf8_lossy(&fleet.stderr);
-        assert!(!fleet.status.success() && fleet_err.contains("--features zenoh"), "{fleet_err}");
+        assert!(
+            !fleet.status.success() && fleet_err.contains("--features zenoh"),
+            "{fleet_err}"
+        );
     }
 }
 

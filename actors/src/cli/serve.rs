@@ -55,8 +55,10 @@ pub struct ServeArgs {
     /// scouting); without it, Zenoh's defaults (a peer found by multicast scouting).
     #[cfg_attr(
         not(feature = "zenoh"),
-        arg(help = "(needs the zenoh feature: cargo install --path actors --features zenoh) Also \
-                    publish the run on Zenoh under pavlov/<robot>/…")
+        arg(
+            help = "(needs the zenoh feature: cargo install --path actors --features zenoh) Also \
+                    publish the run on Zenoh under pavlov/<robot>/…"
+        )
     )]
     #[arg(long, value_name = "CONFIG", num_args = 0..=1)]
     zenoh: Option<Option<PathBuf>>,

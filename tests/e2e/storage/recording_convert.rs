@@ -34,6 +34,7 @@ fn same(a: &Recording, b: &Recording) {
             "config": r.header.config,
             "start": r.header.start,
             "program": r.header.program,
+            "provenance": r.header.provenance,
             "label": r.header.label,
             "started_utc": r.header.started_utc,
         })
@@ -61,7 +62,19 @@ fn convert_round_trips_between_mcap_and_json_lines_and_replay_reads_both() {
     let as_jsonl = recording::load(&jsonl).unwrap();
     same(&original, &as_jsonl);
     let first_line = std::fs::read_to_string(&jsonl).unwrap();
-    assert!(first_line.starts_with("{\"format\":\"pavlov-recording/2\""));
+    // One format version across MCAP and JSON Lines, and the provenance carried over.
+    assert!(first_line.starts_with("{\"format\":\"pavlov-recording/3\""));
+    assert_eq!(as_jsonl.header.provenance, original.header.provenance);
+    let provenance = original.header.provenance.as_ref().expect("provenance");
+    let build = pavlov_actors::provenance::BUILD;
+    assert_eq!(
+        (provenance.commit.as_str(), provenance.dirty.as_str()),
+        (build.commit, build.dirty),
+        "the recording names the commit it was made by, and whether the tree was dirty"
+    );
+    assert!(provenance.config_sha256.starts_with("sha256:"));
+    // Made in this test process: its command line.
+    assert!(!provenance.command_line.is_empty());
 
     // A directory holding both is read from its MCAP file.
     assert!(recording::recording_file(&rec_dir).ends_with(MCAP_FILE));

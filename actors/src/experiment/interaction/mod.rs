@@ -103,6 +103,8 @@ pub struct InteractionStudy {
     pub aligned: Vec<AlignedPoint>,
     /// Wall time, s.
     pub(crate) wall_s: f64,
+    /// The build and invocation that made the study, and the hash of its configuration.
+    pub provenance: crate::provenance::Provenance,
 }
 
 /// Runs every run (alternating reactive / Pavlovian) on `threads` threads, with no progress bar.
@@ -118,7 +120,9 @@ pub fn run_study_with_progress(
 ) -> Result<InteractionStudy, RunError> {
     let wall = std::time::Instant::now();
     let runs = run_runs(base, o, plan(o), progress)?;
-    Ok(assemble(o.clone(), runs, wall.elapsed().as_secs_f64()))
+    let mut study = assemble(o.clone(), runs, wall.elapsed().as_secs_f64());
+    study.provenance = crate::provenance::Provenance::of(base);
+    Ok(study)
 }
 
 /// The interleaved run list: run `i` and its policy, for `2 × runs_per_policy` runs.
@@ -204,5 +208,6 @@ pub(crate) fn assemble(
         runs,
         wall_s,
         options: o,
+        provenance: crate::provenance::Provenance::of_process(),
     }
 }

@@ -72,7 +72,7 @@ pub fn run_shard(
         EXPERIMENT,
         shard,
         plan(opts),
-        base,
+        &base.redacted(),
         opts,
         &opts.out,
         |specs| {
@@ -88,7 +88,8 @@ pub fn run_shard(
 pub fn merge(files: &[PathBuf], out: Option<&Path>) -> anyhow::Result<String> {
     let m = shard::merge_study::<InteractionOptions, ShardRun>(EXPERIMENT, files, out)?;
     let runs = m.runs.into_iter().map(InteractionRun::from).collect();
-    let study = assemble(m.options, runs, m.wall_s);
+    let mut study = assemble(m.options, runs, m.wall_s);
+    study.provenance = m.provenance;
     report::write_all(&m.out, &study)?;
     Ok(report::table(&study) + &shard::merged_note(files.len(), &m.out))
 }

@@ -10,6 +10,7 @@ use serde_json::Value;
 use super::SHARD_FORMAT;
 use super::Shard;
 use super::error::{Difference, MergeError};
+use crate::provenance::Provenance;
 
 /// What one shard wrote: enough to check it belongs with the others, and its runs.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -22,7 +23,7 @@ pub struct ShardFile<R> {
     pub shard: Shard,
     /// How many runs the whole study plans.
     pub planned_runs: usize,
-    /// The study's configuration.
+    /// The study's configuration, its secrets redacted.
     pub config: Value,
     /// The study's options, all but where it writes its results (`out`).
     pub options: Value,
@@ -32,6 +33,10 @@ pub struct ShardFile<R> {
     pub positions: Vec<usize>,
     /// The runs, in planned order.
     pub runs: Vec<R>,
+    /// The build and invocation that ran this shard, with the hash of `config` (`None`: a shard file
+    /// written before provenance).
+    #[serde(default)]
+    pub provenance: Option<Provenance>,
 }
 
 impl<R> ShardFile<R> {
@@ -50,12 +55,18 @@ impl<R> ShardFile<R> {
         if let Some(o) = options.as_object_mut() {
             o.remove("out");
         }
+        let config = serde_json::to_value(config)?;
+        let provenance = Provenance {
+            config_sha256: crate::provenance::json_sha256(&config),
+            ..Provenance::of_process()
+        };
         Ok(ShardFile {
+            provenance: Some(provenance),
             format: SHARD_FORMAT.into(),
             experiment: experiment.into(),
             shard,
             planned_runs,
-            config: serde_json::to_value(config)?,
+            config,
             options,
             wall_s,
             positions: shard.range(planned_runs).collect(),

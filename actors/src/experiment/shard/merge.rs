@@ -203,6 +203,8 @@ pub struct MergedStudy<O, R> {
     pub runs: Vec<R>,
     /// The shards' wall-clock times added up, s.
     pub wall_s: f64,
+    /// This process's build and invocation, with the hash of the shards' (common) configuration.
+    pub provenance: crate::provenance::Provenance,
 }
 
 /// Reads and [`merge`]s the shard files `files` of `experiment`, with the options as `O`, going into `out`
@@ -219,6 +221,10 @@ pub fn merge_study<O: DeserializeOwned, R: DeserializeOwned>(
         out,
         runs: merged.runs,
         wall_s: merged.wall_s,
+        provenance: crate::provenance::Provenance {
+            config_sha256: crate::provenance::json_sha256(&merged.config),
+            ..crate::provenance::Provenance::of_process()
+        },
     })
 }
 
@@ -291,6 +297,7 @@ mod tests {
             wall_s: 1.0,
             runs: positions.iter().map(|p| p * 10).collect(),
             positions,
+            provenance: None,
         };
         (PathBuf::from(shard.file_name()), f)
     }

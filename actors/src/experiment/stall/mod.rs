@@ -88,7 +88,9 @@ pub fn plan(config: &Config, opts: &StallOptions) -> Vec<RunSpec> {
 pub fn run_study(base: &Config, opts: &StallOptions, progress: bool) -> anyhow::Result<StallStudy> {
     let wall = Instant::now();
     let runs = run_runs(base, plan(base, opts), opts, progress)?;
-    Ok(assemble(opts.clone(), runs, wall.elapsed().as_secs_f64()))
+    let mut study = assemble(opts.clone(), runs, wall.elapsed().as_secs_f64());
+    study.provenance = Some(crate::provenance::Provenance::of(base));
+    Ok(study)
 }
 
 /// Runs `specs` on `opts.threads` threads, in order.
@@ -129,6 +131,7 @@ fn assemble(options: StallOptions, runs: Vec<RunResult>, wall_s: f64) -> StallSt
         wall_s,
         simulated_s,
         speedup: if wall_s > 0.0 { simulated_s / wall_s } else { 0.0 },
+        provenance: Some(crate::provenance::Provenance::of_process()),
     }
 }
 

@@ -263,6 +263,9 @@ pub struct PoliciesStudy {
     pub first_predictive_stop_s: Vec<(String, Describe)>,
     /// Wall-clock time, s.
     pub wall_s: f64,
+    /// The build and invocation that made the study, and the hash of its configuration.
+    #[serde(default)]
+    pub provenance: Option<crate::provenance::Provenance>,
 }
 
 fn range(xs: &[f64]) -> Option<(f64, f64)> {
@@ -397,6 +400,7 @@ pub fn run_study(
         accuracy,
         first_predictive_stop_s,
         wall_s: wall.elapsed().as_secs_f64(),
+        provenance: Some(crate::provenance::Provenance::of(&config)),
     })
 }
 

@@ -10,6 +10,7 @@ use super::analysis::{Analysis, TOTALS, total};
 use super::run::RunResult;
 use super::{StallOptions, WINDOW_S, plots};
 use crate::experiment::mode_name;
+use crate::provenance::Provenance;
 
 /// Everything `summary.json` holds.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -30,6 +31,9 @@ pub struct StallStudy {
     pub(crate) simulated_s: f64,
     /// Simulated time per second of wall time.
     pub(crate) speedup: f64,
+    /// The build and invocation that made the study, and the hash of its configuration.
+    #[serde(default)]
+    pub provenance: Option<Provenance>,
 }
 
 /// Writes `summary.json`, the CSV tables and the SVG figures into `dir`.

@@ -40,7 +40,7 @@ pub fn run_shard(
         EXPERIMENT,
         shard,
         plan(base, opts),
-        base,
+        &base.redacted(),
         opts,
         &opts.out,
         |specs| {
@@ -78,7 +78,8 @@ pub fn merge(files: &[PathBuf], out: Option<&Path>) -> anyhow::Result<String> {
             ..r.result
         })
         .collect();
-    let study = assemble(m.options, runs, m.wall_s);
+    let mut study = assemble(m.options, runs, m.wall_s);
+    study.provenance = Some(m.provenance);
     report::write_all(&m.out, &study)?;
     Ok(report::table(&study) + &shard::merged_note(files.len(), &m.out))
 }
