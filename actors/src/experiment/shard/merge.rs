@@ -87,11 +87,19 @@ pub fn merge<R>(
     let planned = first.planned_runs;
     // The count a file states is checked against the files given before anything else.
     if count > shards.len() {
-        let present: BTreeMap<usize, &PathBuf> = shards
-            .iter()
-            .filter(|(_, s)| s.shard.count == count && s.shard.index < count)
-            .map(|(p, s)| (s.shard.index, p))
-            .collect();
+        let mut present: BTreeMap<usize, &PathBuf> = BTreeMap::new();
+        for (path, s) in &shards {
+            if s.shard.count == count
+                && s.shard.index < count
+                && let Some(other) = present.insert(s.shard.index, path)
+            {
+                return Err(MergeError::Duplicate {
+                    shard: s.shard,
+                    a: other.clone(),
+                    b: path.clone(),
+                });
+            }
+        }
         return Err(missing(&present, count, planned, shards.len()));
     }
     let mut by_index: BTreeMap<usize, &PathBuf> = BTreeMap::new();
@@ -406,6 +414,10 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("shard 0/2 given twice"), "{e}");
+        let e = merge("stall", vec![file(0, 4, 1), file(0, 4, 1)])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("shard 0/4 given twice"), "{e}");
         let e = merge("stall", vec![file(0, 4, 1), file(2, 4, 1)])
             .unwrap_err()
             .to_string();
