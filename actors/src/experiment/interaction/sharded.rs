@@ -190,6 +190,35 @@ mod tests {
     }
 
     #[test]
+    fn merged_runs_are_checked_against_the_plan_of_their_options() {
+        let opts = InteractionOptions::new(3, 1, 1.0, PathBuf::new());
+        let planned = |index: usize| {
+            let mut r = run();
+            r.index = index;
+            r.mode = interleaved_mode(index);
+            (r.robot_seed, r.human_seed) = run_seeds(3, index);
+            ShardRun::from(r)
+        };
+        let sources = vec![(0..2, PathBuf::from("shard-0-of-1.json"))];
+        let mut runs = vec![planned(0), planned(1)];
+        assert!(check_plan(&opts, &runs, &sources).is_ok());
+        runs[1].run.human_seed ^= 1;
+        let e = check_plan(&opts, &runs, &sources).unwrap_err().to_string();
+        assert!(
+            e.contains("shard-0-of-1.json: the run at position 1 has operator seed"),
+            "{e}"
+        );
+        runs[1] = planned(1);
+        runs[0].run.mode = Mode::Pavlovian;
+        let e = check_plan(&opts, &runs, &sources).unwrap_err().to_string();
+        assert!(e.contains("position 0 has mode pavlovian"), "{e}");
+        let e = check_plan(&opts, &runs[..1], &sources)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("hold 1 runs") && e.contains("plan 2"), "{e}");
+    }
+
+    #[test]
     fn a_run_that_keeps_no_records_writes_none() {
         let mut r = run();
         r.records.clear();

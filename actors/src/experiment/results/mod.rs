@@ -3,7 +3,8 @@
 //! - Without `--out`, a study gets a new folder of its own, `results/<name>-<UTC time>-seed<S>/` (then
 //!   `-2`, `-3`, … for a second invocation within the same second: the folder is made with `create_dir`, so
 //!   two processes never share one), and once it has written everything, `results/<name>-latest` points to
-//!   it ([`latest`]).
+//!   it ([`latest`]). The folder is made before the study runs (so the name is its own); a study that
+//!   fails leaves it, possibly empty, and `-latest` where it was.
 //! - `--out DIR` is used when it is absent or empty; a non-empty one is refused ([`ResultsError::NotEmpty`])
 //!   unless `--force`, and even then the study only writes its own files (it deletes nothing; a run whose
 //!   recording folder holds a recording already records beside it, [`beside`]).
