@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use pavlov::config::Config;
 
+use pavlov_actors::experiment::results::{Folder, Placement};
 use pavlov_actors::experiment::shard::{self, Shard};
 use pavlov_actors::experiment::{interaction, stall};
 
@@ -34,7 +35,8 @@ pub enum Experiment {
     Interaction(InteractionArgs),
     /// Merge the shard files (shard-I-of-N.json) that `stall|interaction --shard I/N` runs wrote into the
     /// study's summary, tables and figures, the same as the unsharded study's; refuses missing, repeated or
-    /// mismatched shards (different experiment, configuration, options or shard count).
+    /// mismatched shards (different experiment, configuration, options or shard count), runs that are not
+    /// the ones the options plan (index, policy, seeds), and anything but regular files of at most 1 GiB.
     Merge(MergeArgs),
 }
 
@@ -44,9 +46,13 @@ pub struct MergeArgs {
     /// Shard files, or directories holding them (every shard-*-of-*.json in each).
     #[arg(required = true, value_name = "DIR")]
     pub dirs: Vec<PathBuf>,
-    /// Results directory (default: results/<experiment>-<seed>).
+    /// Results directory: absent or empty, or any with --force (default: a new
+    /// results/<experiment>-<UTC time>-seed<S>/, and results/<experiment>-latest points to it).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Write into a non-empty --out: the merge replaces only the files it writes, and deletes nothing.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `pavlov experiment interaction`.
@@ -76,9 +82,16 @@ pub struct InteractionArgs {
     /// The experiment's seed.
     #[arg(long, default_value_t = 1, value_name = "S")]
     pub seed: u64,
-    /// Results directory (default: results/interaction-<seed>).
+    /// Results directory: absent or empty, or any with --force (default: a new
+    /// results/interaction[-curve|-sensitivity]-<UTC time>-seed<S>/, and
+    /// results/interaction[-curve|-sensitivity]-latest points to it). With --shard: the folder the study's
+    /// shards share (default results/interaction[-curve]-seed<S>-shards/).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Write into a non-empty --out (with --shard: replace this shard's file): the study replaces only the
+    /// files it writes, deletes nothing, and records a run beside a folder that holds a recording already.
+    #[arg(long)]
+    pub force: bool,
     /// Configuration (TOML); default: the built-in config/interaction.toml.
     #[arg(long, short = 'c', value_name = "FILE")]
     pub config: Option<PathBuf>,
@@ -103,9 +116,16 @@ pub struct StallArgs {
     /// The experiment's seed; each run's simulator seed is derived from it.
     #[arg(long, default_value_t = 1, value_name = "S")]
     pub seed: u64,
-    /// Results directory (default: results/stall-<seed>).
+    /// Results directory: absent or empty, or any with --force (default: a new
+    /// results/stall-<UTC time>-seed<S>/, or results/stall-policies-…/ with --policies, and
+    /// results/stall-latest or stall-policies-latest points to it). With --shard: the folder the study's
+    /// shards share (default results/stall-seed<S>-shards/).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Write into a non-empty --out (with --shard: replace this shard's file): the study replaces only the
+    /// files it writes, deletes nothing, and records a run beside a folder that holds a recording already.
+    #[arg(long)]
+    pub force: bool,
     /// Configuration (TOML); default: the built-in config/stall.toml. Mode and seed are set per run.
     #[arg(long, short = 'c', value_name = "FILE")]
     pub config: Option<PathBuf>,
@@ -143,34 +163,43 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
             check_study(a.runs, a.minutes, MAX_STALL_RUNS)?;
             let config = load_config(a.config.as_ref(), STALL_CONFIG)?;
             let threads = a.threads.unwrap_or_else(default_threads);
-            let opts = stall::StallOptions {
+            let place = Placement::new(a.out.clone(), a.force);
+            let mut opts = stall::StallOptions {
                 runs_per_policy: a.runs,
                 minutes: a.minutes,
                 seed: a.seed,
                 record: !a.no_record,
                 threads,
-                out: a
-                    .out
-                    .unwrap_or_else(|| PathBuf::from(format!("results/stall-{}", a.seed))),
+                out: PathBuf::new(),
             };
             if let Some(shard) = a.shard {
                 anyhow::ensure!(
                     a.policies.is_none(),
                     "--shard slices the reactive/Pavlovian study; it does not take --policies yet"
                 );
+                opts.out = place.shard("stall", a.seed, shard)?;
                 let (path, line) = stall::sharded::run_shard(&config, &opts, shard, true)?;
                 say!("{line}");
                 say!("wrote {}", path.display());
                 return Ok(());
             }
-            let table = match &a.policies {
-                Some(list) => {
-                    let policies = stall::policies::parse_policies(list)?;
-                    stall::policies::run_and_report(&config, &opts, &policies, true)?
-                }
+            let policies = match &a.policies {
+                Some(list) => Some(stall::policies::parse_policies(list)?),
+                None => None,
+            };
+            let name = if policies.is_some() {
+                "stall-policies"
+            } else {
+                "stall"
+            };
+            let folder = place.study(name, a.seed)?;
+            opts.out = folder.path.clone();
+            let table = match &policies {
+                Some(policies) => stall::policies::run_and_report(&config, &opts, policies, true)?,
                 None => stall::run_and_report(&config, &opts, true)?,
             };
             say!("{}", table.trim_end());
+            say_latest(&folder);
             Ok(())
         }
         Experiment::Interaction(a) => {
@@ -184,14 +213,11 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
             } else {
                 "interaction"
             };
-            let out = a
-                .out
-                .unwrap_or_else(|| PathBuf::from(format!("results/{name}-{}", a.seed)));
             let mut opts = interaction::InteractionOptions::new(
                 a.seed,
                 a.runs.unwrap_or(runs),
                 a.minutes.unwrap_or(minutes),
-                out,
+                PathBuf::new(),
             );
             check_study(opts.runs_per_policy, opts.minutes, MAX_INTERACTION_RUNS)?;
             anyhow::ensure!(
@@ -206,6 +232,16 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
                 opts.window_min > 0.0 && opts.window_min.is_finite(),
                 "--window must be a positive number of minutes"
             );
+            let place = Placement::new(a.out.clone(), a.force);
+            if let Some(shard) = a.shard {
+                opts.out = place.shard(name, a.seed, shard)?;
+                let (path, line) = interaction::sharded::run_shard(&config, &opts, shard, true)?;
+                say!("{line}");
+                say!("wrote {}", path.display());
+                return Ok(());
+            }
+            let folder = place.study(name, a.seed)?;
+            opts.out = folder.path.clone();
             if a.sensitivity {
                 let wall = std::time::Instant::now();
                 let rows = interaction::sensitivity::run_sensitivity(&config, &opts, true)?;
@@ -223,18 +259,14 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
                     opts.out.display(),
                     wall.elapsed().as_secs_f64()
                 );
-                return Ok(());
-            }
-            if let Some(shard) = a.shard {
-                let (path, line) = interaction::sharded::run_shard(&config, &opts, shard, true)?;
-                say!("{line}");
-                say!("wrote {}", path.display());
+                say_latest(&folder);
                 return Ok(());
             }
             let summary = interaction::run_study_with_progress(&config, &opts, true)?;
             interaction::report::write_all(&opts.out, &summary)?;
             say!("{}", interaction::report::table(&summary).trim_end());
             say!("results: {}", opts.out.display());
+            say_latest(&folder);
             Ok(())
         }
     }
@@ -265,9 +297,10 @@ fn check_study(runs: usize, minutes: f64, max_runs: usize) -> Result<()> {
 fn merge(a: MergeArgs) -> Result<()> {
     let files = shard::shard_files(&a.dirs)?;
     let experiment = shard::experiment_of_all(&files)?;
+    let place = Placement::new(a.out, a.force);
     let table = match experiment.as_str() {
-        stall::sharded::EXPERIMENT => stall::sharded::merge(&files, a.out.as_deref())?,
-        interaction::sharded::EXPERIMENT => interaction::sharded::merge(&files, a.out.as_deref())?,
+        stall::sharded::EXPERIMENT => stall::sharded::merge(&files, &place)?,
+        interaction::sharded::EXPERIMENT => interaction::sharded::merge(&files, &place)?,
         other => anyhow::bail!(
             "{}: shards of experiment {other:?} cannot be merged (known: {}, {})",
             files
@@ -279,6 +312,14 @@ fn merge(a: MergeArgs) -> Result<()> {
     };
     say!("{}", table.trim_end());
     Ok(())
+}
+
+/// Marks a default folder as the latest of its kind, once the study is written, and says so.
+fn say_latest(folder: &Folder) {
+    let note = folder.finish_note();
+    if !note.is_empty() {
+        say!("{}", note.trim_end());
+    }
 }
 
 fn default_threads() -> usize {

@@ -5,10 +5,12 @@
 //! analyses, tabulates and plots what comes back:
 //!
 //! - [`stall`]: "Reducing Motor Stalls" (over-current observations and efficiency, Figures 1 and 2);
-//! - [`interaction`]: "Reducing Lag By Predicting the Next Command" (Figures 3 and 4).
+//! - [`interaction`]: "Reducing Lag By Predicting the Next Command" (Figures 3 and 4);
+//! - [`results`]: where a study writes, never over earlier results; [`shard`]: a study in slices.
 
 pub mod interaction;
 pub(crate) mod plot_style;
+pub mod results;
 pub(crate) mod runner;
 pub mod shard;
 pub mod stall;

@@ -101,8 +101,10 @@ pub(crate) fn run_paused<C: Collect>(
             let capacity = usize::try_from(ticks)
                 .unwrap_or(usize::MAX)
                 .saturating_add(64);
+            // A folder that holds a recording already (an earlier study's, or a user's) is left alone.
+            let dir = super::results::beside::recording_dir(&dir);
             Some(
-                Recorder::spawn(header, Some(dir.clone()), dir, capacity)
+                Recorder::spawn_new(header, Some(dir.clone()), dir, capacity)
                     .map_err(RunError::Recorder)?,
             )
         }

@@ -1,5 +1,7 @@
 //! The paper's two experiments through the real runtime under virtual time.
 
 mod interaction;
+mod merge_bounds;
+mod results_folders;
 mod shards;
 mod stall;

@@ -7,7 +7,8 @@
 //! and figures from the same numbers. Tick records are kept only by the runs that keep them in the
 //! unsharded study (runs 0 and 1, which the Figure 3 analogue draws), so other shards stay small.
 
-use std::path::{Path, PathBuf};
+use std::ops::Range;
+use std::path::PathBuf;
 use std::sync::Arc;
 
 use pavlov::analysis::interaction::curve::RunTimeline;
@@ -15,9 +16,11 @@ use pavlov::config::Config;
 use pavlov::record::TickRecord;
 use serde::{Deserialize, Serialize};
 
-use super::run::{AlignedWindow, InteractionRun};
+use super::run::{AlignedWindow, InteractionRun, run_seeds};
 use super::{InteractionOptions, assemble, plan, report, run_runs};
-use crate::experiment::shard::{self, Shard};
+use crate::experiment::results::Placement;
+use crate::experiment::shard::{self, MergeError, PlannedRun, Shard};
+use crate::experiment::{interleaved_mode, mode_name};
 
 /// The experiment's name in shard files.
 pub const EXPERIMENT: &str = "interaction";
@@ -82,16 +85,50 @@ pub fn run_shard(
     )
 }
 
-/// Reads the shard files `files`, checks they are exactly the slices of one interaction study, and writes
-/// the study as the unsharded run would have produced it into `out` (default: `results/interaction-<seed>`);
-/// returns the terminal table.
-pub fn merge(files: &[PathBuf], out: Option<&Path>) -> anyhow::Result<String> {
-    let m = shard::merge_study::<InteractionOptions, ShardRun>(EXPERIMENT, files, out)?;
+/// Reads the shard files `files`, checks they are exactly the slices of one interaction study and that
+/// every run is the one its options plan (index, policy, robot and operator seeds), and writes the study as
+/// the unsharded run would have produced it where `place` says (default: a new
+/// `results/interaction-<UTC time>-seed<S>/`); returns the terminal table.
+pub fn merge(files: &[PathBuf], place: &Placement) -> anyhow::Result<String> {
+    let m =
+        shard::merge_study::<InteractionOptions, ShardRun>(EXPERIMENT, files, place, check_plan)?;
     let runs = m.runs.into_iter().map(InteractionRun::from).collect();
     let mut study = assemble(m.options, runs, m.wall_s);
     study.provenance = m.provenance;
-    report::write_all(&m.out, &study)?;
-    Ok(report::table(&study) + &shard::merged_note(files.len(), &m.out))
+    report::write_all(&m.out.path, &study)?;
+    Ok(
+        report::table(&study)
+            + &shard::merged_note(files.len(), &m.out.path)
+            + &m.out.finish_note(),
+    )
+}
+
+/// Checks the merged runs against [`plan`]'s: `2 × runs_per_policy` runs, run `i` of policy
+/// [`interleaved_mode`]`(i)` with the seeds [`run_seeds`]`(seed, i)`.
+fn check_plan(
+    opts: &InteractionOptions,
+    runs: &[ShardRun],
+    sources: &[(Range<usize>, PathBuf)],
+) -> Result<(), MergeError> {
+    let key = |index, mode, (robot, operator)| PlannedRun {
+        index,
+        mode: mode_name(mode),
+        seeds: vec![("robot seed", robot), ("operator seed", operator)],
+    };
+    shard::check_plan(
+        runs,
+        sources,
+        opts.runs_per_policy.checked_mul(2),
+        &format!("runs_per_policy {}", opts.runs_per_policy),
+        |i| key(i, interleaved_mode(i), run_seeds(opts.seed, i)),
+        |r| {
+            key(
+                r.run.index,
+                r.run.mode,
+                (r.run.robot_seed, r.run.human_seed),
+            )
+        },
+    )
 }
 
 #[cfg(test)]
@@ -151,6 +188,35 @@ mod tests {
         assert_eq!(before.aligned_windows, after.aligned_windows);
         assert_eq!(before.timeline, after.timeline);
         assert_eq!(before.records, after.records);
+    }
+
+    #[test]
+    fn merged_runs_are_checked_against_the_plan_of_their_options() {
+        let opts = InteractionOptions::new(3, 1, 1.0, PathBuf::new());
+        let planned = |index: usize| {
+            let mut r = run();
+            r.index = index;
+            r.mode = interleaved_mode(index);
+            (r.robot_seed, r.human_seed) = run_seeds(3, index);
+            ShardRun::from(r)
+        };
+        let sources = vec![(0..2, PathBuf::from("shard-0-of-1.json"))];
+        let mut runs = vec![planned(0), planned(1)];
+        assert!(check_plan(&opts, &runs, &sources).is_ok());
+        runs[1].run.human_seed ^= 1;
+        let e = check_plan(&opts, &runs, &sources).unwrap_err().to_string();
+        assert!(
+            e.contains("shard-0-of-1.json: the run at position 1 has operator seed"),
+            "{e}"
+        );
+        runs[1] = planned(1);
+        runs[0].run.mode = Mode::Pavlovian;
+        let e = check_plan(&opts, &runs, &sources).unwrap_err().to_string();
+        assert!(e.contains("position 0 has mode pavlovian"), "{e}");
+        let e = check_plan(&opts, &runs[..1], &sources)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("hold 1 runs") && e.contains("plan 2"), "{e}");
     }
 
     #[test]

@@ -189,11 +189,74 @@ pub fn experiment_of_all(files: &[PathBuf]) -> Result<String, MergeError> {
         .ok_or_else(|| MergeError::NoShards("(no paths)".into()))
 }
 
+/// The largest shard file merge reads, bytes (1 GiB; the largest the README describes, the one holding
+/// runs 0 and 1 of `interaction --curve`, is about 490 MB).
+pub const MAX_SHARD_BYTES: u64 = 1 << 30;
+
+/// A shard file's text: only a regular file (opened without blocking, so a FIFO named like a shard is
+/// refused rather than waited on; a symbolic link is followed, and what it points to must be a regular
+/// file), and at most [`MAX_SHARD_BYTES`].
 fn read(path: &Path) -> Result<String, MergeError> {
-    std::fs::read_to_string(path).map_err(|source| MergeError::Read {
+    read_at_most(path, MAX_SHARD_BYTES)
+}
+
+/// [`read`] with the limit `limit`, bytes.
+pub(crate) fn read_at_most(path: &Path, limit: u64) -> Result<String, MergeError> {
+    use std::io::Read;
+    use std::os::unix::fs::OpenOptionsExt;
+    let failed = |source| MergeError::Read {
         path: path.to_path_buf(),
         source,
+    };
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)
+        .map_err(failed)?;
+    let meta = file.metadata().map_err(failed)?;
+    if !meta.is_file() {
+        return Err(MergeError::NotRegular {
+            path: path.to_path_buf(),
+            kind: kind_of(&meta.file_type()),
+        });
+    }
+    let too_large = |size| MergeError::TooLarge {
+        path: path.to_path_buf(),
+        size,
+        limit,
+    };
+    if meta.len() > limit {
+        return Err(too_large(format!("{} bytes", meta.len())));
+    }
+    let mut bytes = Vec::new();
+    file.take(limit.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(failed)?;
+    if bytes.len() as u64 > limit {
+        return Err(too_large(format!("more than {limit} bytes")));
+    }
+    String::from_utf8(bytes).map_err(|e| MergeError::Parse {
+        path: path.to_path_buf(),
+        reason: format!("not UTF-8 text: {e}"),
     })
+}
+
+/// What a file that is not a regular file is, for the refusal.
+fn kind_of(t: &std::fs::FileType) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    if t.is_dir() {
+        "a folder"
+    } else if t.is_fifo() {
+        "a FIFO"
+    } else if t.is_char_device() {
+        "a character device"
+    } else if t.is_block_device() {
+        "a block device"
+    } else if t.is_socket() {
+        "a socket"
+    } else {
+        "not a regular file"
+    }
 }
 
 fn check_format(path: &Path, format: &str) -> Result<(), MergeError> {
@@ -207,9 +270,17 @@ fn check_format(path: &Path, format: &str) -> Result<(), MergeError> {
     }
 }
 
-/// Reads one shard file.
+/// Reads one shard file ([`read`]'s checks, then [`parse`]).
 pub fn load<R: for<'de> Deserialize<'de>>(path: &Path) -> Result<ShardFile<R>, MergeError> {
-    let file: ShardFile<R> = serde_json::from_str(&read(path)?).map_err(|e| MergeError::Parse {
+    parse(path, &read(path)?)
+}
+
+/// A shard file from its text (`path` names it in errors); any text gives a shard file or an error.
+pub fn parse<R: for<'de> Deserialize<'de>>(
+    path: &Path,
+    text: &str,
+) -> Result<ShardFile<R>, MergeError> {
+    let file: ShardFile<R> = serde_json::from_str(text).map_err(|e| MergeError::Parse {
         path: path.to_path_buf(),
         reason: e.to_string(),
     })?;

@@ -2,6 +2,8 @@
 //! puts their runs back in planned order; every refusal names the files and what is wrong
 //! ([`MergeError`], [`Difference`] with the first differing key from [`first_difference`]).
 
+use std::collections::BTreeMap;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use serde::de::DeserializeOwned;
@@ -10,6 +12,7 @@ use serde_json::Value;
 use super::Shard;
 pub use super::error::{Difference, MergeError};
 use super::file::{ShardFile, load};
+use crate::experiment::results::{Folder, Placement};
 
 /// The shards of one study, checked and put together.
 #[derive(Debug)]
@@ -23,6 +26,8 @@ pub struct Merged<R> {
     pub runs: Vec<R>,
     /// The shards' wall-clock times added up, s.
     pub wall_s: f64,
+    /// Which file each block of positions came from, in planned order.
+    pub sources: Vec<(Range<usize>, PathBuf)>,
 }
 
 /// The first place two JSON values differ: its path and the two values there.
@@ -67,7 +72,8 @@ fn show(v: Option<&Value>) -> String {
 }
 
 /// Checks that `shards` (with the paths they came from) are exactly the N slices of one study of
-/// `experiment`, and returns its runs in planned order.
+/// `experiment`, and returns its runs in planned order. Nothing is sized by a count a file states: the
+/// slices are kept in a map of the files given, and only the first few missing ones are listed.
 pub fn merge<R>(
     experiment: &str,
     shards: Vec<(PathBuf, ShardFile<R>)>,
@@ -79,7 +85,24 @@ pub fn merge<R>(
     let first_head = head(first);
     let count = first.shard.count;
     let planned = first.planned_runs;
-    let mut by_index: Vec<Option<&PathBuf>> = vec![None; count];
+    // The count a file states is checked against the files given before anything else.
+    if count > shards.len() {
+        let mut present: BTreeMap<usize, &PathBuf> = BTreeMap::new();
+        for (path, s) in &shards {
+            if s.shard.count == count
+                && s.shard.index < count
+                && let Some(other) = present.insert(s.shard.index, path)
+            {
+                return Err(MergeError::Duplicate {
+                    shard: s.shard,
+                    a: other.clone(),
+                    b: path.clone(),
+                });
+            }
+        }
+        return Err(missing(&present, count, planned, shards.len()));
+    }
+    let mut by_index: BTreeMap<usize, &PathBuf> = BTreeMap::new();
     for (path, s) in &shards {
         let mismatch = |what, (key, va, vb): (String, String, String)| {
             MergeError::Mismatch(Box::new(Difference {
@@ -111,23 +134,22 @@ pub fn merge<R>(
         ) {
             return Err(mismatch("options", d));
         }
-        let slot = by_index
-            .get_mut(s.shard.index)
-            .ok_or_else(|| MergeError::Parse {
+        if s.shard.index >= count {
+            return Err(MergeError::Parse {
                 path: path.clone(),
                 reason: format!(
                     "shard index {} is not below its count {count}",
                     s.shard.index
                 ),
-            })?;
-        if let Some(other) = slot {
+            });
+        }
+        if let Some(other) = by_index.insert(s.shard.index, path) {
             return Err(MergeError::Duplicate {
                 shard: s.shard,
-                a: (*other).clone(),
+                a: other.clone(),
                 b: path.clone(),
             });
         }
-        *slot = Some(path);
         let expected = s.shard.range(planned);
         if s.positions.len() != s.runs.len() || !s.positions.iter().copied().eq(expected.clone()) {
             return Err(MergeError::WrongRuns {
@@ -139,21 +161,10 @@ pub fn merge<R>(
             });
         }
     }
-    let missing: Vec<usize> = (0..count).filter(|i| by_index[*i].is_none()).collect();
-    if !missing.is_empty() {
-        let ids: Vec<String> = missing.iter().map(usize::to_string).collect();
-        let runs: Vec<String> = missing
-            .iter()
-            .map(|&index| {
-                let r = Shard { index, count }.range(planned);
-                format!("{}..{}", r.start, r.end)
-            })
-            .collect();
-        return Err(MergeError::Missing {
-            missing: ids.join(", "),
-            count,
-            runs: runs.join(", "),
-        });
+    // Every index is below the count and none is repeated, so the count is met exactly when as many
+    // files were given.
+    if by_index.len() < count {
+        return Err(missing(&by_index, count, planned, shards.len()));
     }
     let (config, mut options) = (first.config.clone(), first.options.clone());
     let threads = shards
@@ -166,13 +177,54 @@ pub fn merge<R>(
     let mut shards = shards;
     shards.sort_by_key(|(_, s)| s.shard.index);
     let wall_s = shards.iter().map(|(_, s)| s.wall_s).sum();
+    let sources = shards
+        .iter()
+        .map(|(p, s)| (s.shard.range(planned), p.clone()))
+        .collect();
     let runs = shards.into_iter().flat_map(|(_, s)| s.runs).collect();
     Ok(Merged {
         config,
         options,
         runs,
         wall_s,
+        sources,
     })
+}
+
+/// How many missing shards a refusal lists.
+const LISTED: usize = 10;
+
+/// The refusal for a set that lacks some of its `count` slices (the first [`LISTED`] named).
+fn missing(
+    present: &BTreeMap<usize, &PathBuf>,
+    count: usize,
+    planned: usize,
+    given: usize,
+) -> MergeError {
+    let absent: Vec<usize> = (0..count)
+        .filter(|i| !present.contains_key(i))
+        .take(LISTED)
+        .collect();
+    let more = count - present.len() - absent.len();
+    let etc = |mut v: Vec<String>| {
+        if more > 0 {
+            v.push(format!("… and {more} more"));
+        }
+        v.join(", ")
+    };
+    let runs = absent
+        .iter()
+        .map(|&index| {
+            let r = Shard { index, count }.range(planned);
+            format!("{}..{}", r.start, r.end)
+        })
+        .collect();
+    MergeError::Missing {
+        missing: etc(absent.iter().map(usize::to_string).collect()),
+        count,
+        runs: etc(runs),
+        given,
+    }
 }
 
 /// Reads the shard files `files` of `experiment` and [`merge`]s them.
@@ -192,11 +244,11 @@ pub fn merged_note(files: usize, out: &Path) -> String {
     format!("merged {files} shard file(s) into {}\n", out.display())
 }
 
-/// A study put together from its shards, ready for its experiment to assemble.
+/// A study put together from its shards, ready for its experiment to check against its plan and assemble.
 #[derive(Debug)]
 pub struct MergedStudy<O, R> {
     /// Where the merged study goes.
-    pub out: PathBuf,
+    pub out: Folder,
     /// Its options (with `out` as the results directory; `threads` as [`Merged::options`] says).
     pub options: O,
     /// Every run, in planned order.
@@ -205,19 +257,31 @@ pub struct MergedStudy<O, R> {
     pub wall_s: f64,
     /// This process's build and invocation, with the hash of the shards' (common) configuration.
     pub provenance: crate::provenance::Provenance,
+    /// Which file each block of positions came from.
+    pub sources: Vec<(Range<usize>, PathBuf)>,
 }
 
-/// Reads and [`merge`]s the shard files `files` of `experiment`, with the options as `O`, going into `out`
-/// (default: `results/<experiment>-<seed>`, as the unsharded study's).
+/// Reads and [`merge`]s the shard files `files` of `experiment`, with the options as `O`, checks the runs
+/// with `check` (the options, the runs, and where they came from: the experiment's [`super::check_plan`]),
+/// and only then finds the folder the study goes into, where `place` says (by default a new
+/// `results/<experiment>-<UTC time>-seed<S>/`, as the unsharded study's).
 pub fn merge_study<O: DeserializeOwned, R: DeserializeOwned>(
     experiment: &str,
     files: &[PathBuf],
-    out: Option<&Path>,
+    place: &Placement,
+    check: impl FnOnce(&O, &[R], &[(Range<usize>, PathBuf)]) -> Result<(), MergeError>,
 ) -> Result<MergedStudy<O, R>, MergeError> {
     let merged = merge_files::<R>(experiment, files)?;
-    let out = merged.out_dir(experiment, out);
+    let seed = merged
+        .options
+        .get("seed")
+        .and_then(Value::as_u64)
+        .unwrap_or(0);
+    let options: O = merged.options_as(experiment, Path::new(""))?;
+    check(&options, &merged.runs, &merged.sources)?;
+    let out = place.study(experiment, seed)?;
     Ok(MergedStudy {
-        options: merged.options_as(experiment, &out)?,
+        options: merged.options_as(experiment, &out.path)?,
         out,
         runs: merged.runs,
         wall_s: merged.wall_s,
@@ -225,25 +289,11 @@ pub fn merge_study<O: DeserializeOwned, R: DeserializeOwned>(
             config_sha256: crate::provenance::json_sha256(&merged.config),
             ..crate::provenance::Provenance::of_process()
         },
+        sources: merged.sources,
     })
 }
 
 impl<R> Merged<R> {
-    /// Where the merged study goes: `out`, or `results/<experiment>-<seed>` as the unsharded study's default.
-    pub fn out_dir(&self, experiment: &str, out: Option<&Path>) -> PathBuf {
-        match out {
-            Some(out) => out.to_path_buf(),
-            None => {
-                let seed = self
-                    .options
-                    .get("seed")
-                    .and_then(Value::as_u64)
-                    .unwrap_or(0);
-                PathBuf::from(format!("results/{experiment}-{seed}"))
-            }
-        }
-    }
-
     /// The merged options as `experiment`'s options type, with `out` as the results directory.
     pub fn options_as<O: DeserializeOwned>(
         &self,
@@ -328,7 +378,7 @@ mod tests {
     }
 
     #[test]
-    fn the_merged_options_take_the_results_directory_and_the_default_is_the_experiments() {
+    fn the_merged_options_take_the_results_directory() {
         #[derive(serde::Deserialize)]
         struct Opts {
             seed: u64,
@@ -341,8 +391,6 @@ mod tests {
             (o.seed, o.minutes, o.out),
             (7, 1.0, PathBuf::from("merged"))
         );
-        assert_eq!(m.out_dir("stall", None), PathBuf::from("results/stall-7"));
-        assert_eq!(m.out_dir("stall", Some(Path::new("x"))), PathBuf::from("x"));
         #[derive(Debug, serde::Deserialize)]
         #[allow(dead_code)]
         struct Other {
@@ -373,6 +421,10 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("shard 0/2 given twice"), "{e}");
+        let e = merge("stall", vec![file(0, 4, 1), file(0, 4, 1)])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("shard 0/4 given twice"), "{e}");
         let e = merge("stall", vec![file(0, 4, 1), file(2, 4, 1)])
             .unwrap_err()
             .to_string();

@@ -10,15 +10,20 @@
 //! runs and the runs themselves. [`merge()`] reads a set of those files and refuses, with an error naming
 //! the files and the difference, shards of different experiments, configurations, options or shard counts,
 //! a shard given twice, missing shards, and runs outside their shard's slice. What it returns is the runs
-//! in planned order, from which the experiment computes the same summary, tables and figures as the
-//! unsharded study.
+//! in planned order; the experiment checks each against the run its options plan there ([`check_plan`])
+//! and computes from them the same summary, tables and figures as the unsharded study.
 //!
 //! - this file: [`Shard`], parsing `--shard I/N` and slicing a plan;
 //! - [`mod@file`]: the shard file, finding, reading and writing it;
-//! - [`mod@merge`]: checking a set of shards and putting their runs together.
+//! - [`mod@merge`]: checking a set of shards and putting their runs together;
+//! - [`mod@plan`]: checking each merged run against the run the study's options plan at its position.
+//!
+//! Shard files are untrusted input: merge reads only regular files of at most [`MAX_SHARD_BYTES`], sizes
+//! nothing by a count a file states, and ends every bad file with an error, never a panic.
 
 pub mod file;
 pub mod merge;
+pub mod plan;
 
 use std::ops::Range;
 use std::str::FromStr;
@@ -26,15 +31,21 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 mod error;
+#[cfg(test)]
+mod robustness;
 
 /// The format tag of a shard file.
 pub const SHARD_FORMAT: &str = "pavlov-shard/1";
 
-pub use file::{ShardFile, experiment_of, experiment_of_all, load, run_slice, shard_files, write};
+pub use file::{
+    MAX_SHARD_BYTES, ShardFile, experiment_of, experiment_of_all, load, parse, run_slice,
+    shard_files, write,
+};
 pub use merge::{
     Difference, MergeError, Merged, MergedStudy, NOT_OUTCOME, first_difference, merge, merge_files,
     merge_study, merged_note,
 };
+pub use plan::{PlannedRun, check_plan};
 
 /// The I-th (0-based) of N slices of a study.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -102,9 +113,13 @@ impl Shard {
     pub fn range(&self, planned: usize) -> Range<usize> {
         let count = self.count.max(1);
         let (base, extra) = (planned / count, planned % count);
-        let start = self.index * base + self.index.min(extra);
+        // Saturating: a shard read from a file may state any index (one past its count gives an empty range).
+        let start = self
+            .index
+            .saturating_mul(base)
+            .saturating_add(self.index.min(extra));
         let len = base + usize::from(self.index < extra);
-        start.min(planned)..(start + len).min(planned)
+        start.min(planned)..start.saturating_add(len).min(planned)
     }
 
     /// This shard's runs of the planned list.

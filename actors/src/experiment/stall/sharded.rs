@@ -5,7 +5,8 @@
 //! A shard keeps, besides each run's result, the Figure 1 excerpt of the first run of each policy that has
 //! one; the unsharded study draws the first such run of each policy, which is always one of those.
 
-use std::path::{Path, PathBuf};
+use std::ops::Range;
+use std::path::PathBuf;
 
 use pavlov::config::Config;
 use pavlov::control::Mode;
@@ -13,8 +14,10 @@ use pavlov::record::TickRecord;
 use serde::{Deserialize, Serialize};
 
 use super::report;
-use super::{RunResult, StallOptions, assemble, plan, run_runs};
-use crate::experiment::shard::{self, Shard};
+use super::{RunResult, StallOptions, assemble, plan, run_runs, run_seed};
+use crate::experiment::results::Placement;
+use crate::experiment::shard::{self, MergeError, PlannedRun, Shard};
+use crate::experiment::{interleaved_mode, mode_name};
 
 /// The experiment's name in shard files.
 pub const EXPERIMENT: &str = "stall";
@@ -65,11 +68,12 @@ pub fn run_shard(
     )
 }
 
-/// Reads the shard files `files`, checks they are exactly the slices of one stall study, and writes the
-/// study as the unsharded run would have produced it into `out` (default: `results/stall-<seed>`, as the
-/// unsharded study); returns the terminal table.
-pub fn merge(files: &[PathBuf], out: Option<&Path>) -> anyhow::Result<String> {
-    let m = shard::merge_study::<StallOptions, ShardRun>(EXPERIMENT, files, out)?;
+/// Reads the shard files `files`, checks they are exactly the slices of one stall study and that every run
+/// is the one its options plan (index, policy, simulator seed), and writes the study as the unsharded run
+/// would have produced it where `place` says (default: a new `results/stall-<UTC time>-seed<S>/`, as the
+/// unsharded study's); returns the terminal table.
+pub fn merge(files: &[PathBuf], place: &Placement) -> anyhow::Result<String> {
+    let m = shard::merge_study::<StallOptions, ShardRun>(EXPERIMENT, files, place, check_plan)?;
     let runs = m
         .runs
         .into_iter()
@@ -80,6 +84,32 @@ pub fn merge(files: &[PathBuf], out: Option<&Path>) -> anyhow::Result<String> {
         .collect();
     let mut study = assemble(m.options, runs, m.wall_s);
     study.provenance = Some(m.provenance);
-    report::write_all(&m.out, &study)?;
-    Ok(report::table(&study) + &shard::merged_note(files.len(), &m.out))
+    report::write_all(&m.out.path, &study)?;
+    Ok(
+        report::table(&study)
+            + &shard::merged_note(files.len(), &m.out.path)
+            + &m.out.finish_note(),
+    )
+}
+
+/// Checks the merged runs against [`plan`]'s: `2 × runs_per_policy` runs, run `i` of policy
+/// [`interleaved_mode`]`(i)` with simulator seed [`run_seed`]`(seed, i)`.
+fn check_plan(
+    opts: &StallOptions,
+    runs: &[ShardRun],
+    sources: &[(Range<usize>, PathBuf)],
+) -> Result<(), MergeError> {
+    let key = |index, mode, seed| PlannedRun {
+        index,
+        mode: mode_name(mode),
+        seeds: vec![("seed", seed)],
+    };
+    shard::check_plan(
+        runs,
+        sources,
+        opts.runs_per_policy.checked_mul(2),
+        &format!("runs_per_policy {}", opts.runs_per_policy),
+        |i| key(i, interleaved_mode(i), run_seed(opts.seed, i)),
+        |r| key(r.result.index, r.result.mode, r.result.seed),
+    )
 }

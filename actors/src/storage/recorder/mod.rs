@@ -17,8 +17,8 @@
 //! A client names a recording, never a place: `start_recording`'s `dir` is a plain name
 //! ([`crate::storage::names`]) of a folder inside the recordings root, and the default name
 //! (`recording-<UTC time>`, with `-2`, `-3`, … if taken) is always new. A recording file is never
-//! overwritten, neither by a client nor by `pavlov serve --record` ([`Recorder::spawn_new`]); only the
-//! experiments, which regenerate their own results, replace one ([`Recorder::spawn`]). A refused start
+//! overwritten, neither by a client, nor by `pavlov serve --record`, nor by the experiments
+//! ([`Recorder::spawn_new`]; an experiment's run records beside a folder that holds one). A refused start
 //! leaves the running recording open.
 
 mod writer;
@@ -96,8 +96,8 @@ pub struct Recorder {
 
 impl Recorder {
     /// Starts the recorder thread. With `dir`, recording into `dir/recording.mcap` starts as soon as the
-    /// server is attached, replacing a recording already there (for experiments, which regenerate their
-    /// own results); `root` is the folder `start_recording` creates its recordings in.
+    /// server is attached, replacing a recording already there (in either format: an older `ticks.jsonl`
+    /// is deleted); `root` is the folder `start_recording` creates its recordings in.
     pub fn spawn(
         header: RecordingHeader,
         dir: Option<PathBuf>,
@@ -108,7 +108,7 @@ impl Recorder {
     }
 
     /// Like [`Recorder::spawn`], but refuses (an `AlreadyExists` error naming the file) to start when
-    /// `dir` already holds a recording: for `pavlov serve --record DIR`.
+    /// `dir` already holds a recording: for `pavlov serve --record DIR` and the experiments.
     pub fn spawn_new(
         header: RecordingHeader,
         dir: Option<PathBuf>,
