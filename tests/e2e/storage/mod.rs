@@ -1,9 +1,10 @@
 //! What the server keeps on disk: recordings (round trip, replay, a rule table's rules, a kill mid-write, names a client may
 //! give, conversion between MCAP and JSON Lines, an independent MCAP reader), checkpoints (periodic, per
-//! run, resumed with fallback) and saves.
+//! run, resumed with fallback) and saves; and what it does when the disk is full (`disk_full`).
 
 mod checkpoint;
 mod checkpoint_runs;
+mod disk_full;
 pub(crate) mod fixtures;
 mod recording_convert;
 mod recording_crash;
