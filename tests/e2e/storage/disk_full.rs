@@ -33,11 +33,16 @@ const ROOM: u64 = 16 * 1024;
 const WAIT: Duration = Duration::from_secs(120);
 
 /// A tmpfs mounted for the test, unmounted (and its mount point removed) when dropped.
-struct Tmpfs(PathBuf);
+pub(crate) struct Tmpfs(PathBuf);
 
 impl Tmpfs {
+    /// Where it is mounted.
+    pub(crate) fn path(&self) -> &Path {
+        &self.0
+    }
+
     /// Mounts a tmpfs of [`TMPFS_SIZE`]; `None` when this machine does not let the test mount.
-    fn mount() -> Option<Tmpfs> {
+    pub(crate) fn mount() -> Option<Tmpfs> {
         let nanos = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos());

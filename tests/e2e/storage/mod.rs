@@ -4,7 +4,7 @@
 
 mod checkpoint;
 mod checkpoint_runs;
-mod disk_full;
+pub(crate) mod disk_full;
 pub(crate) mod fixtures;
 mod recording_convert;
 mod recording_crash;
