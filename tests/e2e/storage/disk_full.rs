@@ -9,8 +9,11 @@
 //! - what was recorded before the disk filled up still loads;
 //! - once the filler is removed, `start_recording` records again, into a file that loads whole.
 //!
-//! Mounting needs root (or `CAP_SYS_ADMIN`); where `mount` is refused, the test says so and does nothing.
-//! Every wait is for a message, with a generous bound: nothing is timed.
+//! Mounting needs root (or `CAP_SYS_ADMIN`). Where `mount` is refused (or with `PAVLOV_TEST_FULL=limit`),
+//! the server runs in an ordinary folder with `SIGXFSZ` ignored, and its file-size limit (`RLIMIT_FSIZE`,
+//! set with `prlimit --pid`) is lowered to 4 KiB below the recording's size: every write past it fails with
+//! the OS's `EFBIG` ("File too large"); raising the limit again gives the room back. Where neither works,
+//! the test says so and does nothing. Every wait is for a message, with a generous bound: nothing is timed.
 
 use std::io::{BufRead, BufReader, Write};
 use std::net::SocketAddr;
@@ -69,6 +72,114 @@ impl Drop for Tmpfs {
     }
 }
 
+/// A folder in the temporary directory, removed when dropped.
+struct Folder(PathBuf);
+
+impl Folder {
+    fn new() -> Folder {
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos());
+        let dir = std::env::temp_dir().join(format!("pavlov-fsize-{}-{nanos}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("a temporary folder");
+        Folder(dir)
+    }
+}
+
+impl Drop for Folder {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// How the test makes the disk full.
+enum Full {
+    /// A small tmpfs, filled by a filler file but [`ROOM`] bytes; the room comes back when it is removed.
+    Tmpfs(Tmpfs),
+    /// An ordinary folder, and the server's file-size limit lowered to [`LIMIT`] bytes; the room comes back
+    /// when the limit is raised.
+    Limit(Folder),
+}
+
+/// The file-size limit of [`Full::Limit`]: less than a recording's first chunk, less than a checkpoint.
+const LIMIT: u64 = 4096;
+
+impl Full {
+    /// A tmpfs if this machine lets the test mount one (unless `PAVLOV_TEST_FULL=limit`), else the
+    /// file-size limit if `prlimit` is there.
+    fn new() -> Option<Full> {
+        let forced = std::env::var("PAVLOV_TEST_FULL").is_ok_and(|v| v == "limit");
+        if !forced && let Some(fs) = Tmpfs::mount() {
+            return Some(Full::Tmpfs(fs));
+        }
+        let prlimit = Command::new("prlimit")
+            .arg("--version")
+            .stdout(Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+        prlimit.then(|| Full::Limit(Folder::new()))
+    }
+
+    fn dir(&self) -> &Path {
+        match self {
+            Full::Tmpfs(fs) => fs.path(),
+            Full::Limit(folder) => &folder.0,
+        }
+    }
+
+    /// What the OS says when a write finds no room.
+    fn reason(&self) -> &'static str {
+        match self {
+            Full::Tmpfs(_) => "No space left on device",
+            Full::Limit(_) => "File too large",
+        }
+    }
+
+    /// Takes the room away from the server `pid`.
+    fn fill(&self, pid: u32) {
+        match self {
+            Full::Tmpfs(fs) => fill(fs.path(), ROOM),
+            Full::Limit(folder) => {
+                // Below the recording's size, so that what it holds already (a chunk at least) stays.
+                let recording = folder.0.join("rec").join(MCAP_FILE);
+                let deadline = std::time::Instant::now() + WAIT;
+                while std::fs::metadata(&recording).map_or(0, |m| m.len()) <= LIMIT {
+                    assert!(
+                        std::time::Instant::now() < deadline,
+                        "the recording did not grow past {LIMIT} bytes within {WAIT:?}"
+                    );
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+                set_file_size_limit(pid, &format!("{LIMIT}:unlimited"));
+            }
+        }
+    }
+
+    /// Gives the room back to the server `pid`.
+    fn free(&self, pid: u32) {
+        match self {
+            Full::Tmpfs(fs) => {
+                std::fs::remove_file(fs.path().join("filler")).expect("free the room")
+            }
+            Full::Limit(_) => set_file_size_limit(pid, "unlimited:unlimited"),
+        }
+    }
+}
+
+/// Sets the file-size limit of process `pid` (`soft:hard`) with `prlimit`.
+fn set_file_size_limit(pid: u32, limits: &str) {
+    let status = Command::new("prlimit")
+        .arg("--pid")
+        .arg(pid.to_string())
+        .arg(format!("--fsize={limits}"))
+        .status()
+        .expect("run prlimit");
+    assert!(
+        status.success(),
+        "prlimit --pid {pid} --fsize={limits}: {status}"
+    );
+}
+
 /// Kills the server if the test ends before it does.
 struct Server(Child);
 
@@ -79,9 +190,13 @@ impl Drop for Server {
     }
 }
 
-/// Starts `pavlov serve --record rec` in `dir` on an ephemeral port; returns it and its dashboard address.
+/// Starts `pavlov serve --record rec` in `dir` on an ephemeral port, with `SIGXFSZ` ignored (so that a
+/// write past a file-size limit fails with `EFBIG` instead of killing it); returns it and its dashboard
+/// address.
 fn start(dir: &Path) -> (Server, SocketAddr) {
-    let mut child = Command::new(PAVLOV)
+    // An ignored signal stays ignored across exec; the server keeps the shell's process id.
+    let mut child = Command::new("sh")
+        .args(["-c", "trap '' XFSZ; exec \"$0\" \"$@\"", PAVLOV])
         .args(["serve", "--bind", "127.0.0.1:0", "--record", "rec"])
         .current_dir(dir)
         .stdin(Stdio::null())
@@ -223,8 +338,8 @@ async fn metric(addr: SocketAddr, name: &str) -> f64 {
         .unwrap_or_else(|| panic!("no {name} in\n{text}"))
 }
 
-/// Fills the filesystem of `dir` with `dir/filler` but `room` bytes; returns the filler's path.
-fn fill(dir: &Path, room: u64) -> PathBuf {
+/// Fills the filesystem of `dir` with `dir/filler` but `room` bytes.
+fn fill(dir: &Path, room: u64) {
     let path = dir.join("filler");
     let mut f = std::fs::File::create(&path).expect("create the filler");
     let block = vec![0xa5u8; 64 * 1024];
@@ -239,7 +354,6 @@ fn fill(dir: &Path, room: u64) -> PathBuf {
     let _ = f.flush();
     let len = f.metadata().expect("its size").len();
     f.set_len(len.saturating_sub(room)).expect("make room");
-    path
 }
 
 /// Every file under `dir` whose name ends in `.tmp`.
@@ -262,12 +376,16 @@ fn temporary_files(dir: &Path) -> Vec<PathBuf> {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_full_disk_stops_the_recording_and_fails_checkpoints_as_events_and_recording_resumes_with_room()
  {
-    let Some(fs) = Tmpfs::mount() else {
-        eprintln!("skipped: this machine does not let the test mount a tmpfs (needs root)");
+    let Some(full) = Full::new() else {
+        eprintln!(
+            "skipped: this machine lets the test neither mount a tmpfs (needs root) nor run prlimit"
+        );
         return;
     };
-    let dir = fs.0.clone();
+    let dir = full.dir().to_path_buf();
+    let no_room = full.reason();
     let (server, addr) = start(&dir);
+    let pid = server.0.id();
     let (mut client, hello) = Client::connect(addr).await;
     let recording = dir.join("rec").join(MCAP_FILE);
     // The recording is in force (it began with the run; a late hello names it, an early one sees it start).
@@ -279,13 +397,13 @@ async fn a_full_disk_stops_the_recording_and_fails_checkpoints_as_events_and_rec
         .next_where("tick", |t| t["seq"].as_u64() > Some(100))
         .await;
 
-    let filler = fill(&dir, ROOM);
+    full.fill(pid);
     let stopped = client
         .event("recording_stopped", |e| e["reason"].is_string())
         .await;
     let reason = stopped["reason"].as_str().unwrap_or_default();
     assert!(
-        reason.contains("No space left on device"),
+        reason.contains(no_room),
         "the reason is the OS's: {stopped}"
     );
     assert!(
@@ -315,7 +433,7 @@ async fn a_full_disk_stops_the_recording_and_fails_checkpoints_as_events_and_rec
         reply["message"]
             .as_str()
             .unwrap_or_default()
-            .contains("No space left on device"),
+            .contains(no_room),
         "{reply}"
     );
     let failed = client
@@ -327,7 +445,7 @@ async fn a_full_disk_stops_the_recording_and_fails_checkpoints_as_events_and_rec
         failed["reason"]
             .as_str()
             .unwrap_or_default()
-            .contains("No space left on device"),
+            .contains(no_room),
         "{failed}"
     );
     assert!(metric(addr, "pavlov_checkpoint_failures_total").await >= 1.0);
@@ -349,7 +467,7 @@ async fn a_full_disk_stops_the_recording_and_fails_checkpoints_as_events_and_rec
     );
 
     // With room again, recording resumes when asked.
-    std::fs::remove_file(&filler).expect("free the room");
+    full.free(pid);
     let reply = client
         .command("start_recording", json!({"dir": "again"}))
         .await;
