@@ -1,6 +1,6 @@
 //! What the server keeps on disk: recordings (round trip, replay, a rule table's rules, a kill mid-write, names a client may
 //! give, conversion between MCAP and JSON Lines, an independent MCAP reader), checkpoints (periodic, per
-//! run, resumed with fallback) and saves; and what it does when the disk is full (`disk_full`).
+//! run, resumed with fallback) and saves.
 
 mod checkpoint;
 mod checkpoint_runs;
