@@ -80,10 +80,22 @@ pub enum EventKind {
         /// Its path.
         path: String,
     },
-    /// A recording stopped.
+    /// A recording stopped: asked to, or because writing it failed (`reason`). What was written before
+    /// a failure stays readable.
     RecordingStopped {
         /// Its path.
         path: String,
+        /// Why it stopped when nobody asked it to: the error, as the OS gave it (absent for a stop asked for).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        reason: Option<String>,
+    },
+    /// Writing a checkpoint or a save failed; its temporary file was removed, and the file it was to
+    /// become is as it was before.
+    CheckpointFailed {
+        /// The file it was to become.
+        path: String,
+        /// The error, as the OS gave it.
+        reason: String,
     },
     /// The robot link changed state (stale, reconnecting, tripped, up again, down).
     Link {
@@ -118,6 +130,18 @@ impl EventKind {
         matches!(self, EventKind::ModeSet { .. } | EventKind::Teleop { .. })
     }
 
+    /// Whether the event reports a failure to write to storage: a recording stopped by an error, or a
+    /// checkpoint that could not be written (what `/metrics` counts).
+    pub fn is_storage_failure(&self) -> bool {
+        matches!(
+            self,
+            EventKind::RecordingStopped {
+                reason: Some(_),
+                ..
+            } | EventKind::CheckpointFailed { .. }
+        )
+    }
+
     /// A short name of the kind, as serialised (`mode_set`, `e_stop`, …).
     pub fn name(&self) -> &'static str {
         match self {
@@ -131,6 +155,7 @@ impl EventKind {
             EventKind::WeightsSaved { .. } => "weights_saved",
             EventKind::RecordingStarted { .. } => "recording_started",
             EventKind::RecordingStopped { .. } => "recording_stopped",
+            EventKind::CheckpointFailed { .. } => "checkpoint_failed",
             EventKind::Link { .. } => "link",
             EventKind::PipelineStall { .. } => "pipeline_stall",
         }
@@ -167,6 +192,40 @@ mod tests {
         assert_eq!(text, r#"{"id":8,"after":null,"kind":"weights_reset"}"#);
         assert_eq!(serde_json::from_str::<Event>(&text).unwrap(), reset);
         assert_eq!(reset.kind.name(), "weights_reset");
+    }
+
+    #[test]
+    fn a_stop_without_a_reason_reads_as_before_and_failures_are_storage_failures() {
+        let asked: Event =
+            serde_json::from_str(r#"{"id":3,"after":9,"kind":"recording_stopped","path":"r"}"#)
+                .unwrap();
+        assert_eq!(
+            asked.kind,
+            EventKind::RecordingStopped {
+                path: "r".into(),
+                reason: None
+            }
+        );
+        assert!(!asked.kind.is_storage_failure());
+        let text = serde_json::to_string(&asked).unwrap();
+        assert!(!text.contains("reason"), "{text}");
+        let failed = EventKind::RecordingStopped {
+            path: "r".into(),
+            reason: Some("No space left on device (os error 28)".into()),
+        };
+        assert!(failed.is_storage_failure());
+        let json = serde_json::to_value(&failed).unwrap();
+        assert_eq!(json["reason"], "No space left on device (os error 28)");
+        let checkpoint = EventKind::CheckpointFailed {
+            path: "w/saved/a.json".into(),
+            reason: "No space left on device (os error 28)".into(),
+        };
+        assert!(checkpoint.is_storage_failure());
+        assert_eq!(checkpoint.name(), "checkpoint_failed");
+        assert_eq!(
+            serde_json::to_value(&checkpoint).unwrap()["kind"],
+            "checkpoint_failed"
+        );
     }
 
     #[test]

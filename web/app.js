@@ -4,15 +4,16 @@
 // says so everywhere (greyed panels, a banner, an E-STOP that says it cannot send) and reconnects by itself.
 
 import {
-  Backoff, GapCounter, Timeline, WINDOWS, applyParams, connectionTarget, fmt, markerLabel, paramLimits,
-  sampleFromTick, samplesFromHistory, toCsv, tokenFromHash,
+  Backoff, GapCounter, Timeline, WINDOWS, applyParams, applyStorageEvent, connectionTarget, fmt, markerLabel,
+  paramLimits, sampleFromTick, samplesFromHistory, toCsv, tokenFromHash,
 } from './lib.js';
 import { ElbowPanel } from './elbow.js';
 import { AlignedCharts, Charts } from './charts.js';
 import { wireControls } from './controls.js';
 import { HordeView, LearningView } from './learning.js';
 import {
-  applyLimits, labelRequest, renderInForce, renderNow, renderRecording, renderStatus, robotText, showParamsError,
+  applyLimits, labelRequest, renderCheckpoint, renderInForce, renderNow, renderRecording, renderStatus, robotText,
+  showParamsError,
 } from './panels.js';
 
 /** Seconds of data the page keeps: the widest window. */
@@ -42,6 +43,8 @@ const state = {
   historyParams: {},
   historyDone: false,
   recording: null,
+  // The reasons of the latest storage failures still in force (lib.js applyStorageEvent).
+  storage: { recordingFailure: null, checkpointFailure: null },
   held: new Set(),
   teleopTimer: null,
   backoff: new Backoff(),
@@ -262,7 +265,16 @@ function onEvent(e, fromHistory) {
   else state.params = after;
   if (!timeline.addEvent({ ...e, label })) return;
   charts.touch();
+  // A storage failure in the history still shows (the recording in force came with hello).
+  const storage = applyStorageEvent(state.storage, e);
+  if (storage !== state.storage) {
+    state.storage = storage;
+    renderRecording(state);
+    renderCheckpoint(state);
+  }
   if (fromHistory) return;
+  if (e.kind === 'recording_stopped' && e.reason) log(`recording stopped: ${e.reason}`, 'error');
+  if (e.kind === 'checkpoint_failed') log(`checkpoint not written: ${e.reason}`, 'error');
   if (e.kind === 'params_set') {
     renderInForce(state);
     state.learning.setParams(state.params);

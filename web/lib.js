@@ -173,3 +173,29 @@ export function alignedData(aligned) {
     counts: { reactive: (reactive && reactive.commands) || 0, pavlovian: (pavlovian && pavlovian.commands) || 0 },
   };
 }
+
+/**
+ * What the recording card shows: the badge (`on` while a recording is written; `stopped` when the last one
+ * stopped because writing it failed, with that reason; else `off`) and the notice under it.
+ */
+export function recordingView(recording, failure) {
+  if (recording) return { badge: 'on', alarm: false, notice: null };
+  if (failure) return { badge: 'stopped', alarm: true, notice: `Recording stopped: ${failure}` };
+  return { badge: 'off', alarm: false, notice: null };
+}
+
+/**
+ * How storage events change what the page shows about storage, as `{ recordingFailure, checkpointFailure }`
+ * (the reasons of the latest failures; `null`: none in force): a `recording_stopped` with a `reason` sets
+ * the first, a `recording_started` clears it; `checkpoint_failed` sets the second, `weights_saved` clears it.
+ */
+export function applyStorageEvent(storage, event) {
+  switch (event.kind) {
+    case 'recording_started': return { ...storage, recordingFailure: null };
+    case 'recording_stopped':
+      return event.reason ? { ...storage, recordingFailure: String(event.reason) } : { ...storage, recordingFailure: null };
+    case 'checkpoint_failed': return { ...storage, checkpointFailure: String(event.reason || 'unknown error') };
+    case 'weights_saved': return { ...storage, checkpointFailure: null };
+    default: return storage;
+  }
+}

@@ -1,8 +1,9 @@
 // The dashboard's panels: the header (which robot), the Now, Counters, Tick health and Learning cards,
-// the recording card, and the link banners, drawn from the messages app.js receives (PROTOCOL.md).
+// the recording card (and a storage failure's reason), and the link banners, drawn from the messages app.js
+// receives (PROTOCOL.md).
 
 import {
-  alignedData, fmt, fmtDuration, fmtLead, fmtParam, gateText, tokenFromHash,
+  alignedData, fmt, fmtDuration, fmtLead, fmtParam, gateText, recordingView, tokenFromHash,
 } from './lib.js';
 
 const $ = (id) => document.getElementById(id);
@@ -76,9 +77,18 @@ export function renderInForce(state) {
   }
 }
 
-/** The recording badge, and the download link for an operator while one is being written. */
+/**
+ * The recording badge (on, off, or stopped by a failure to write it, with the reason under it), and the
+ * download link for an operator while one is being written.
+ */
 export function renderRecording(state) {
-  $('rec-state').textContent = state.recording ? 'on' : 'off';
+  const view = recordingView(state.recording, state.storage ? state.storage.recordingFailure : null);
+  const badge = $('rec-state');
+  badge.textContent = view.badge;
+  badge.classList.toggle('alarm', view.alarm);
+  const notice = $('rec-error');
+  notice.hidden = !view.notice;
+  notice.textContent = view.notice || '';
   const a = $('rec-download');
   const show = !!state.recording && state.canCommand;
   a.hidden = !show;
@@ -86,6 +96,14 @@ export function renderRecording(state) {
     const token = tokenFromHash(window.location.hash);
     a.href = token ? `/recording?token=${encodeURIComponent(token)}` : '/recording';
   }
+}
+
+/** The reason the latest checkpoint or save could not be written, under the weights buttons, until one is. */
+export function renderCheckpoint(state) {
+  const failure = state.storage ? state.storage.checkpointFailure : null;
+  const notice = $('weights-error');
+  notice.hidden = !failure;
+  notice.textContent = failure ? `Checkpoint not written: ${failure}` : '';
 }
 
 export function renderNow(state) {

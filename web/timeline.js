@@ -234,7 +234,8 @@ export function markerLabel(event, before = null) {
     case 'weights_reset': return 'weights reset';
     case 'weights_saved': return 'weights saved';
     case 'recording_started': return 'recording ●';
-    case 'recording_stopped': return 'recording ■';
+    case 'recording_stopped': return event.reason ? 'recording ■ failed' : 'recording ■';
+    case 'checkpoint_failed': return 'checkpoint failed';
     case 'link': return `link→${event.state}${event.trip ? ` (${event.trip})` : ''}`;
     case 'pipeline_stall': return 'pipeline stall';
     case 'teleop': return null;
@@ -246,7 +247,7 @@ export function markerLabel(event, before = null) {
 export function markerColor(kind) {
   if (kind === 'params_set' || kind === 'weights_reset') return '#7c3aed';
   if (kind === 'mode_set') return '#2563eb';
-  if (kind === 'e_stop' || kind === 'pipeline_stall') return '#dc2626';
+  if (kind === 'e_stop' || kind === 'pipeline_stall' || kind === 'checkpoint_failed') return '#dc2626';
   if (kind === 'link' || kind === 'rearm') return '#d97706';
   if (kind === 'recording_started' || kind === 'recording_stopped') return '#059669';
   return '#6b7280';

@@ -251,6 +251,7 @@ impl ServerBuilder {
             foxglove: Default::default(),
             zenoh: Default::default(),
             horde: horde.as_ref().map(|h| h.status.clone()),
+            storage: events.storage_failures(),
         };
         actors.push(tokio::spawn(crate::telemetry::health_log::run(
             health.clone(),

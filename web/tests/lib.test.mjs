@@ -3,9 +3,9 @@ import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
 import {
-  Backoff, GapCounter, SUBPROTOCOL, Timeline, WINDOWS, alignedData, applyParams, columns, connectionTarget, fmt, fmtDuration,
+  Backoff, GapCounter, SUBPROTOCOL, Timeline, WINDOWS, alignedData, applyParams, applyStorageEvent, columns, connectionTarget, fmt, fmtDuration,
   fmtLead, fmtParam, gateText, markerLabel, paramLimits, parseParam, redrawIntervalMs, sampleFromTick, samplesFromHistory, sensorsLive,
-  teleopWheels, toCsv, tokenFromHash,
+  recordingView, teleopWheels, toCsv, tokenFromHash,
 } from '../lib.js';
 
 test('the token comes from the URL fragment', () => {
@@ -239,4 +239,28 @@ test('the Gate row names the rule that engaged the gate', () => {
   assert.equal(gateText({ gate: true, rule: 'stall_ahead' }), 'ϱ · stall_ahead');
   assert.equal(gateText({ gate: true, rule: 'stimulus' }), 'ϱ · stimulus');
   assert.equal(gateText({ gate: true }), 'response ϱ', 'a server without rules');
+});
+
+test('a storage failure shows until what failed works again', () => {
+  const none = { recordingFailure: null, checkpointFailure: null };
+  const full = 'No space left on device (os error 28)';
+  let s = applyStorageEvent(none, { kind: 'recording_started', path: 'r' });
+  assert.deepEqual(s, none);
+  s = applyStorageEvent(s, { kind: 'recording_stopped', path: 'r' });
+  assert.deepEqual(s, none, 'a stop asked for is no failure');
+  s = applyStorageEvent(s, { kind: 'recording_stopped', path: 'r', reason: full });
+  assert.equal(s.recordingFailure, full);
+  s = applyStorageEvent(s, { kind: 'checkpoint_failed', path: 'w', reason: full });
+  assert.equal(s.checkpointFailure, full);
+  assert.equal(applyStorageEvent(s, { kind: 'mode_set', mode: 'manual' }), s, 'other events change nothing');
+  s = applyStorageEvent(s, { kind: 'weights_saved', path: 'w' });
+  assert.equal(s.checkpointFailure, null);
+  s = applyStorageEvent(s, { kind: 'recording_started', path: 'r2' });
+  assert.equal(s.recordingFailure, null);
+  assert.deepEqual(recordingView('r2', null), { badge: 'on', alarm: false, notice: null });
+  assert.deepEqual(recordingView(null, null), { badge: 'off', alarm: false, notice: null });
+  assert.deepEqual(recordingView(null, full), { badge: 'stopped', alarm: true, notice: `Recording stopped: ${full}` });
+  assert.equal(markerLabel({ kind: 'recording_stopped', reason: full }), 'recording ■ failed');
+  assert.equal(markerLabel({ kind: 'recording_stopped' }), 'recording ■');
+  assert.equal(markerLabel({ kind: 'checkpoint_failed', reason: full }), 'checkpoint failed');
 });

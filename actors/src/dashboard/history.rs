@@ -238,7 +238,8 @@ impl History {
             }
             EventKind::ModeSet { mode } => ring.in_force.mode = *mode,
             EventKind::RecordingStarted { path } => ring.in_force.recording = Some(path.clone()),
-            EventKind::RecordingStopped { path }
+            // Stopped as asked, or by a failure to write it: either way it is no longer being written.
+            EventKind::RecordingStopped { path, .. }
                 if ring.in_force.recording.as_ref() == Some(path) =>
             {
                 ring.in_force.recording = None;
@@ -428,6 +429,7 @@ mod tests {
             Some(1),
             EventKind::RecordingStopped {
                 path: "recordings/a/ticks.jsonl".into(),
+                reason: None,
             },
         ));
         assert_eq!(h.recording(), None);
@@ -442,6 +444,38 @@ mod tests {
         h.push(&record(102));
         assert!(ids(&h).is_empty());
         assert_eq!(h.snapshot().in_force.mode, Mode::Pavlovian, "ticks say");
+    }
+
+    #[test]
+    fn a_recording_stopped_by_a_write_error_is_no_longer_in_force() {
+        let h = History::new(2, 20, Mode::Pavlovian, params());
+        let path = "recordings/a/recording.mcap".to_string();
+        h.on_event(&event(
+            1,
+            Some(0),
+            EventKind::RecordingStarted { path: path.clone() },
+        ));
+        assert_eq!(h.recording().as_deref(), Some(path.as_str()));
+        // A failure of another recording's write leaves this one in force.
+        h.on_event(&event(
+            2,
+            Some(3),
+            EventKind::RecordingStopped {
+                path: "recordings/b/recording.mcap".into(),
+                reason: Some("No space left on device (os error 28)".into()),
+            },
+        ));
+        assert_eq!(h.recording().as_deref(), Some(path.as_str()));
+        h.on_event(&event(
+            3,
+            Some(4),
+            EventKind::RecordingStopped {
+                path,
+                reason: Some("No space left on device (os error 28)".into()),
+            },
+        ));
+        assert_eq!(h.recording(), None);
+        assert_eq!(h.snapshot().in_force.recording, None);
     }
 
     #[test]

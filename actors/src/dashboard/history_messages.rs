@@ -60,13 +60,29 @@ pub(crate) fn event_time_s(event: &Event, period_ms: u64) -> f64 {
     event.after.map_or(0, |a| a + 1) as f64 * period_ms as f64 / 1000.0
 }
 
+/// `text` with every occurrence of `path` redacted.
+fn without(text: &str, path: &str) -> String {
+    if path.is_empty() {
+        text.to_string()
+    } else {
+        text.replace(path, REDACTED)
+    }
+}
+
 /// `event` as a watcher may see it: without file paths.
 pub(crate) fn for_watcher(event: &Event) -> Cow<'_, Event> {
     let hidden = || REDACTED.to_string();
     let kind = match &event.kind {
         EventKind::WeightsSaved { .. } => EventKind::WeightsSaved { path: hidden() },
         EventKind::RecordingStarted { .. } => EventKind::RecordingStarted { path: hidden() },
-        EventKind::RecordingStopped { .. } => EventKind::RecordingStopped { path: hidden() },
+        EventKind::RecordingStopped { path, reason } => EventKind::RecordingStopped {
+            path: hidden(),
+            reason: reason.as_deref().map(|r| without(r, path)),
+        },
+        EventKind::CheckpointFailed { path, reason } => EventKind::CheckpointFailed {
+            path: hidden(),
+            reason: without(reason, path),
+        },
         _ => return Cow::Borrowed(event),
     };
     Cow::Owned(Event {

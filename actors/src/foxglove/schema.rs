@@ -215,6 +215,7 @@ pub(crate) fn event() -> Value {
                     "weights_saved",
                     "recording_started",
                     "recording_stopped",
+                    "checkpoint_failed",
                     "link",
                     "pipeline_stall",
                 ]),
@@ -230,6 +231,8 @@ pub(crate) fn event() -> Value {
             ("lambda", number()),
             ("threshold", number()),
             ("path", string()),
+            // recording_stopped (when writing failed) and checkpoint_failed: the error.
+            ("reason", string()),
             ("state", link_state()),
             ("trip", trip_cause()),
             ("reconnects", integer()),
@@ -383,6 +386,7 @@ pub(crate) mod tests {
             | EventKind::WeightsSaved { .. }
             | EventKind::RecordingStarted { .. }
             | EventKind::RecordingStopped { .. }
+            | EventKind::CheckpointFailed { .. }
             | EventKind::Link { .. }
             | EventKind::PipelineStall { .. } => k.name(),
         };
@@ -406,7 +410,14 @@ pub(crate) mod tests {
             EventKind::WeightsReset,
             EventKind::WeightsSaved { path: "w".into() },
             EventKind::RecordingStarted { path: "r".into() },
-            EventKind::RecordingStopped { path: "r".into() },
+            EventKind::RecordingStopped {
+                path: "r".into(),
+                reason: Some("No space left on device (os error 28)".into()),
+            },
+            EventKind::CheckpointFailed {
+                path: "w".into(),
+                reason: "No space left on device (os error 28)".into(),
+            },
             EventKind::Link {
                 state: LinkState::Reconnecting,
                 trip: Some(TripCause::Charger),
@@ -415,7 +426,7 @@ pub(crate) mod tests {
             EventKind::PipelineStall { ticks: 4 },
         ];
         let names: std::collections::BTreeSet<_> = kinds.iter().map(listed).collect();
-        assert_eq!(names.len(), 12, "one event of every kind");
+        assert_eq!(names.len(), 13, "one event of every kind");
         kinds
     }
 

@@ -12,6 +12,7 @@ use pavlov::event::{Event, EventKind};
 use tokio::sync::{broadcast, mpsc};
 
 use crate::storage::recorder::RecorderInput;
+use crate::telemetry::counters::StorageFailures;
 
 /// Capacity of the live broadcast, in events.
 pub(crate) const LIVE_CAPACITY: usize = 256;
@@ -28,6 +29,8 @@ pub struct EventLog {
     recent: Arc<Mutex<VecDeque<Arc<Event>>>>,
     recorder: Option<mpsc::Sender<RecorderInput>>,
     dropped: Arc<AtomicU64>,
+    /// Storage failures among the events made (for `/metrics`).
+    storage_failures: Arc<StorageFailures>,
 }
 
 impl EventLog {
@@ -40,6 +43,7 @@ impl EventLog {
             recent: Arc::default(),
             recorder: None,
             dropped: Arc::new(AtomicU64::new(0)),
+            storage_failures: Arc::default(),
         }
     }
 
@@ -60,6 +64,7 @@ impl EventLog {
     pub(crate) fn emit(&self, after: Option<u64>, kind: EventKind) -> Arc<Event> {
         let id = self.next_id.fetch_add(1, Ordering::Relaxed);
         let event = Arc::new(Event { id, after, kind });
+        self.storage_failures.count(&event.kind);
         let args = serde_json::to_string(&event.kind).unwrap_or_default();
         if event.kind.is_frequent() {
             tracing::debug!(id, after = ?event.after, event = %args, "event");
@@ -91,6 +96,11 @@ impl EventLog {
             recorder: None,
             ..self.clone()
         }
+    }
+
+    /// The count of storage failures among the events made (shared by every clone of the log).
+    pub(crate) fn storage_failures(&self) -> Arc<StorageFailures> {
+        self.storage_failures.clone()
     }
 
     /// The id the next event will get: every event with a smaller id has already been made.

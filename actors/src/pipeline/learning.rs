@@ -28,7 +28,9 @@ use crate::command::{Applied, CommandError, Envelope, Inbox, LearningCommand, Ou
 use crate::horde::{HordeHandle, HordeView};
 use crate::storage::checkpoint_files::layout::create_run_dir;
 use crate::storage::checkpoint_files::saves::{SaveQuota, check_save_name, saved_dir};
-use crate::storage::checkpoint_files::writer::{CheckpointWriter, SaveJob, WriterSettings};
+use crate::storage::checkpoint_files::writer::{
+    Announce, CheckpointWriter, SaveJob, WriterSettings,
+};
 use crate::storage::recording::StartState;
 use crate::storage::utc;
 
@@ -195,7 +197,7 @@ impl Learning {
         if let Ok(c) = self.checkpoint(seq)
             && let Some(w) = &self.writer
         {
-            w.submit(c);
+            w.submit(c, self.announcer());
         }
         if let Some(h) = &self.horde {
             h.checkpoint(&run_dir, self.config.checkpoint.keep);
@@ -243,9 +245,14 @@ impl Learning {
                 unique,
                 checkpoint,
                 reply,
-                announce: self.events.clone().map(|e| (e, self.after)),
+                announce: self.announcer(),
             });
         }
+    }
+
+    /// Where the checkpoint writer announces what it did (a save, a failure), after the last tick handled.
+    fn announcer(&self) -> Option<Announce> {
+        self.events.clone().map(|e| (e, self.after))
     }
 
     /// Announces a change that took effect after the last tick handled.
@@ -306,7 +313,7 @@ impl Learning {
         }
         let autosave = self.autosave.take();
         let last = match &autosave {
-            Some(_) => self.checkpoint(seq).ok(),
+            Some(_) => self.checkpoint(seq).ok().map(|c| (c, self.announcer())),
             None => None,
         };
         if let Some(horde) = self.horde.take() {

@@ -15,8 +15,8 @@
 //!
 //! It is written to a hidden temporary file a few megabytes at a time ([`super::paced_file`]), fsynced
 //! and renamed, so a crash leaves the old file or the
-//! new one; a file cut short, corrupted, of another precision or holding a non-finite weight is refused
-//! with a precise error.
+//! new one; a write that fails (a full disk) removes its temporary file again. A file cut short,
+//! corrupted, of another precision or holding a non-finite weight is refused with a precise error.
 
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
@@ -119,6 +119,28 @@ pub fn write_atomic<W: Weight>(
     std::fs::create_dir_all(dir)?;
     let path = dir.join(file_name(tick));
     let tmp = dir.join(format!(".{}.tmp", file_name(tick)));
+    let written = write_temporary(&tmp, tick, snapshot).and_then(|()| {
+        std::fs::rename(&tmp, &path)?;
+        Ok(())
+    });
+    if let Err(e) = written {
+        match std::fs::remove_file(&tmp) {
+            Ok(()) => {}
+            Err(r) if r.kind() == std::io::ErrorKind::NotFound => {}
+            Err(r) => tracing::warn!("cannot remove {}: {r}", tmp.display()),
+        }
+        return Err(e);
+    }
+    std::fs::File::open(dir)?.sync_all()?;
+    Ok(path)
+}
+
+/// Writes `snapshot` of tick `tick` to `tmp` and fsyncs it.
+fn write_temporary<W: Weight>(
+    tmp: &Path,
+    tick: u64,
+    snapshot: &HordeSnapshot<W>,
+) -> Result<(), HordeFileError> {
     let header = Header {
         tick,
         precision: W::NAME.into(),
@@ -127,7 +149,7 @@ pub fn write_atomic<W: Weight>(
         groups: snapshot.groups.iter().map(|(s, _)| s.clone()).collect(),
     };
     let json = serde_json::to_vec(&header).map_err(|e| HordeFileError::Header(e.to_string()))?;
-    let file = PacedFile::new(std::fs::File::create(&tmp)?, paced_file::STEP);
+    let file = PacedFile::new(std::fs::File::create(tmp)?, paced_file::STEP);
     let mut out = Summed {
         inner: BufWriter::with_capacity(1 << 20, file),
         sum: Fnv::new(),
@@ -149,10 +171,7 @@ pub fn write_atomic<W: Weight>(
     inner.write_all(&sum.to_le_bytes())?;
     let file = inner.into_inner().map_err(|e| e.into_error())?.into_file();
     file.sync_all()?;
-    drop(file);
-    std::fs::rename(&tmp, &path)?;
-    std::fs::File::open(dir)?.sync_all()?;
-    Ok(path)
+    Ok(())
 }
 
 /// Reads exactly `buf.len()` bytes into the checksum, or says the file was cut short.

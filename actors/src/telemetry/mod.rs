@@ -28,7 +28,7 @@ use tokio::sync::watch;
 
 use counters::{
     ActuationStats, FoxgloveCounters, RecorderGauge, SharedTickStats, SharedWriterStats,
-    ZenohCounters,
+    StorageFailures, ZenohCounters,
 };
 use histogram::{LatencyHistogram, LatencyQuantiles};
 
@@ -51,6 +51,8 @@ pub struct Health {
     pub(crate) zenoh: std::sync::Arc<ZenohCounters>,
     /// The Horde's figures, when there is a Horde.
     pub(crate) horde: Option<watch::Receiver<crate::horde::status::HordeStatus>>,
+    /// Failures to write recordings and checkpoints (the event log's count).
+    pub(crate) storage: std::sync::Arc<StorageFailures>,
 }
 
 /// The recorder queue's figures.
@@ -210,6 +212,7 @@ mod tests {
             foxglove: Default::default(),
             zenoh: Default::default(),
             horde: None,
+            storage: Default::default(),
         }
     }
 

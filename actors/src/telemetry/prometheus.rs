@@ -9,7 +9,9 @@ use pavlov::config::TickTimer;
 use pavlov::record::LinkStatus;
 use pavlov::supervision::{LinkState, TripCause};
 
-use super::counters::{ActuationStats, DashboardStats, FoxgloveFigures, ZenohFigures};
+use super::counters::{
+    ActuationStats, DashboardStats, FoxgloveFigures, StorageFigures, ZenohFigures,
+};
 use super::exposition::Exposition;
 pub(crate) use super::exposition::HistogramSample;
 use super::{Health, RecorderFigures};
@@ -58,6 +60,8 @@ pub(crate) struct MetricsSnapshot {
     pub(crate) zenoh: ZenohFigures,
     /// The Horde's figures (`None` without `[horde]`).
     pub(crate) horde: Option<HordeStatus>,
+    /// Failures to write recordings and checkpoints.
+    pub(crate) storage: StorageFigures,
 }
 
 impl MetricsSnapshot {
@@ -82,6 +86,7 @@ impl MetricsSnapshot {
             foxglove: health.foxglove.figures(),
             zenoh: health.zenoh.figures(),
             horde: health.horde.as_ref().map(|h| h.borrow().clone()),
+            storage: health.storage.figures(),
         }
     }
 }
@@ -509,6 +514,18 @@ pub(crate) fn render(s: &MetricsSnapshot) -> String {
             r.dropped,
         );
     }
+    e.counter(
+        "pavlov_recording_failures_total",
+        "Recordings stopped because writing them failed (open, write, flush or finish; each sent a \
+         recording_stopped event with the reason).",
+        s.storage.recordings,
+    );
+    e.counter(
+        "pavlov_checkpoint_failures_total",
+        "Checkpoints and saves that could not be written (each sent a checkpoint_failed event with the \
+         reason; its temporary file removed).",
+        s.storage.checkpoints,
+    );
     if let Ok(serde_json::Value::Object(fields)) = serde_json::to_value(s.actuation) {
         for (field, value) in fields {
             if let Some(v) = value.as_u64() {
@@ -626,6 +643,10 @@ mod tests {
                 chain_breaks: 5,
                 ..HordeStatus::default()
             }),
+            storage: StorageFigures {
+                recordings: 2,
+                checkpoints: 3,
+            },
         }
     }
 
@@ -697,6 +718,8 @@ mod tests {
         assert_eq!(value("pavlov_ws_pending_connections", &[]), 5.0);
         assert_eq!(value("pavlov_ws_tcp_refused_total", &[]), 6.0);
         assert_eq!(value("pavlov_recorder_backlog", &[]), 12.0);
+        assert_eq!(value("pavlov_recording_failures_total", &[]), 2.0);
+        assert_eq!(value("pavlov_checkpoint_failures_total", &[]), 3.0);
         assert_eq!(value("pavlov_actuation_pipeline_stalls_total", &[]), 6.0);
         assert_eq!(value("pavlov_serial_write_errors_total", &[]), 1.0);
         assert_eq!(value("pavlov_sim_faults_total", &[("kind", "hangs")]), 3.0);

@@ -20,7 +20,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
 
 /// Every family `/metrics` serves once the first tick is out (the README lists the same).
-const FAMILIES: [(&str, &str); 51] = [
+const FAMILIES: [(&str, &str); 53] = [
     ("pavlov_tick_lateness_seconds", "histogram"),
     ("pavlov_ticks_fired_total", "counter"),
     ("pavlov_tick_timer", "gauge"),
@@ -67,6 +67,8 @@ const FAMILIES: [(&str, &str); 51] = [
     ("pavlov_zenoh_commands_total", "counter"),
     ("pavlov_recorder_backlog", "gauge"),
     ("pavlov_recorder_dropped_total", "counter"),
+    ("pavlov_recording_failures_total", "counter"),
+    ("pavlov_checkpoint_failures_total", "counter"),
     ("pavlov_actuation_commands_total", "counter"),
     ("pavlov_actuation_pipeline_stalls_total", "counter"),
     ("pavlov_actuation_stale_observations_total", "counter"),

@@ -4,6 +4,7 @@
 
 mod checkpoint;
 mod checkpoint_runs;
+pub(crate) mod disk_full;
 pub(crate) mod fixtures;
 mod no_secrets;
 mod recording_convert;

@@ -104,7 +104,13 @@ pub(crate) fn encode(checkpoint: &Checkpoint, pretty: bool) -> std::io::Result<V
     json.map_err(std::io::Error::other)
 }
 
+/// The file name of the automatic checkpoint of lifelong tick `tick`.
+pub(crate) fn file_name(tick: u64) -> String {
+    format!("checkpoint-{tick}.json")
+}
+
 /// Writes `bytes` to the hidden `.<name>.tmp` beside `path` and fsyncs it; returns the temporary path.
+/// When writing fails (a full disk), the temporary file is removed again.
 fn write_temporary(path: &Path, bytes: &[u8]) -> std::io::Result<PathBuf> {
     let dir = path.parent().unwrap_or(Path::new("."));
     let name = path
@@ -112,10 +118,25 @@ fn write_temporary(path: &Path, bytes: &[u8]) -> std::io::Result<PathBuf> {
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.tmp"));
-    let mut f = std::fs::File::create(&tmp)?;
-    f.write_all(bytes)?;
-    f.sync_all()?;
-    Ok(tmp)
+    let written = std::fs::File::create(&tmp).and_then(|mut f| {
+        f.write_all(bytes)?;
+        f.sync_all()
+    });
+    match written {
+        Ok(()) => Ok(tmp),
+        Err(e) => Err(removing(&tmp, e)),
+    }
+}
+
+/// `e`, after removing the temporary file `tmp` of the write it failed (a failure to remove it is
+/// logged: the error that matters is the write's).
+pub(crate) fn removing(tmp: &Path, e: std::io::Error) -> std::io::Error {
+    match std::fs::remove_file(tmp) {
+        Ok(()) => {}
+        Err(r) if r.kind() == std::io::ErrorKind::NotFound => {}
+        Err(r) => tracing::warn!("cannot remove {}: {r}", tmp.display()),
+    }
+    e
 }
 
 fn sync_dir(dir: &Path) -> std::io::Result<()> {
@@ -124,13 +145,14 @@ fn sync_dir(dir: &Path) -> std::io::Result<()> {
 
 /// Writes `checkpoint` atomically into `dir` as `checkpoint-<created_tick>.json` and returns its path:
 /// to a hidden `.tmp`, fsynced, renamed over the name, and the folder fsynced. A checkpoint holding a
-/// non-finite number is refused (`InvalidData`) and nothing is written.
+/// non-finite number is refused (`InvalidData`) and nothing is written; a write that fails leaves no
+/// temporary file.
 pub fn write_atomic(dir: &Path, checkpoint: &Checkpoint) -> std::io::Result<PathBuf> {
     let json = encode(checkpoint, false)?;
     std::fs::create_dir_all(dir)?;
-    let path = dir.join(format!("checkpoint-{}.json", checkpoint.created_tick));
+    let path = dir.join(file_name(checkpoint.created_tick));
     let tmp = write_temporary(&path, &json)?;
-    std::fs::rename(&tmp, &path)?;
+    std::fs::rename(&tmp, &path).map_err(|e| removing(&tmp, e))?;
     sync_dir(dir)?;
     Ok(path)
 }
@@ -240,6 +262,41 @@ mod tests {
             .filter(|e| e.file_name().to_string_lossy().starts_with('.'))
             .collect();
         assert!(hidden.is_empty(), "{hidden:?}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// The hidden files in `dir`.
+    fn hidden(dir: &Path) -> Vec<std::ffi::OsString> {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name())
+            .filter(|n| n.to_string_lossy().starts_with('.'))
+            .collect()
+    }
+
+    #[test]
+    fn a_write_the_disk_refuses_leaves_no_temporary_file() {
+        let dir = temp("full");
+        std::fs::create_dir_all(&dir).unwrap();
+        // The temporary files' names lead to /dev/full: writing them fails with ENOSPC, as on a full disk.
+        let full = |name: &str| {
+            std::os::unix::fs::symlink("/dev/full", dir.join(format!(".{name}.tmp"))).unwrap()
+        };
+        full("checkpoint-5.json");
+        let err = write_atomic(&dir, &checkpoint(5)).unwrap_err();
+        assert_eq!(err.raw_os_error(), Some(28), "{err}");
+        assert!(hidden(&dir).is_empty(), "{:?}", hidden(&dir));
+        assert!(list(&dir).unwrap().is_empty());
+        full("w.json");
+        let err = write_new(&dir.join("w.json"), b"weights").unwrap_err();
+        assert_eq!(err.raw_os_error(), Some(28), "{err}");
+        assert!(hidden(&dir).is_empty(), "{:?}", hidden(&dir));
+        assert!(!dir.join("w.json").exists());
+        // With room again, both are written.
+        write_atomic(&dir, &checkpoint(5)).unwrap();
+        write_new(&dir.join("w.json"), b"weights").unwrap();
+        assert!(hidden(&dir).is_empty());
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -63,6 +63,8 @@ pub(crate) enum SaveError {
         size: u64,
         max_mb: u64,
     },
+    #[error("save_weights: {0}")]
+    Encode(std::io::Error),
     #[error("save_weights: cannot write {}: {source}", .path.display())]
     Io {
         path: PathBuf,

@@ -124,3 +124,33 @@ fn a_non_finite_weight_is_never_written_and_old_files_are_pruned() {
     assert!(!d.join("horde-40.bin").exists());
     let _ = std::fs::remove_dir_all(&d);
 }
+
+#[test]
+fn a_write_the_disk_refuses_leaves_no_temporary_file() {
+    let mut h = horde();
+    let snap = snapshot(&mut h);
+    let d = dir("full");
+    std::fs::create_dir_all(&d).unwrap();
+    // The temporary file's name leads to /dev/full: every write to it fails with ENOSPC, as on a full disk.
+    let tmp = d.join(format!(".{}.tmp", file_name(77)));
+    std::os::unix::fs::symlink("/dev/full", &tmp).unwrap();
+    let err = write_atomic(&d, 77, &snap).unwrap_err();
+    assert!(
+        matches!(&err, HordeFileError::Io(e) if e.raw_os_error() == Some(28)),
+        "{err}"
+    );
+    assert!(
+        std::fs::symlink_metadata(&tmp).is_err(),
+        "the temporary file is left"
+    );
+    assert!(list(&d).unwrap().is_empty());
+    // With room again, the same checkpoint is written.
+    write_atomic(&d, 77, &snap).unwrap();
+    let left: Vec<_> = std::fs::read_dir(&d)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    assert_eq!(left, ["horde-77.bin"]);
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -5,6 +5,13 @@
 //! message not yet on disk has waited [`FLUSH_EVERY`]; while the queue is dry and something waits, the
 //! thread naps at most [`POLL`] (and never past that deadline) instead of blocking, so a tick handed to
 //! the queue never has to wake it. A kill therefore loses at most about a second.
+//!
+//! Failing: when opening, writing, flushing or finishing the file fails (a full disk, a file-size limit),
+//! the recording stops there: what can still be finished is, so every chunk on disk before the error
+//! stays readable (the reader tolerates the cut tail), and a `recording_stopped` event names the file and
+//! carries the reason, the error as the OS gave it. The dashboard then no longer names the recording, and
+//! `/metrics` counts the failure (the event log counts it). A later `start_recording` opens a new file as
+//! usual, and records again once there is room.
 
 use std::fs::File;
 use std::io::BufWriter;
@@ -78,7 +85,24 @@ pub(super) struct Writer {
     source: Option<Box<dyn StartSource>>,
     /// The event log without the recorder's own queue (events the recorder makes are written directly).
     events: Option<EventLog>,
+    /// The newest tick the recorder was handed (where an event about a failure takes effect).
+    last_seen: Option<u64>,
     pub(super) report: RecorderReport,
+}
+
+/// The text of `e` and of every error under it, each told once: the OS's own words included (a write
+/// error of the MCAP writer says only that writing failed; the `std::io::Error` under it says why).
+pub(super) fn reason(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    let mut next = Some(e);
+    while let Some(err) = next {
+        let text = err.to_string();
+        if !parts.iter().any(|p| p.ends_with(&text)) {
+            parts.push(text);
+        }
+        next = err.source();
+    }
+    parts.join(": ")
 }
 
 fn create(dir: &Path, existing: Existing) -> std::io::Result<(File, PathBuf)> {
@@ -123,6 +147,7 @@ impl Writer {
             file: None,
             source: None,
             events: None,
+            last_seen: None,
             report: RecorderReport::default(),
         }
     }
@@ -161,7 +186,7 @@ impl Writer {
         header.started_utc = utc::stamp(SystemTime::now());
         header.start = Some(start);
         let sink = McapSink::create(BufWriter::with_capacity(64 * 1024, file), &header)
-            .map_err(|e| format!("{}: {e}", f.path.display()))?;
+            .map_err(|e| format!("{}: {}", f.path.display(), reason(&e)))?;
         f.begun = Some(Begun {
             sink,
             after,
@@ -182,32 +207,80 @@ impl Writer {
         }
     }
 
+    /// Stops the open recording as asked: announces the stop (written into it) and finishes the file. A
+    /// finish that fails (no room for the last chunk or the summary) is announced as a second stop, with
+    /// the reason.
     fn close(&mut self) {
         let Some(f) = self.file.as_ref() else { return };
         if let Some(b) = &f.begun {
             let path = f.path.display().to_string();
-            self.announce(b.last_tick, EventKind::RecordingStopped { path });
+            self.announce(
+                b.last_tick,
+                EventKind::RecordingStopped { path, reason: None },
+            );
         }
         if let Some(f) = self.file.take()
             && let Some(b) = f.begun
-            && let Err(e) = b.sink.finish()
         {
-            self.report
-                .errors
-                .push(format!("{}: {e}", f.path.display()));
+            let last = b.last_tick;
+            if let Err(e) = b.sink.finish() {
+                self.failed(&f.path, last, format!("finishing the file: {}", reason(&e)));
+            }
         }
     }
 
-    fn fail(&mut self, e: impl std::fmt::Display) {
-        let path = self
-            .file
-            .as_ref()
-            .map(|f| f.path.display().to_string())
-            .unwrap_or_default();
-        let msg = format!("{path}: {e}");
-        tracing::error!("recording stopped: {msg}");
-        self.report.errors.push(msg);
-        self.file = None;
+    /// The open recording's write failed with `e`: it stops here. What can still be finished is (every
+    /// chunk already on disk stays readable), and the stop is announced with the reason.
+    fn fail(&mut self, e: &(dyn std::error::Error + 'static)) {
+        let Some(f) = self.file.take() else { return };
+        let why = reason(e);
+        let last = match f.begun {
+            Some(b) => {
+                let last = b.last_tick;
+                // Usually fails as well (the MCAP writer refuses to go on after an error); the chunks
+                // before the error are on disk either way.
+                if let Err(e) = b.sink.finish() {
+                    tracing::debug!(
+                        "finishing {} after its error: {}",
+                        f.path.display(),
+                        reason(&e)
+                    );
+                }
+                last
+            }
+            None => self.last_seen,
+        };
+        self.failed(&f.path, last, why);
+    }
+
+    /// Reports that the recording at `path` stopped after tick `after` because of `why`: in the log, the
+    /// report, and as a `recording_stopped` event with the reason (the recording is closed already, so
+    /// the event goes to the clients only).
+    fn failed(&mut self, path: &Path, after: Option<u64>, why: String) {
+        let path = path.display().to_string();
+        tracing::error!("recording stopped: {path}: {why}");
+        self.report.errors.push(format!("{path}: {why}"));
+        if let Some(events) = &self.events {
+            events.emit(
+                after,
+                EventKind::RecordingStopped {
+                    path,
+                    reason: Some(why),
+                },
+            );
+        }
+    }
+
+    /// A recording that could not begin (its file was made for it and holds nothing worth keeping):
+    /// removes the file and announces the failure.
+    fn failed_to_begin(&mut self, why: String) {
+        let Some(f) = self.file.take() else { return };
+        if let Err(e) = std::fs::remove_file(&f.path) {
+            tracing::warn!("cannot remove {}: {e}", f.path.display());
+        }
+        self.report.files.retain(|p| p != &f.path);
+        let after = self.last_seen;
+        self.failed(&f.path, after, why);
     }
 
     /// The open recording, if it has begun.
@@ -216,6 +289,7 @@ impl Writer {
     }
 
     fn write(&mut self, record: &TickRecord) {
+        self.last_seen = Some(record.seq);
         let Some(b) = self.begun() else {
             self.report.discarded += 1;
             return;
@@ -230,7 +304,7 @@ impl Writer {
                 b.last_tick = Some(record.seq);
                 self.report.written += 1;
             }
-            Err(e) => self.fail(e),
+            Err(e) => self.fail(&e),
         }
     }
 
@@ -244,7 +318,7 @@ impl Writer {
                 b.unflushed_since.get_or_insert_with(Instant::now);
                 self.report.events += 1;
             }
-            Err(e) => self.fail(e),
+            Err(e) => self.fail(&e),
         }
     }
 
@@ -264,7 +338,7 @@ impl Writer {
         let result = b.sink.flush();
         b.unflushed_since = None;
         if let Err(e) = result {
-            self.fail(e);
+            self.fail(&e);
         }
         None
     }
@@ -274,9 +348,7 @@ impl Writer {
         self.source = Some(source);
         self.events = Some(events.detached());
         if let Err(e) = self.begin(Some(initial)) {
-            tracing::error!("the recording could not begin: {e}");
-            self.report.errors.push(e);
-            self.file = None;
+            self.failed_to_begin(format!("the recording could not begin: {e}"));
         }
     }
 
@@ -310,10 +382,10 @@ impl Writer {
                     reserved: Some(file),
                     begun: None,
                 });
-                self.begin(None).map_err(|e| {
-                    self.file = None;
-                    CommandError::Rejected(format!("start_recording: {e}"))
-                })?;
+                if let Err(e) = self.begin(None) {
+                    self.failed_to_begin(format!("the recording could not begin: {e}"));
+                    return Err(CommandError::Rejected(format!("start_recording: {e}")));
+                }
                 Ok(Applied::Recording {
                     recording: path.display().to_string(),
                 })
@@ -576,5 +648,59 @@ mod tests {
         let err = start(&mut w, Some("x")).unwrap_err().to_string();
         assert!(err.contains("not running yet"), "{err}");
         assert!(!root.join("x").exists());
+    }
+
+    #[test]
+    fn the_reason_of_a_write_error_carries_the_os_words() {
+        let e = crate::storage::recording::mcap_write::McapWriteError::Mcap(mcap::McapError::Io(
+            std::io::Error::from_raw_os_error(28),
+        ));
+        let text = reason(&e);
+        assert!(
+            text.contains("No space left on device (os error 28)"),
+            "{text}"
+        );
+        assert_eq!(text.matches("I/O error").count(), 1, "{text}");
+    }
+
+    #[test]
+    fn a_recording_the_disk_refuses_stops_with_the_reason_and_a_new_one_records() {
+        let root = fresh("full");
+        let dir = root.join("full");
+        std::fs::create_dir_all(&dir).unwrap();
+        // The recording's file leads to /dev/full: every write fails with ENOSPC, as on a full disk.
+        std::os::unix::fs::symlink("/dev/full", dir.join(MCAP_FILE)).unwrap();
+        let mut w = Writer::new(header(), root.clone());
+        w.reserve(&dir, Existing::Replace).unwrap();
+        let log = EventLog::new();
+        let mut live = log.subscribe();
+        let initial = Fixed(None).start_state().unwrap();
+        w.attach(Box::new(Fixed(None)), log.clone(), initial);
+        let event = live.try_recv().expect("an event");
+        match &event.kind {
+            EventKind::RecordingStopped {
+                path,
+                reason: Some(why),
+            } => {
+                assert_eq!(Path::new(path), dir.join(MCAP_FILE));
+                assert!(why.contains("No space left on device"), "{why}");
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(log.storage_failures().figures().recordings, 1);
+        assert!(w.file.is_none(), "nothing is being recorded");
+        assert!(!w.report.errors.is_empty());
+        // The file made for it is gone; nothing else was touched.
+        assert!(std::fs::symlink_metadata(dir.join(MCAP_FILE)).is_err());
+        w.write(&record(0));
+        assert_eq!(w.report.written, 0);
+        // Asked again, with room, it records.
+        assert!(start(&mut w, Some("again")).is_ok());
+        w.write(&record(1));
+        w.close();
+        assert_eq!(w.report.written, 1);
+        let back = crate::storage::recording::load(&root.join("again")).unwrap();
+        assert_eq!(back.records.len(), 1);
+        let _ = std::fs::remove_dir_all(&root);
     }
 }

@@ -32,7 +32,7 @@ pub const METADATA_NAME: &str = "pavlov.recording";
 pub(crate) const MCAP_FORMAT: &str = super::FORMAT;
 
 /// The JSON Schema of an `events` message.
-pub(crate) const EVENT_SCHEMA: &str = r#"{"title":"pavlov.Event","description":"A change made at run time (pavlov::event::Event): it applies from the tick after `after`; the other fields depend on `kind`.","type":"object","properties":{"id":{"type":"integer","description":"Position in the order events were made"},"after":{"type":["integer","null"],"description":"The last tick its owner had handled when it took effect (null: before the first)"},"kind":{"type":"string","enum":["mode_set","teleop","e_stop","rearm","human_request","params_set","weights_reset","weights_saved","recording_started","recording_stopped","link","pipeline_stall"]}},"required":["id","after","kind"]}"#;
+pub(crate) const EVENT_SCHEMA: &str = r#"{"title":"pavlov.Event","description":"A change made at run time (pavlov::event::Event): it applies from the tick after `after`; the other fields depend on `kind`.","type":"object","properties":{"id":{"type":"integer","description":"Position in the order events were made"},"after":{"type":["integer","null"],"description":"The last tick its owner had handled when it took effect (null: before the first)"},"kind":{"type":"string","enum":["mode_set","teleop","e_stop","rearm","human_request","params_set","weights_reset","weights_saved","recording_started","recording_stopped","checkpoint_failed","link","pipeline_stall"]}},"required":["id","after","kind"]}"#;
 
 /// The JSON Schema of the `config` message.
 pub(crate) const CONFIG_SCHEMA: &str = r#"{"title":"pavlov.Config","description":"The configuration in force, every key as in config/README.md; [sim] seed is the run's seed.","type":"object","properties":{"robot":{"type":"object"},"tick":{"type":"object"},"safety":{"type":"object"},"link":{"type":"object"},"control":{"type":"object"},"predictions":{"type":"array","items":{"type":"object"}},"sim":{"type":"object"},"dashboard":{"type":"object"},"checkpoint":{"type":"object"},"skeleton":{"type":"object"}},"required":["robot","tick","control","predictions","sim"]}"#;
@@ -340,7 +340,14 @@ mod tests {
             EventKind::WeightsReset,
             EventKind::WeightsSaved { path: "p".into() },
             EventKind::RecordingStarted { path: "p".into() },
-            EventKind::RecordingStopped { path: "p".into() },
+            EventKind::RecordingStopped {
+                path: "p".into(),
+                reason: None,
+            },
+            EventKind::CheckpointFailed {
+                path: "p".into(),
+                reason: "r".into(),
+            },
             EventKind::Link {
                 state: LinkState::Up,
                 trip: None,
