@@ -26,6 +26,7 @@ use serde::{Deserialize, Serialize};
 
 pub mod jsonl;
 mod mcap_read;
+pub(crate) mod finish;
 pub(crate) mod mcap_write;
 pub mod schema;
 mod tick_encode;
