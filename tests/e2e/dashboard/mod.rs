@@ -1,5 +1,6 @@
 //! The dashboard endpoint: the websocket protocol, the browser page, abuse, who gets in when it is abused
-//! (`operator`), what it refuses to guess and keeps to itself (`strictness`), and `/metrics`.
+//! (`operator`), what it refuses to guess and keeps to itself (`strictness`), `/metrics`, and the recording's
+//! download (`download`).
 
 mod abuse;
 mod abusers;
@@ -7,6 +8,7 @@ mod analysis;
 pub(crate) mod browser;
 mod browser_analysis;
 mod browser_learning;
+mod download;
 mod learning_bounds;
 mod learning_view;
 mod metrics;

@@ -1,5 +1,5 @@
 //! What the server keeps on disk: recordings (round trip, replay, a rule table's rules, a kill mid-write, names a client may
-//! give, conversion between MCAP and JSON Lines, an independent MCAP reader), checkpoints (periodic, per
+//! give, conversion between MCAP and JSON Lines, an independent MCAP reader, `replay`'s exit statuses), checkpoints (periodic, per
 //! run, resumed with fallback) and saves.
 
 mod checkpoint;
@@ -12,4 +12,5 @@ mod recording_python;
 mod recording_roundtrip;
 mod recording_rules;
 mod replay_cases;
+mod replay_exit;
 mod saves;
