@@ -213,36 +213,40 @@ async fn a_download_taken_while_recording_opens_in_the_mcap_python_package_with_
     let file = lab.dir.join("download.mcap");
     std::fs::write(&file, &answer.body).unwrap();
 
-    // pavlov reads it as a finished file, not a torn one.
-    let rec = recording::load(&file).expect("pavlov reads the download");
-    assert!(!rec.torn_tail, "the download has its summary and footer");
-    let seqs: Vec<u64> = rec.records.iter().map(|r| r.seq).collect();
+    // The standard reader: its summary, and every message by iterating.
+    let read = read_with_python(&file);
+    assert_eq!(read["summary_counts"], read["counted"], "{read}");
+    assert_eq!(read["counted"]["config"], 1);
+    assert_eq!(read["counted"]["learner"], 1);
+    let seqs: Vec<u64> = read["ticks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|row| row[0].as_u64().unwrap())
+        .collect();
     assert!(seqs.windows(2).all(|w| w[0] < w[1]), "{seqs:?}");
     let last = *seqs.last().expect("ticks");
     assert!(
         last >= before,
         "the download ends at tick {last}, before tick {before} the dashboard had when it was asked for"
     );
-    assert_eq!(answer.header("x-pavlov-ticks"), Some(seqs.len().to_string().as_str()));
-    assert_eq!(answer.header("x-pavlov-last-tick"), Some(last.to_string().as_str()));
-
-    // The standard reader: its summary, and every message by iterating.
-    let read = read_with_python(&file);
-    assert_eq!(read["summary_counts"], read["counted"], "{read}");
-    assert_eq!(read["counted"]["ticks"], seqs.len(), "{read}");
-    assert_eq!(read["counted"]["config"], 1);
-    assert_eq!(read["counted"]["learner"], 1);
-    let py_seqs: Vec<u64> = read["ticks"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|row| row[0].as_u64().unwrap())
-        .collect();
-    assert_eq!(py_seqs, seqs);
+    assert_eq!(
+        answer.header("x-pavlov-ticks"),
+        Some(seqs.len().to_string().as_str())
+    );
+    assert_eq!(
+        answer.header("x-pavlov-last-tick"),
+        Some(last.to_string().as_str())
+    );
     assert_eq!(
         read["metadata"]["pavlov.recording"]["label"],
         "download while recording"
     );
+
+    // pavlov reads the same ticks, as a finished file, not a torn one.
+    let rec = recording::load(&file).expect("pavlov reads the download");
+    assert!(!rec.torn_tail, "the download has its summary and footer");
+    assert_eq!(rec.records.iter().map(|r| r.seq).collect::<Vec<_>>(), seqs);
     assert!(
         read["events"]
             .as_array()
@@ -267,16 +271,10 @@ fn noise(n: usize) -> String {
         .collect()
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_download_read_at_100_kb_a_second_arrives_whole_and_a_second_one_meanwhile_is_busy() {
-    // A long label makes the recording about 700 kB from its first second: at 100 kB/s, about 7 s to
-    // read, well past the 3 s a request head has.
-    let label = noise(700 * 1024);
-    let lab = Lab::start("download-slow", &label).await;
-    let addr = lab.addr();
-    lab.ticks_seen_by_the_dashboard(50).await;
-
-    // A small receive buffer, so that the kernel holds little of the response for the slow reader.
+/// Connects from 127.0.0.1 with a small receive buffer (so that the kernel holds little of a response the
+/// client does not read yet), asks for the recording and reads the response head: the stream, the
+/// `Content-Length` and the body bytes that came with the head.
+async fn begin_download(addr: SocketAddr) -> (TcpStream, usize, Vec<u8>) {
     let sock = TcpSocket::new_v4().unwrap();
     sock.set_recv_buffer_size(16 * 1024).unwrap();
     sock.bind(SocketAddr::new(loopback(1), 0)).unwrap();
@@ -284,55 +282,102 @@ async fn a_download_read_at_100_kb_a_second_arrives_whole_and_a_second_one_meanw
     s.write_all(request(&format!("/recording?token={TOKEN}"), &addr.to_string()).as_bytes())
         .await
         .unwrap();
-    let (status, head, mut body) = read_head(&mut s).await;
+    let (status, head, body) = read_head(&mut s).await;
     assert_eq!(status, 200, "{head}");
     let answer = Answer {
         status,
         head,
         body: Vec::new(),
     };
-    let expected = answer.content_length();
-    assert!(expected > 700 * 1024, "{expected} bytes");
+    (s, answer.content_length(), body)
+}
 
-    // While it is being sent, another download is refused as busy.
-    let busy = get(addr, &format!("/recording?token={TOKEN}"), &addr.to_string()).await;
-    assert_eq!(busy.status, 503, "{}", String::from_utf8_lossy(&busy.body));
-    assert!(
-        String::from_utf8_lossy(&busy.body).contains("busy"),
-        "{}",
-        String::from_utf8_lossy(&busy.body)
-    );
-
-    // 10 kB every 100 ms, until the server closes.
-    let began = tokio::time::Instant::now();
-    let mut piece = vec![0u8; 10_000];
+/// Reads `s` to its end, `per_read` bytes at a time with `pause` after each; fails on more than
+/// `expected` bytes.
+async fn read_paced(
+    s: &mut TcpStream,
+    body: &mut Vec<u8>,
+    expected: usize,
+    per_read: usize,
+    pause: Duration,
+) {
+    let mut piece = vec![0u8; per_read];
     loop {
         let n = tokio::time::timeout(WAIT, s.read(&mut piece))
             .await
             .expect("progress in time")
             .unwrap_or_else(|e| panic!("after {} of {expected} bytes: {e}", body.len()));
         if n == 0 {
-            break;
+            return;
         }
         body.extend_from_slice(&piece[..n]);
         assert!(body.len() <= expected, "more than Content-Length");
-        tokio::time::sleep(Duration::from_millis(100)).await;
+        if !pause.is_zero() {
+            tokio::time::sleep(pause).await;
+        }
     }
-    // The premise: the reading outlasted the request-head deadline (the sleeps alone take longer).
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_download_read_at_100_kb_a_second_arrives_whole() {
+    // A long label makes the recording about 700 kB from its first second: at 100 kB/s, about 7 s to
+    // read, well past the 3 s a request head has.
+    let label = noise(700 * 1024);
+    let lab = Lab::start("download-slow", &label).await;
+    let addr = lab.addr();
+    lab.ticks_seen_by_the_dashboard(50).await;
+    let (mut s, expected, mut body) = begin_download(addr).await;
+    assert!(expected > 700 * 1024, "{expected} bytes");
+    // 10 kB every 100 ms, until the server closes.
+    let began = tokio::time::Instant::now();
+    read_paced(
+        &mut s,
+        &mut body,
+        expected,
+        10_000,
+        Duration::from_millis(100),
+    )
+    .await;
+    // The premise: the reading outlasted the request-head deadline (the pauses alone take longer).
     assert!(
         began.elapsed() > pavlov_actors::dashboard::guard::PRE_UPGRADE_LIMIT,
         "{:?}",
         began.elapsed()
     );
-    assert_eq!(body.len(), expected, "the whole download, as Content-Length said");
+    assert_eq!(
+        body.len(),
+        expected,
+        "the whole download, as Content-Length said"
+    );
     let rec = recording::from_bytes(&body).expect("the download reads");
     assert!(!rec.torn_tail, "a finished file");
     assert_eq!(rec.header.label, label);
     assert!(!rec.records.is_empty());
+    lab.stop().await;
+}
 
-    // The slot is free again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_second_download_while_one_is_being_sent_is_answered_busy() {
+    let lab = Lab::start("download-busy", &noise(700 * 1024)).await;
+    let addr = lab.addr();
+    lab.ticks_seen_by_the_dashboard(50).await;
+    // The first download's client reads nothing for now: its response cannot be all sent.
+    let (mut s, expected, mut body) = begin_download(addr).await;
+    let busy = get(addr, &format!("/recording?token={TOKEN}"), &addr.to_string()).await;
+    let text = String::from_utf8_lossy(&busy.body);
+    assert_eq!(busy.status, 503, "{text}");
+    assert!(text.contains("busy"), "{text}");
+    assert!(busy.header("retry-after").is_some(), "{}", busy.head);
+    // The first arrives whole all the same; then the slot is free again.
+    read_paced(&mut s, &mut body, expected, 64 * 1024, Duration::ZERO).await;
+    assert_eq!(body.len(), expected);
     let again = get(addr, &format!("/recording?token={TOKEN}"), &addr.to_string()).await;
-    assert_eq!(again.status, 200, "{}", String::from_utf8_lossy(&again.body));
+    assert_eq!(
+        again.status,
+        200,
+        "{}",
+        String::from_utf8_lossy(&again.body)
+    );
     assert_eq!(again.body.len(), again.content_length());
     lab.stop().await;
 }
