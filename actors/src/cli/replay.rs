@@ -97,7 +97,10 @@ fn replay_and_tell(args: &ReplayArgs) -> Status {
     let report = match replay::replay(&rec) {
         Ok(report) => report,
         Err(e) => {
-            complain(&format!("error: cannot replay {}: {e}", args.path.display()));
+            complain(&format!(
+                "error: cannot replay {}: {e}",
+                args.path.display()
+            ));
             return Status::Unreadable;
         }
     };

@@ -181,7 +181,8 @@ fn host_name(authority: &str) -> &str {
     let authority = authority.split('/').next().unwrap_or_default();
     match authority.rsplit_once(':') {
         Some((name, port))
-            if port.bytes().all(|b| b.is_ascii_digit()) && (!name.contains(':') || name.ends_with(']')) =>
+            if port.bytes().all(|b| b.is_ascii_digit())
+                && (!name.contains(':') || name.ends_with(']')) =>
         {
             name
         }
@@ -324,7 +325,10 @@ mod tests {
             assert_eq!(p.check_host(Some(h)), Err(Denied::Host(h.into())), "{h}");
         }
         let refused = p.check_host(Some("evil.example")).unwrap_err().to_string();
-        assert!(refused.contains("Host `evil.example` is not a name of this server"), "{refused}");
+        assert!(
+            refused.contains("Host `evil.example` is not a name of this server"),
+            "{refused}"
+        );
     }
 
     #[test]

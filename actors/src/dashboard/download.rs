@@ -85,7 +85,10 @@ pub(crate) async fn recording(
         Err((status, why)) => return refuse(&state, status, why),
     }
     let Some(path) = state.hub.history().recording() else {
-        return plain(StatusCode::NOT_FOUND, "no recording is being written\n".into());
+        return plain(
+            StatusCode::NOT_FOUND,
+            "no recording is being written\n".into(),
+        );
     };
     let Ok(permit) = state.downloads.clone().try_acquire_owned() else {
         let mut r = plain(
@@ -138,9 +141,8 @@ pub(crate) async fn recording(
     let len = prepared.len;
     let (ticks, last_tick) = (copied.ticks, copied.last_tick);
     let file = tokio::fs::File::from_std(prepared.file);
-    let pieces = futures_util::stream::unfold(
-        (file.take(len), permit),
-        |(mut file, permit)| async move {
+    let pieces =
+        futures_util::stream::unfold((file.take(len), permit), |(mut file, permit)| async move {
             let mut buf = vec![0u8; PIECE];
             match file.read(&mut buf).await {
                 Ok(0) => None,
@@ -150,8 +152,7 @@ pub(crate) async fn recording(
                 }
                 Err(e) => Some((Err(e), (file, permit))),
             }
-        },
-    );
+        });
     let mut r = closing(Body::from_stream(pieces).into_response());
     let h = r.headers_mut();
     h.insert(

@@ -476,7 +476,8 @@ mod tests {
     }
 
     #[tokio::test(start_paused = true)]
-    async fn a_long_response_outlives_the_head_deadline_and_ends_only_when_the_client_stops_reading() {
+    async fn a_long_response_outlives_the_head_deadline_and_ends_only_when_the_client_stops_reading()
+     {
         let mut rig = rig(8, 8);
         let (mut client, mut server) = rig.connect(from(1)).await;
         server.long.begin();

@@ -81,7 +81,9 @@ impl Lab {
                 .unwrap()
                 .seq;
         }
-        let (mut ws, _) = ws_from(loopback(1), self.addr(), Some(TOKEN)).await.unwrap();
+        let (mut ws, _) = ws_from(loopback(1), self.addr(), Some(TOKEN))
+            .await
+            .unwrap();
         loop {
             let v = next_json(&mut ws).await;
             if v["type"] == "tick" && v["seq"].as_u64().is_some_and(|s| s >= last) {
@@ -143,7 +145,10 @@ async fn read_head(s: &mut TcpStream) -> (u16, String, Vec<u8>) {
             .await
             .expect("a response head in time")
             .expect("a readable response");
-        assert!(n > 0, "the connection closed before the head ended: {buf:?}");
+        assert!(
+            n > 0,
+            "the connection closed before the head ended: {buf:?}"
+        );
         buf.extend_from_slice(&piece[..n]);
     }
 }
@@ -198,11 +203,16 @@ fn read_with_python(file: &Path) -> Value {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_download_taken_while_recording_opens_in_the_mcap_python_package_with_every_tick_before_it()
-{
+ {
     let lab = Lab::start("download-python", "download while recording").await;
     let addr = lab.addr();
     let before = lab.ticks_seen_by_the_dashboard(100).await;
-    let answer = get(addr, &format!("/recording?token={TOKEN}"), &addr.to_string()).await;
+    let answer = get(
+        addr,
+        &format!("/recording?token={TOKEN}"),
+        &addr.to_string(),
+    )
+    .await;
     assert_eq!(
         answer.status,
         200,
@@ -363,7 +373,12 @@ async fn a_second_download_while_one_is_being_sent_is_answered_busy() {
     lab.ticks_seen_by_the_dashboard(50).await;
     // The first download's client reads nothing for now: its response cannot be all sent.
     let (mut s, expected, mut body) = begin_download(addr).await;
-    let busy = get(addr, &format!("/recording?token={TOKEN}"), &addr.to_string()).await;
+    let busy = get(
+        addr,
+        &format!("/recording?token={TOKEN}"),
+        &addr.to_string(),
+    )
+    .await;
     let text = String::from_utf8_lossy(&busy.body);
     assert_eq!(busy.status, 503, "{text}");
     assert!(text.contains("busy"), "{text}");
@@ -371,7 +386,12 @@ async fn a_second_download_while_one_is_being_sent_is_answered_busy() {
     // The first arrives whole all the same; then the slot is free again.
     read_paced(&mut s, &mut body, expected, 64 * 1024, Duration::ZERO).await;
     assert_eq!(body.len(), expected);
-    let again = get(addr, &format!("/recording?token={TOKEN}"), &addr.to_string()).await;
+    let again = get(
+        addr,
+        &format!("/recording?token={TOKEN}"),
+        &addr.to_string(),
+    )
+    .await;
     assert_eq!(
         again.status,
         200,
@@ -399,7 +419,11 @@ async fn recording_and_metrics_refuse_a_host_that_is_not_this_servers() {
         let port = format!("evil.example:{}", addr.port());
         assert_eq!(get(addr, &path, &port).await.status, 403, "{path}");
     }
-    assert_eq!(lab.dash.stats().rejected, rejected + 4, "counted as refusals");
+    assert_eq!(
+        lab.dash.stats().rejected,
+        rejected + 4,
+        "counted as refusals"
+    );
     // The server's own names pass.
     for host in [addr.to_string(), format!("localhost:{}", addr.port())] {
         assert_eq!(get(addr, "/metrics", &host).await.status, 200, "{host}");

@@ -148,9 +148,7 @@ impl<W: Write + Seek> Copy<W> {
         {
             self.writer = Some(options(profile).create(out)?);
         }
-        self.writer
-            .as_mut()
-            .ok_or_else(|| McapError::UnexpectedEof)
+        self.writer.as_mut().ok_or_else(|| McapError::UnexpectedEof)
     }
 
     /// Copies one record of the live file's data section; `false` at its end.
@@ -186,10 +184,13 @@ impl<W: Write + Seek> Copy<W> {
                 }
             }
             Record::Message { header, data } => {
-                let &(id, is_tick) = self
-                    .channels
-                    .get(&header.channel_id)
-                    .ok_or(McapError::UnknownChannel(header.sequence, header.channel_id))?;
+                let &(id, is_tick) =
+                    self.channels
+                        .get(&header.channel_id)
+                        .ok_or(McapError::UnknownChannel(
+                            header.sequence,
+                            header.channel_id,
+                        ))?;
                 if is_tick {
                     // A tick that does not decode is copied all the same: the copy is the file, not a
                     // judgement of it.
@@ -209,10 +210,8 @@ impl<W: Write + Seek> Copy<W> {
             }
             Record::Metadata(m) => {
                 if m.name == METADATA_NAME {
-                    self.copied.start_after = m
-                        .metadata
-                        .get("start_after")
-                        .and_then(|a| a.parse().ok());
+                    self.copied.start_after =
+                        m.metadata.get("start_after").and_then(|a| a.parse().ok());
                 }
                 self.writer("")?.write_metadata(&m)?;
             }
@@ -348,8 +347,12 @@ mod tests {
         let mut sink = McapSink::create(file, &header()).unwrap();
         let mut ends = vec![std::fs::metadata(path).unwrap().len()];
         for seq in 10..10 + n {
-            sink.tick(&TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Pavlovian))
-                .unwrap();
+            sink.tick(&TickRecord::at_rest(
+                seq,
+                seq as f64 * 20.0,
+                Mode::Pavlovian,
+            ))
+            .unwrap();
             if seq % 7 == 0 {
                 let e = Event {
                     id: seq,
@@ -463,8 +466,12 @@ mod tests {
         let file = std::io::BufWriter::new(File::create(&path).unwrap());
         let mut sink = McapSink::create(file, &header()).unwrap();
         for seq in 10..60 {
-            sink.tick(&TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Pavlovian))
-                .unwrap();
+            sink.tick(&TickRecord::at_rest(
+                seq,
+                seq as f64 * 20.0,
+                Mode::Pavlovian,
+            ))
+            .unwrap();
         }
         sink.finish().unwrap();
         let wait = Wait {
@@ -474,7 +481,10 @@ mod tests {
         };
         let (bytes, copied) = copy(&path, &wait);
         assert!(copied.finished);
-        assert!(copied.reached, "a stopped recording has all it will ever have");
+        assert!(
+            copied.reached,
+            "a stopped recording has all it will ever have"
+        );
         assert_eq!(copied.ticks, 50);
         let rec = parse_mcap(&bytes).unwrap();
         assert!(!rec.torn_tail);
@@ -486,8 +496,8 @@ mod tests {
     fn a_file_that_is_not_mcap_is_an_error_naming_it() {
         let path = tmp("not-mcap");
         std::fs::write(&path, b"{\"format\":\"pavlov-recording/2\"}\n").unwrap();
-        let err = finish_copy(&path, Cursor::new(Vec::new()), &Wait::none(), &|| false)
-            .unwrap_err();
+        let err =
+            finish_copy(&path, Cursor::new(Vec::new()), &Wait::none(), &|| false).unwrap_err();
         assert!(matches!(err, FinishError::Damaged { .. }), "{err}");
         assert!(err.to_string().contains("not-mcap"), "{err}");
         let _ = std::fs::remove_file(&path);

@@ -24,9 +24,9 @@ use pavlov::event::Event;
 use pavlov::record::TickRecord;
 use serde::{Deserialize, Serialize};
 
+pub(crate) mod finish;
 pub mod jsonl;
 mod mcap_read;
-pub(crate) mod finish;
 pub(crate) mod mcap_write;
 pub mod schema;
 mod tick_encode;
