@@ -3,7 +3,7 @@
 //!
 //! Only an operator may have it (the token as `?token=`, checked and throttled like a websocket handshake's;
 //! anyone on a server without a token, which binds loopback only): a recording holds the whole
-//! configuration. `Host` and `Origin` are checked first, as for `/metrics` ([`check_host_and_origin`]),
+//! configuration. `Host` and `Origin` are checked first, as for `/metrics` ([`refuse_foreign`]),
 //! so a DNS-rebinding page cannot fetch it. The file is the one the recorder announced in its last
 //! `recording_started` event.
 //!
@@ -32,7 +32,7 @@ use tokio::io::AsyncReadExt;
 use super::auth::Access;
 use super::download_copy::{PATIENCE, prepare};
 use super::guard::Peer;
-use super::http::{AppState, WsQuery, check_host_and_origin, check_token, refuse};
+use super::http::{AppState, WsQuery, check_token, refuse, refuse_foreign};
 use super::source::Source;
 
 /// Bytes read from the copy at a time.
@@ -69,7 +69,7 @@ pub(crate) async fn recording(
     headers: HeaderMap,
     Query(query): Query<WsQuery>,
 ) -> Response {
-    if let Err(refused) = check_host_and_origin(&state, &headers) {
+    if let Some(refused) = refuse_foreign(&state, &headers) {
         return refused;
     }
     let source = Source::of(peer.ip());

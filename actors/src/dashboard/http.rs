@@ -1,7 +1,7 @@
 //! The HTTP side of the dashboard endpoint: the page and its assets, `/healthz`, `/metrics`, `/recording`
 //! ([`super::download`]), and the `/ws` handshake: the origin, then the wrong-token throttle (429), the
 //! token (401), then a seat as operator or watcher (503), all before the upgrade. `/metrics` and
-//! `/recording` check `Host` and `Origin` first ([`check_host_and_origin`]: 403, counted as a refusal).
+//! `/recording` check `Host` and `Origin` first ([`refuse_foreign`]: 403, counted as a refusal).
 //!
 //! The page, its script and its style sheet are compiled into the binary. uPlot is not: it is an npm
 //! dependency, served from `<web dir>/node_modules/uplot/dist/` at run time; when it is missing the
@@ -182,7 +182,7 @@ async fn healthz(State(state): State<Arc<AppState>>) -> Response {
 }
 
 async fn metrics(State(state): State<Arc<AppState>>, headers: HeaderMap) -> Response {
-    if let Err(refused) = check_host_and_origin(&state, &headers) {
+    if let Some(refused) = refuse_foreign(&state, &headers) {
         return refused;
     }
     let text = crate::telemetry::prometheus::render(&state.metrics());
@@ -314,9 +314,8 @@ fn header_text(headers: &HeaderMap, name: header::HeaderName) -> Result<Option<&
 
 /// For the routes a page could fetch without a handshake (`/metrics`, `/recording`): `Host` must be a
 /// name of this server and `Origin`, when present, allowed, as in the websocket's handshake
-/// ([`AccessPolicy::check_host`], [`AccessPolicy::check_origin`]). The error is the 403 refusal,
-/// counted.
-pub(crate) fn check_host_and_origin(state: &AppState, headers: &HeaderMap) -> Result<(), Response> {
+/// ([`AccessPolicy::check_host`], [`AccessPolicy::check_origin`]). `Some` is the 403 refusal, counted.
+pub(crate) fn refuse_foreign(state: &AppState, headers: &HeaderMap) -> Option<Response> {
     let checked = header_text(headers, header::HOST).and_then(|host| {
         let origin = header_text(headers, header::ORIGIN)?;
         state
@@ -325,7 +324,9 @@ pub(crate) fn check_host_and_origin(state: &AppState, headers: &HeaderMap) -> Re
             .and_then(|()| state.policy.check_origin(origin, host))
             .map_err(|denied| denied.to_string())
     });
-    checked.map_err(|why| refuse(state, StatusCode::FORBIDDEN, why))
+    checked
+        .err()
+        .map(|why| refuse(state, StatusCode::FORBIDDEN, why))
 }
 
 /// Checks the token presented by a client from `source`: 429 without looking at it when the source has

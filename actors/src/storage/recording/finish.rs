@@ -157,31 +157,28 @@ impl<W: Write + Seek> Copy<W> {
             Record::Header(h) => {
                 self.writer(&h.profile)?;
             }
-            Record::Schema { header, data } => {
-                if !self.schemas.contains_key(&header.id) {
-                    let id = self
-                        .writer("")?
-                        .add_schema(&header.name, &header.encoding, &data)?;
-                    self.schemas.insert(header.id, id);
-                }
+            // A schema or channel seen before (the same id) is not added twice.
+            Record::Schema { header, data } if !self.schemas.contains_key(&header.id) => {
+                let id = self
+                    .writer("")?
+                    .add_schema(&header.name, &header.encoding, &data)?;
+                self.schemas.insert(header.id, id);
             }
-            Record::Channel(c) => {
-                if !self.channels.contains_key(&c.id) {
-                    let schema = match c.schema_id {
-                        0 => 0,
-                        id => *self
-                            .schemas
-                            .get(&id)
-                            .ok_or(McapError::UnknownSchema(c.topic.clone(), id))?,
-                    };
-                    let id = self.writer("")?.add_channel(
-                        schema,
-                        &c.topic,
-                        &c.message_encoding,
-                        &c.metadata,
-                    )?;
-                    self.channels.insert(c.id, (id, c.topic == TICKS));
-                }
+            Record::Channel(c) if !self.channels.contains_key(&c.id) => {
+                let schema = match c.schema_id {
+                    0 => 0,
+                    id => *self
+                        .schemas
+                        .get(&id)
+                        .ok_or(McapError::UnknownSchema(c.topic.clone(), id))?,
+                };
+                let id = self.writer("")?.add_channel(
+                    schema,
+                    &c.topic,
+                    &c.message_encoding,
+                    &c.metadata,
+                )?;
+                self.channels.insert(c.id, (id, c.topic == TICKS));
             }
             Record::Message { header, data } => {
                 let &(id, is_tick) =
