@@ -489,6 +489,36 @@ mod tests {
         let _ = std::fs::remove_file(&path);
     }
 
+    /// A measurement, not a check: copies the recording in `PAVLOV_FINISH_FILE` (cut by a byte, so it is
+    /// read as a live file) into a temporary file and prints what the copy holds and how long it took.
+    /// Run it under `/usr/bin/time -v` for the process's CPU time and peak memory:
+    /// `PAVLOV_FINISH_FILE=… cargo test -p pavlov-actors --lib finish::tests::measure -- --ignored`.
+    #[test]
+    #[ignore = "a measurement: needs PAVLOV_FINISH_FILE"]
+    fn measure_a_copy_of_a_long_recording() {
+        let Some(source) = std::env::var_os("PAVLOV_FINISH_FILE") else {
+            return;
+        };
+        let bytes = std::fs::read(&source).unwrap();
+        let path = tmp("measure");
+        std::fs::write(&path, &bytes[..bytes.len() - 1]).unwrap();
+        drop(bytes);
+        let out = std::io::BufWriter::new(File::create(tmp("measure-out")).unwrap());
+        let began = Instant::now();
+        let (out, copied) = finish_copy(&path, out, &Wait::none(), &|| false).unwrap();
+        let took = began.elapsed();
+        let len = out.into_inner().unwrap().metadata().unwrap().len();
+        eprintln!(
+            "copied {} ticks, {} messages, {} of {} bytes read, {len} bytes written in {took:?}",
+            copied.ticks,
+            copied.messages,
+            copied.read_bytes,
+            std::fs::metadata(&path).unwrap().len()
+        );
+        let _ = std::fs::remove_file(&path);
+        let _ = std::fs::remove_file(tmp("measure-out"));
+    }
+
     #[test]
     fn a_file_that_is_not_mcap_is_an_error_naming_it() {
         let path = tmp("not-mcap");
