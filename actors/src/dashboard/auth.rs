@@ -5,6 +5,13 @@
 //!   own origin, the configured `allowed_origins`, and `http://<Host>` when the `Host` header is a literal
 //!   IP address (a page loaded from this server by IP; a DNS name there could be a rebinding attack, so it
 //!   must be listed). A request without `Origin` is not from a browser page and passes (tests, scripts).
+//! - **Host.** `/recording` and `/metrics` are fetched by plain requests, which a page of any site can
+//!   send; a DNS-rebinding page (a name of the attacker's that now resolves to this server) even reads the
+//!   answer, as same-origin. Its requests carry the attacker's name in `Host`, so these routes also check
+//!   `Host` ([`AccessPolicy::check_host`]): an IP literal (not `0.0.0.0` or `[::]`), `localhost`, or the
+//!   host of a configured `allowed_origins` entry, on any port (a tunnel or a proxy may change the port;
+//!   the name is what a rebinding page controls). A request without `Host` is not from a browser and
+//!   passes.
 //! - **Token.** When a token is configured, a client presents it in the handshake, either as a
 //!   subprotocol entry `token.<token>` (next to `pavlov.v1`) or as the `token` query parameter. A wrong
 //!   token is refused outright; no token gives a watch-only connection when `watch_without_token` is set,
@@ -37,6 +44,12 @@ pub(crate) enum Denied {
     /// No token, and watching without one is off (HTTP 401).
     #[error("a token is required: pass ?token=… or the subprotocol token.<token>")]
     TokenRequired,
+    /// `Host` is not a name of this server (HTTP 403).
+    #[error(
+        "Host `{0}` is not a name of this server (a DNS-rebinding page?): use its IP address or localhost, \
+         or add the origin you use for it to [dashboard] allowed_origins"
+    )]
+    Host(String),
 }
 
 /// The rules, fixed when the endpoint starts.
@@ -45,6 +58,8 @@ pub(crate) struct AccessPolicy {
     token: Option<String>,
     watch_without_token: bool,
     origins: Vec<String>,
+    /// Host names (without port) `Host` may carry besides IP literals and `localhost`.
+    hosts: Vec<String>,
 }
 
 fn origin_of(host: &str, port: u16) -> String {
@@ -71,11 +86,22 @@ impl AccessPolicy {
             };
             origins.push(origin_of(&host, port));
         }
-        origins.extend(config.allowed_origins.iter().map(|o| normalise_origin(o)));
+        let configured: Vec<String> = config
+            .allowed_origins
+            .iter()
+            .map(|o| normalise_origin(o))
+            .collect();
+        let hosts = configured
+            .iter()
+            .filter_map(|o| o.split_once("://").map(|(_, authority)| authority))
+            .map(|authority| host_name(authority).to_string())
+            .collect();
+        origins.extend(configured);
         AccessPolicy {
             token: config.token.clone().filter(|t| !t.is_empty()),
             watch_without_token: config.watch_without_token,
             origins,
+            hosts,
         }
     }
 
@@ -106,6 +132,23 @@ impl AccessPolicy {
         Err(Denied::Origin(origin.to_string()))
     }
 
+    /// Checks the `Host` header (`None` = absent): an IP literal, `localhost` or a configured origin's host,
+    /// on any port.
+    pub(crate) fn check_host(&self, host: Option<&str>) -> Result<(), Denied> {
+        let Some(host) = host else {
+            return Ok(());
+        };
+        let h = host.trim().to_ascii_lowercase();
+        if host_is_ip_literal(&h) {
+            return Ok(());
+        }
+        let name = host_name(&h);
+        if name == "localhost" || self.hosts.iter().any(|n| n == name) {
+            return Ok(());
+        }
+        Err(Denied::Host(host.to_string()))
+    }
+
     /// Decides access from the token presented in the handshake, if any.
     pub(crate) fn check_token(&self, presented: Option<&str>) -> Result<Access, Denied> {
         let Some(expected) = &self.token else {
@@ -131,6 +174,20 @@ pub(crate) fn presented_token<'a>(
         .map(str::trim)
         .find_map(|p| p.strip_prefix(TOKEN_PROTOCOL_PREFIX))
         .or(query_token)
+}
+
+/// The name in `authority` without its port (`[::1]:8080` → `[::1]`, `lab:8080` → `lab`).
+fn host_name(authority: &str) -> &str {
+    let authority = authority.split('/').next().unwrap_or_default();
+    match authority.rsplit_once(':') {
+        Some((name, port))
+            if port.bytes().all(|b| b.is_ascii_digit())
+                && (!name.contains(':') || name.ends_with(']')) =>
+        {
+            name
+        }
+        _ => authority,
+    }
 }
 
 fn host_is_ip_literal(host: &str) -> bool {
@@ -237,6 +294,40 @@ mod tests {
         assert!(
             p.check_origin(Some("http://0.0.0.0:8080"), Some("0.0.0.0:8080"))
                 .is_err()
+        );
+    }
+
+    #[test]
+    fn host_must_be_an_ip_literal_localhost_or_a_configured_origins_host() {
+        let p = policy(None, true, &["https://lab.example.org"], "127.0.0.1:8080");
+        for h in [
+            "127.0.0.1:8080",
+            "127.0.0.1",
+            "localhost:8080",
+            "LOCALHOST:9000",
+            "[::1]:8080",
+            "192.168.1.5:8080",
+            "lab.example.org",
+            "lab.example.org:443",
+        ] {
+            assert_eq!(p.check_host(Some(h)), Ok(()), "{h}");
+        }
+        assert_eq!(p.check_host(None), Ok(()), "not a browser");
+        for h in [
+            "evil.example",
+            "evil.example:8080",
+            "localhost.evil.example",
+            "rebind.lab.example.org",
+            "0.0.0.0:8080",
+            "[::]:8080",
+            "",
+        ] {
+            assert_eq!(p.check_host(Some(h)), Err(Denied::Host(h.into())), "{h}");
+        }
+        let refused = p.check_host(Some("evil.example")).unwrap_err().to_string();
+        assert!(
+            refused.contains("Host `evil.example` is not a name of this server"),
+            "{refused}"
         );
     }
 

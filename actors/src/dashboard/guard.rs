@@ -13,11 +13,17 @@
 //! the websocket protocol within [`PRE_UPGRADE_LIMIT`] (page and asset requests take milliseconds, and
 //! browsers simply reopen an idle keep-alive connection). It recognises the switch by the `101` status line
 //! the server writes; from then on the connection is a websocket and leaves the pool.
+//!
+//! That deadline is meant for a request head, not for a response: a handler that answers with a long
+//! response (the recording's download, [`super::download`]) says so through the connection's
+//! [`LongResponse`] (handlers reach it as the second field of [`Peer`]). The connection then leaves the
+//! pool, like a websocket, and from then on ends only when the client takes no bytes for [`STALL_LIMIT`]
+//! (a slow reader is bounded by its progress, never by the total time).
 
 use std::io;
 use std::net::SocketAddr;
 use std::pin::Pin;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::task::{Context, Poll};
 use std::time::Duration;
@@ -34,6 +40,8 @@ use super::source::Source;
 
 /// How long a connection may stay plain HTTP (not a websocket).
 pub const PRE_UPGRADE_LIMIT: Duration = Duration::from_secs(3);
+/// How long a long response's client may take no bytes before its connection is closed.
+pub const STALL_LIMIT: Duration = Duration::from_secs(30);
 pub use super::pending::GRACE;
 
 /// What the guard did, shared with the endpoint's counters.
@@ -45,6 +53,8 @@ pub(crate) struct GuardCounters {
     pub(crate) evicted: AtomicU64,
     /// Connections closed because they did not become a websocket in time.
     pub(crate) timed_out: AtomicU64,
+    /// Long responses closed because their client took no bytes for [`STALL_LIMIT`].
+    pub(crate) stalled: AtomicU64,
 }
 
 /// The pool shared by the listener and its connections.
@@ -54,16 +64,34 @@ fn lock(pool: &Mutex<PendingPool>) -> MutexGuard<'_, PendingPool> {
     pool.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
-/// The peer's address, for handlers (`ConnectInfo<Peer>`).
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Peer(pub(crate) SocketAddr);
+/// The peer's address and its connection's [`LongResponse`] switch, for handlers (`ConnectInfo<Peer>`).
+#[derive(Debug, Clone)]
+pub(crate) struct Peer(pub(crate) SocketAddr, pub(crate) LongResponse);
 
 impl<L> Connected<IncomingStream<'_, GuardedListener<L>>> for Peer
 where
     L: Listener<Addr = SocketAddr>,
 {
     fn connect_info(stream: IncomingStream<'_, GuardedListener<L>>) -> Self {
-        Peer(*stream.remote_addr())
+        Peer(*stream.remote_addr(), stream.io().long.clone())
+    }
+}
+
+/// A handler's word to its connection that the response it is making is long: from then on the
+/// connection is not pending (it leaves the pool and its request-head deadline) and ends only when its
+/// client takes no bytes for [`STALL_LIMIT`]. Set once; a connection carrying a long response should
+/// close after it (`Connection: close`), so it never goes back to waiting for a request.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct LongResponse(Arc<AtomicBool>);
+
+impl LongResponse {
+    /// The response being made is long.
+    pub(crate) fn begin(&self) {
+        self.0.store(true, Ordering::Release);
+    }
+
+    fn begun(&self) -> bool {
+        self.0.load(Ordering::Acquire)
     }
 }
 
@@ -153,6 +181,8 @@ impl<L: Listener<Addr = SocketAddr>> GuardedListener<L> {
             pending: Some(seat),
             ended: false,
             counters: self.counters.clone(),
+            long: LongResponse::default(),
+            progress: None,
         };
         (io, addr)
     }
@@ -181,6 +211,10 @@ pub(crate) struct GuardedIo<T> {
     /// Evicted or out of time: every read and write fails from then on.
     ended: bool,
     counters: Arc<GuardCounters>,
+    /// Set by the handler making a long response.
+    long: LongResponse,
+    /// While a long response is made: when the connection ends unless the client takes bytes first.
+    progress: Option<Pin<Box<Sleep>>>,
 }
 
 /// Whether bytes the server writes begin the `101 Switching Protocols` response.
@@ -193,6 +227,25 @@ impl<T> GuardedIo<T> {
     fn ended(&mut self, cx: &mut Context<'_>) -> bool {
         if self.ended {
             return true;
+        }
+        if self.progress.is_none() && self.long.begun() {
+            // The request is in; the response is long: only the client's progress bounds it now.
+            self.pending = None;
+            self.progress = Some(Box::pin(tokio::time::sleep(STALL_LIMIT)));
+        }
+        if let Some(progress) = self.progress.as_mut() {
+            if progress.as_mut().poll(cx).is_ready() {
+                let n = self.counters.stalled.fetch_add(1, Ordering::Relaxed) + 1;
+                if worth_logging(n) {
+                    tracing::info!(
+                        total = n,
+                        "a dashboard client took no bytes of a long response for {} s; closing it",
+                        STALL_LIMIT.as_secs()
+                    );
+                }
+                self.ended = true;
+            }
+            return self.ended;
         }
         let Some(seat) = self.pending.as_mut() else {
             return false;
@@ -212,6 +265,17 @@ impl<T> GuardedIo<T> {
     fn saw_write(&mut self, first: &[u8]) {
         if self.pending.is_some() && is_switch(first) {
             self.pending = None;
+        }
+    }
+
+    /// Bytes were written: a long response's connection has another [`STALL_LIMIT`].
+    fn progressed(&mut self, written: &Poll<io::Result<usize>>) {
+        if let (Some(progress), Poll::Ready(Ok(n))) = (self.progress.as_mut(), written)
+            && *n > 0
+        {
+            progress
+                .as_mut()
+                .reset(tokio::time::Instant::now() + STALL_LIMIT);
         }
     }
 }
@@ -246,7 +310,9 @@ impl<T: AsyncWrite + Unpin> AsyncWrite for GuardedIo<T> {
             return Poll::Ready(Err(ended_error()));
         }
         self.saw_write(buf);
-        Pin::new(&mut self.inner).poll_write(cx, buf)
+        let written = Pin::new(&mut self.inner).poll_write(cx, buf);
+        self.progressed(&written);
+        written
     }
 
     fn poll_write_vectored(
@@ -260,7 +326,9 @@ impl<T: AsyncWrite + Unpin> AsyncWrite for GuardedIo<T> {
         if let Some(first) = bufs.iter().find(|b| !b.is_empty()) {
             self.saw_write(first);
         }
-        Pin::new(&mut self.inner).poll_write_vectored(cx, bufs)
+        let written = Pin::new(&mut self.inner).poll_write_vectored(cx, bufs);
+        self.progressed(&written);
+        written
     }
 
     fn is_write_vectored(&self) -> bool {
@@ -405,6 +473,36 @@ mod tests {
         let (_e, _fourth) = rig.connect(from(1)).await;
         assert_eq!(rig.counters.evicted.load(Ordering::Relaxed), 1);
         assert!(first.read(&mut buf).await.is_err());
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_long_response_outlives_the_head_deadline_and_ends_only_when_the_client_stops_reading()
+     {
+        let mut rig = rig(8, 8);
+        let (mut client, mut server) = rig.connect(from(1)).await;
+        server.long.begin();
+        server.write_all(b"HTTP/1.1 200 OK\r\n\r\n").await.unwrap();
+        assert_eq!(lock(&rig.pool).len(), 0, "a long response is not pending");
+        let mut buf = [0u8; 256];
+        let _ = client.read(&mut buf).await.unwrap();
+        // Ten times the head deadline, a little at a time: the connection stays.
+        for _ in 0..30 {
+            tokio::time::sleep(Duration::from_secs(1)).await;
+            server.write_all(b"0123456789").await.unwrap();
+            assert_eq!(client.read(&mut buf).await.unwrap(), 10);
+        }
+        assert_eq!(rig.counters.timed_out.load(Ordering::Relaxed), 0);
+        // The client stops reading: once the pipe is full, the connection ends after STALL_LIMIT.
+        let t0 = tokio::time::Instant::now();
+        let err = loop {
+            if let Err(e) = server.write(&[0u8; 64]).await {
+                break e;
+            }
+        };
+        assert_eq!(err.kind(), io::ErrorKind::TimedOut);
+        assert_eq!(t0.elapsed(), STALL_LIMIT);
+        assert_eq!(rig.counters.stalled.load(Ordering::Relaxed), 1);
+        assert_eq!(rig.counters.timed_out.load(Ordering::Relaxed), 0);
     }
 
     #[tokio::test(start_paused = true)]

@@ -1,6 +1,7 @@
 //! The HTTP side of the dashboard endpoint: the page and its assets, `/healthz`, `/metrics`, `/recording`
 //! ([`super::download`]), and the `/ws` handshake: the origin, then the wrong-token throttle (429), the
-//! token (401), then a seat as operator or watcher (503), all before the upgrade.
+//! token (401), then a seat as operator or watcher (503), all before the upgrade. `/metrics` and
+//! `/recording` check `Host` and `Origin` first ([`refuse_foreign`]: 403, counted as a refusal).
 //!
 //! The page, its script and its style sheet are compiled into the binary. uPlot is not: it is an npm
 //! dependency, served from `<web dir>/node_modules/uplot/dist/` at run time; when it is missing the
@@ -111,6 +112,8 @@ pub(crate) struct AppState {
     pub(crate) cancel: CancellationToken,
     /// The Horde's names and values for the clients that watch it (`None`: no `[horde]`).
     pub(crate) horde: Option<Arc<super::horde_feed::HordeFeed>>,
+    /// Downloads of the recording being prepared or sent: [`super::download::AT_ONCE`] permits.
+    pub(crate) downloads: Arc<tokio::sync::Semaphore>,
 }
 
 impl AppState {
@@ -178,7 +181,10 @@ async fn healthz(State(state): State<Arc<AppState>>) -> Response {
     r
 }
 
-async fn metrics(State(state): State<Arc<AppState>>) -> Response {
+async fn metrics(State(state): State<Arc<AppState>>, headers: HeaderMap) -> Response {
+    if let Some(refused) = refuse_foreign(&state, &headers) {
+        return refused;
+    }
     let text = crate::telemetry::prometheus::render(&state.metrics());
     let mut r = text.into_response();
     r.headers_mut().insert(
@@ -281,10 +287,11 @@ pub(crate) struct WsQuery {
     pub(crate) token: Option<String>,
 }
 
+/// Refuses a request (a handshake, a download, `/metrics`) with `status` and `why`, and counts it.
 pub(crate) fn refuse(state: &AppState, status: StatusCode, why: String) -> Response {
     let n = state.rejected.fetch_add(1, Ordering::Relaxed) + 1;
     if super::session::worth_logging(n) {
-        tracing::info!(%status, total = n, "websocket handshake refused: {why}");
+        tracing::info!(%status, total = n, "dashboard request refused: {why}");
     }
     let mut r = (status, format!("{why}\n")).into_response();
     if status == StatusCode::TOO_MANY_REQUESTS {
@@ -294,6 +301,32 @@ pub(crate) fn refuse(state: &AppState, status: StatusCode, why: String) -> Respo
         );
     }
     r
+}
+
+/// A header as text (`None`: absent); the error names a header that is not text.
+fn header_text(headers: &HeaderMap, name: header::HeaderName) -> Result<Option<&str>, String> {
+    match headers.get(&name).map(|v| v.to_str()) {
+        None => Ok(None),
+        Some(Ok(v)) => Ok(Some(v)),
+        Some(Err(_)) => Err(format!("the {name} header is not text")),
+    }
+}
+
+/// For the routes a page could fetch without a handshake (`/metrics`, `/recording`): `Host` must be a
+/// name of this server and `Origin`, when present, allowed, as in the websocket's handshake
+/// ([`AccessPolicy::check_host`], [`AccessPolicy::check_origin`]). `Some` is the 403 refusal, counted.
+pub(crate) fn refuse_foreign(state: &AppState, headers: &HeaderMap) -> Option<Response> {
+    let checked = header_text(headers, header::HOST).and_then(|host| {
+        let origin = header_text(headers, header::ORIGIN)?;
+        state
+            .policy
+            .check_host(host)
+            .and_then(|()| state.policy.check_origin(origin, host))
+            .map_err(|denied| denied.to_string())
+    });
+    checked
+        .err()
+        .map(|why| refuse(state, StatusCode::FORBIDDEN, why))
 }
 
 /// Checks the token presented by a client from `source`: 429 without looking at it when the source has
@@ -340,21 +373,14 @@ pub(crate) fn check_token(
 
 async fn ws_handler(
     State(state): State<Arc<AppState>>,
-    ConnectInfo(Peer(peer)): ConnectInfo<Peer>,
+    ConnectInfo(Peer(peer, _)): ConnectInfo<Peer>,
     headers: HeaderMap,
     Query(query): Query<WsQuery>,
     ws: WebSocketUpgrade,
 ) -> Response {
-    let origin = match headers.get(header::ORIGIN).map(|v| v.to_str()) {
-        None => None,
-        Some(Ok(o)) => Some(o),
-        Some(Err(_)) => {
-            return refuse(
-                &state,
-                StatusCode::FORBIDDEN,
-                "the Origin header is not text".into(),
-            );
-        }
+    let origin = match header_text(&headers, header::ORIGIN) {
+        Ok(o) => o,
+        Err(refused) => return refuse(&state, StatusCode::FORBIDDEN, refused),
     };
     let host = headers.get(header::HOST).and_then(|v| v.to_str().ok());
     if let Err(denied) = state.policy.check_origin(origin, host) {

@@ -19,7 +19,8 @@
 //!   [`source`] address, evicting the oldest of the busiest address) and their deadline to become one;
 //! - [`strict_json`]: client messages parsed with duplicate keys refused;
 //! - [`hello_config`]: what of the configuration operators and watchers see;
-//! - [`http`]: routes, static files and the handshake; [`download`]: the recording being written;
+//! - [`http`]: routes, static files and the handshake; [`download`]: the recording being written,
+//!   finished for the download by [`download_copy`];
 //! - [`load`]: the websocket load behind `pavlov bench --ws-clients`, and [`abuse`], its abusive clients.
 //!
 //! Nothing here can delay the tick: the hub reads the tick feed's lossy broadcast, every client reads the
@@ -29,6 +30,7 @@
 pub(crate) mod admission;
 pub(crate) mod auth;
 pub(crate) mod download;
+pub(crate) mod download_copy;
 pub mod guard;
 pub(crate) mod hello_config;
 pub(crate) mod history;
@@ -274,6 +276,7 @@ impl Dashboard {
                 .horde
                 .as_ref()
                 .map(|view| Arc::new(horde_feed::HordeFeed::new(view))),
+            downloads: Arc::new(tokio::sync::Semaphore::new(download::AT_ONCE)),
         });
         let (earlier_events, events) = server.events.subscribe_with_recent();
         let hub = runtime.spawn(hub::run(

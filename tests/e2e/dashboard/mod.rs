@@ -1,6 +1,6 @@
 //! The dashboard endpoint: the websocket protocol, the browser page, abuse, who gets in when it is abused
-//! (`operator`), what it refuses to guess and keeps to itself (`strictness`), `/metrics`, and a full disk
-//! as the page shows it (`browser_storage`).
+//! (`operator`), what it refuses to guess and keeps to itself (`strictness`), `/metrics`, the recording's
+//! download (`download`), and a full disk as the page shows it (`browser_storage`).
 
 mod abuse;
 mod abusers;
@@ -9,6 +9,7 @@ pub(crate) mod browser;
 mod browser_analysis;
 mod browser_learning;
 mod browser_storage;
+mod download;
 mod learning_bounds;
 mod learning_view;
 mod metrics;

@@ -1,6 +1,6 @@
 //! What the server keeps on disk: recordings (round trip, replay, a rule table's rules, a kill mid-write, names a client may
-//! give, conversion between MCAP and JSON Lines, an independent MCAP reader), checkpoints (periodic, per
-//! run, resumed with fallback) and saves; no artifact carrying the token.
+//! give, conversion between MCAP and JSON Lines, an independent MCAP reader, `replay`'s exit statuses),
+//! checkpoints (periodic, per run, resumed with fallback) and saves; no artifact carrying the token.
 
 mod checkpoint;
 mod checkpoint_runs;
@@ -14,4 +14,5 @@ mod recording_python;
 mod recording_roundtrip;
 mod recording_rules;
 mod replay_cases;
+mod replay_exit;
 mod saves;

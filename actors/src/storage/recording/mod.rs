@@ -26,6 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::provenance::Provenance;
 
+pub(crate) mod finish;
 pub mod jsonl;
 mod mcap_read;
 pub(crate) mod mcap_write;
