@@ -4,6 +4,7 @@
 
 mod checkpoint;
 mod checkpoint_runs;
+mod crafted_files;
 pub(crate) mod fixtures;
 mod recording_convert;
 mod recording_crash;
