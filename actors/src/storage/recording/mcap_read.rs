@@ -64,7 +64,9 @@ impl Scan {
                 }
             }
             op::METADATA => {
-                if f.str("metadata name").map_err(err)? == METADATA_NAME {
+                // Only the provenance's map is read; other metadata records are skipped.
+                let name = f.str("metadata name").map_err(err)?;
+                if name == METADATA_NAME {
                     self.metadata = f.string_map("metadata").map_err(err)?;
                 }
             }
@@ -478,6 +480,9 @@ mod tests {
         ]
     }
 
+    /// A file to mutate, and where its length fields are ([`length_fields`]).
+    type Fuzzed = (Vec<u8>, Vec<(usize, usize)>);
+
     use crate::storage::recording::{MAX_RECORD, from_bytes};
     use proptest::test_runner::{Config as Cases, RngSeed};
 
@@ -499,7 +504,7 @@ mod tests {
             mutations in proptest::collection::vec(mutation(), 1..4),
         ) {
             thread_local! {
-                static FILES: [(Vec<u8>, Vec<(usize, usize)>); 2] = {
+                static FILES: [Fuzzed; 2] = {
                     let (bytes, _) = write(60);
                     [bytes.clone(), uncompressed(&bytes)].map(|f| {
                         let mut fields = Vec::new();
