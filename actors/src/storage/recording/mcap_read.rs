@@ -28,6 +28,10 @@ struct Scan {
     config: Option<Vec<u8>>,
     start: Option<Vec<u8>>,
     metadata: BTreeMap<String, String>,
+    /// The most tick and event messages kept: one for each byte of the file. Each kept message costs
+    /// memory beyond its bytes (its buffer, then its decoded record), so a small file of highly
+    /// compressed empty messages must not be read as millions of ticks.
+    max_messages: usize,
 }
 
 impl Scan {
@@ -54,6 +58,14 @@ impl Scan {
                 let Some(topic) = self.topics.get(&channel) else {
                     return Ok(());
                 };
+                if matches!(topic.as_str(), TICKS | EVENTS)
+                    && self.ticks.len() + self.events.len() >= self.max_messages
+                {
+                    return Err(RecordingError::TooManyMessages {
+                        at,
+                        allowed: self.max_messages,
+                    });
+                }
                 let data = f.rest().to_vec();
                 match topic.as_str() {
                     TICKS => self.ticks.push(data),
@@ -78,7 +90,10 @@ impl Scan {
 
 /// Scans every record of `bytes`; true when the file is torn.
 fn scan(bytes: &[u8]) -> Result<(Scan, bool), RecordingError> {
-    let mut out = Scan::default();
+    let mut out = Scan {
+        max_messages: bytes.len(),
+        ..Scan::default()
+    };
     let end = mcap_scan::scan(bytes, |record| out.take(record))?;
     Ok((out, end == End::Torn))
 }
@@ -318,6 +333,58 @@ mod tests {
         // Only the magic and the header record.
         let err = parse_mcap(&bytes[..40]).unwrap_err();
         assert!(err.to_string().contains("no `config` message"), "{err}");
+    }
+
+    /// A record: opcode, length, body.
+    fn rec(opcode: u8, body: &[u8]) -> Vec<u8> {
+        let mut out = vec![opcode];
+        out.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        out.extend_from_slice(body);
+        out
+    }
+
+    #[test]
+    fn a_file_holds_at_most_one_message_a_byte() {
+        // A channel `ticks` and 100 000 empty messages on it: 3.1 MB that zstd packs into a few
+        // hundred bytes.
+        let mut channel = [9, 0, 0, 0].to_vec();
+        for s in ["ticks", "protobuf"] {
+            channel.extend_from_slice(&(s.len() as u32).to_le_bytes());
+            channel.extend_from_slice(s.as_bytes());
+        }
+        channel.extend_from_slice(&0u32.to_le_bytes());
+        let mut records = rec(op::CHANNEL, &channel);
+        let message = rec(
+            op::MESSAGE,
+            &[
+                9, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+            ],
+        );
+        for _ in 0..100_000 {
+            records.extend_from_slice(&message);
+        }
+        let packed = zstd::encode_all(&records[..], 3).unwrap();
+        let mut chunk = [0; 16].to_vec();
+        chunk.extend_from_slice(&(records.len() as u64).to_le_bytes());
+        chunk.extend_from_slice(&0u32.to_le_bytes());
+        chunk.extend_from_slice(&4u32.to_le_bytes());
+        chunk.extend_from_slice(b"zstd");
+        chunk.extend_from_slice(&(packed.len() as u64).to_le_bytes());
+        chunk.extend_from_slice(&packed);
+        let mut file = mcap_scan::MAGIC.to_vec();
+        file.extend(rec(op::CHUNK, &chunk));
+        assert!(file.len() < 10_000, "{}", file.len());
+        let err = parse_mcap(&file).map(|r| r.records.len()).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                RecordingError::TooManyMessages {
+                    at: Place::Chunk { chunk: 8, .. },
+                    allowed,
+                } if allowed == file.len()
+            ),
+            "{err}"
+        );
     }
 
     fn u64_at(bytes: &[u8], at: usize) -> u64 {

@@ -216,6 +216,17 @@ pub enum RecordingError {
         /// Its claimed uncompressed size.
         claimed: u64,
     },
+    /// The file holds more messages than its length allows.
+    #[error(
+        "the MCAP message at {at} is one too many: a file of {allowed} bytes may hold {allowed} \
+         messages, one a byte (the recorder writes about 50 bytes a tick)"
+    )]
+    TooManyMessages {
+        /// Where the first message too many begins.
+        at: Place,
+        /// The file's length, and so the most messages it may hold.
+        allowed: usize,
+    },
     /// The file is larger than any recording read whole.
     #[error("{path} is {size} bytes; recordings over {allowed} bytes are not read")]
     TooLarge {
