@@ -39,6 +39,11 @@ pub const MAX_RATIO: u64 = 1024;
 /// `0.0,` into 1.5 kB), and is still read.
 pub const RATIO_ALLOWANCE: u64 = 64 << 20;
 
+/// The largest zstd window a chunk's frames may ask the decoder to allocate: 2^24 bytes (16 MiB), where
+/// zstd's own default would allow 128 MiB. The recorder's level 1 uses 2^19; zstd's levels up to 19 stay
+/// within 2^23.
+pub const MAX_WINDOW_LOG: u32 = 24;
+
 /// The MCAP magic, at both ends of a file.
 pub(crate) const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
 
@@ -313,7 +318,8 @@ fn chunk(
 /// alone.
 fn unzstd(compressed: &[u8], claimed: u64, at: Place) -> Result<Vec<u8>, RecordingError> {
     let zstd = |e: std::io::Error| malformed(at, op::CHUNK, format!("zstd: {e}"));
-    let decoder = zstd::stream::read::Decoder::with_buffer(compressed).map_err(zstd)?;
+    let mut decoder = zstd::stream::read::Decoder::with_buffer(compressed).map_err(zstd)?;
+    decoder.window_log_max(MAX_WINDOW_LOG).map_err(zstd)?;
     // A first guess from the bytes in hand; reading grows it as the output arrives.
     let guess = claimed.min(
         (compressed.len() as u64)
@@ -337,4 +343,63 @@ fn unzstd(compressed: &[u8], claimed: u64, at: Place) -> Result<Vec<u8>, Recordi
         ));
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A zstd frame asking for a window of 2^`log` bytes, holding `n` zeros in one RLE block.
+    fn frame(log: u32, n: u32) -> Vec<u8> {
+        let mut out = vec![0x28, 0xb5, 0x2f, 0xfd, 0x00, ((log - 10) << 3) as u8];
+        out.extend_from_slice(&(1 | (1 << 1) | (n << 3)).to_le_bytes()[..3]);
+        out.push(0);
+        out
+    }
+
+    #[test]
+    fn a_frame_asking_for_a_window_over_the_limit_is_refused_before_it_is_allocated() {
+        let at = Place::File(8);
+        assert_eq!(
+            unzstd(&frame(MAX_WINDOW_LOG, 100), 100, at).unwrap(),
+            [0; 100]
+        );
+        let err = unzstd(&frame(MAX_WINDOW_LOG + 3, 100), 100, at).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                RecordingError::Malformed {
+                    opcode: op::CHUNK,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("zstd"), "{err}");
+    }
+
+    #[test]
+    fn a_chunk_inflating_past_its_claim_or_short_of_it_is_refused() {
+        let at = Place::File(8);
+        assert!(matches!(
+            unzstd(&frame(20, 1000), 999, at),
+            Err(RecordingError::Inflates { claimed: 999, .. })
+        ));
+        let err = unzstd(&frame(20, 1000), 1001, at).unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("inflate to 1000 bytes, not the 1001"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn the_budget_grows_with_the_file() {
+        assert_eq!(decompression_budget(0), RATIO_ALLOWANCE);
+        assert_eq!(
+            decompression_budget(1000),
+            1000 * MAX_RATIO + RATIO_ALLOWANCE
+        );
+        assert_eq!(decompression_budget(usize::MAX), u64::MAX);
+    }
 }

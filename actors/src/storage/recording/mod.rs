@@ -46,7 +46,7 @@ pub use bounded_file::MAX_FILE;
 pub use jsonl::parse;
 pub use mcap_read::parse_mcap;
 pub use mcap_scan::{
-    MAX_CHUNK, MAX_RATIO, MAX_RECORD, Place, RATIO_ALLOWANCE, decompression_budget,
+    MAX_CHUNK, MAX_RATIO, MAX_RECORD, MAX_WINDOW_LOG, Place, RATIO_ALLOWANCE, decompression_budget,
 };
 pub use mcap_write::{McapWriteError, write_recording};
 pub use tick_pb::TickDecodeError;
