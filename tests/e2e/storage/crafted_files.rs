@@ -1,9 +1,10 @@
 //! Crafted recordings against `pavlov replay` and `pavlov convert`, each run under a 256 MiB address-space
 //! limit: a chunk claiming 6 GiB uncompressed, a record length of u64::MAX, a 32 KB zstd bomb that
 //! inflates to 1 GiB (claiming its true size, a size under the chunk limit but past the file's
-//! decompression budget, or a small size it overruns), a FIFO and a symbolic link to `/dev/zero`. Each
-//! must end with a message naming the problem and a non-zero exit status that is neither a panic (101)
-//! nor an abort (134); a hang is killed and fails the test. A real recording replays under the same limit.
+//! decompression budget, or a small size it overruns), a few kilobytes of compressed empty messages, a
+//! FIFO and a symbolic link to `/dev/zero`. Each must end with a message naming the problem and a
+//! non-zero exit status that is neither a panic (101) nor an abort (134); a hang is killed and fails the
+//! test. A real recording replays under the same limit.
 
 use std::ffi::OsStr;
 use std::io::Read;
@@ -202,6 +203,36 @@ fn crafted_lengths_and_sizes_are_refused_with_the_claim_and_the_limit() {
         &dir,
         &path,
         "(opcode 0x05) claims 18446744073709551615 bytes; at most 268435456 are allowed",
+    );
+}
+
+#[test]
+fn a_few_kilobytes_of_compressed_empty_messages_are_not_read_as_a_million_ticks() {
+    let dir = TestDir::new("crafted-flood");
+    // A channel `ticks`, then 300 000 empty messages on it: 9.3 MB that zstd packs into a few kB.
+    let mut channel = [9, 0, 0, 0].to_vec();
+    string(&mut channel, "ticks");
+    string(&mut channel, "protobuf");
+    channel.extend_from_slice(&0u32.to_le_bytes());
+    let mut records = record(0x04, &channel);
+    let message = record(
+        0x05,
+        &[
+            9, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+        ],
+    );
+    for _ in 0..300_000 {
+        records.extend_from_slice(&message);
+    }
+    let packed = zstd::encode_all(&records[..], 3).expect("compress");
+    let mut file = opening();
+    file.extend(zstd_chunk(records.len() as u64, &packed));
+    assert!(file.len() < 20_000, "{} bytes", file.len());
+    let path = write(&dir, "flood.mcap", &file);
+    refused(
+        &dir,
+        &path,
+        &format!("is one too many: a file of {} bytes may hold", file.len()),
     );
 }
 
