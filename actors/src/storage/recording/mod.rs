@@ -281,7 +281,11 @@ pub fn is_mcap(bytes: &[u8]) -> bool {
     bytes.starts_with(mcap::MAGIC)
 }
 
-/// Reads a recording from its bytes, MCAP or JSON Lines.
+/// Reads a recording from its bytes, MCAP or JSON Lines. No length an MCAP file states is trusted: records
+/// over [`MAX_RECORD`], chunks claiming over [`MAX_CHUNK`] uncompressed or more than the file's
+/// [`decompression_budget`], chunks inflating past their claim and files holding more messages than bytes
+/// are refused with an error naming the place, the claim and the limit; any input gives `Ok` or `Err`,
+/// never a panic.
 pub fn from_bytes(bytes: &[u8]) -> Result<Recording, RecordingError> {
     if is_mcap(bytes) {
         parse_mcap(bytes)
@@ -309,7 +313,7 @@ pub fn from_bytes(bytes: &[u8]) -> Result<Recording, RecordingError> {
 }
 
 /// Reads a recording from a file or a recording directory, in either format: only a regular file of at
-/// most [`MAX_FILE`] bytes ([`bounded_file::read`]).
+/// most [`MAX_FILE`] bytes (`bounded_file`).
 pub fn load(path: &Path) -> Result<Recording, RecordingError> {
     from_bytes(&bounded_file::read(&recording_file(path))?)
 }
