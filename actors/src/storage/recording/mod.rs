@@ -27,8 +27,11 @@ use serde::{Deserialize, Serialize};
 use crate::provenance::Provenance;
 
 pub(crate) mod finish;
+mod bounded_file;
 pub mod jsonl;
+mod mcap_fields;
 mod mcap_read;
+mod mcap_scan;
 pub(crate) mod mcap_write;
 pub mod schema;
 mod tick_encode;
@@ -42,8 +45,12 @@ pub mod bench_support {
     pub use super::tick_encode::TickEncoder;
 }
 
+pub use bounded_file::MAX_FILE;
 pub use jsonl::parse;
 pub use mcap_read::parse_mcap;
+pub use mcap_scan::{
+    MAX_CHUNK, MAX_RATIO, MAX_RECORD, MAX_WINDOW_LOG, Place, RATIO_ALLOWANCE, decompression_budget,
+};
 pub use mcap_write::{McapWriteError, write_recording};
 pub use tick_pb::TickDecodeError;
 
@@ -171,6 +178,97 @@ pub enum RecordingError {
     /// The MCAP container is damaged before its end (not merely cut short).
     #[error("not a readable MCAP file: {0}")]
     BadMcap(String),
+    /// A record of the MCAP file is malformed: a field runs past its record, a CRC does not match, a
+    /// chunk does not inflate.
+    #[error("the MCAP record at {at} (opcode 0x{opcode:02x}): {message}")]
+    Malformed {
+        /// Where it begins.
+        at: Place,
+        /// Its opcode.
+        opcode: u8,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// A record claims a length no file of ours holds.
+    #[error(
+        "the MCAP record at {at} (opcode 0x{opcode:02x}) claims {claimed} bytes; at most {allowed} are allowed there"
+    )]
+    RecordTooLarge {
+        /// Where it begins.
+        at: Place,
+        /// Its opcode.
+        opcode: u8,
+        /// The length it claims.
+        claimed: u64,
+        /// The most it may claim there ([`MAX_RECORD`] in the file, what is left inside a chunk).
+        allowed: u64,
+    },
+    /// A chunk claims more uncompressed bytes than any chunk may.
+    #[error(
+        "the MCAP chunk at {at} claims {claimed} bytes uncompressed; at most {allowed} are allowed"
+    )]
+    ChunkTooLarge {
+        /// Where it begins.
+        at: Place,
+        /// Its claimed uncompressed size.
+        claimed: u64,
+        /// [`MAX_CHUNK`].
+        allowed: u64,
+    },
+    /// The chunks claim more uncompressed bytes than the file's length allows.
+    #[error(
+        "the MCAP chunk at {at} claims {claimed} bytes uncompressed, but only {left} of the file's \
+         {allowed} are left ({MAX_RATIO} times its length plus {RATIO_ALLOWANCE}: a decompression bomb?)"
+    )]
+    DecompressionBudget {
+        /// Where it begins.
+        at: Place,
+        /// Its claimed uncompressed size.
+        claimed: u64,
+        /// What the chunks before it left of the budget.
+        left: u64,
+        /// The whole file's budget ([`decompression_budget`]).
+        allowed: u64,
+    },
+    /// A chunk inflates to more than it claims.
+    #[error(
+        "the MCAP chunk at {at} inflates to more than the {claimed} bytes it claims (a decompression bomb?)"
+    )]
+    Inflates {
+        /// Where it begins.
+        at: Place,
+        /// Its claimed uncompressed size.
+        claimed: u64,
+    },
+    /// The file holds more messages than its length allows.
+    #[error(
+        "the MCAP message at {at} is one too many: a file of {allowed} bytes may hold {allowed} \
+         messages, one a byte (the recorder writes about 50 bytes a tick)"
+    )]
+    TooManyMessages {
+        /// Where the first message too many begins.
+        at: Place,
+        /// The file's length, and so the most messages it may hold.
+        allowed: usize,
+    },
+    /// The file is larger than any recording read whole.
+    #[error("{path} is {size} bytes; recordings over {allowed} bytes are not read")]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// Its size (at least; a file still growing may be larger).
+        size: u64,
+        /// [`MAX_FILE`].
+        allowed: u64,
+    },
+    /// The path is not a regular file (a FIFO, a device, a socket).
+    #[error("{path} is {kind}, not a regular file: recordings are read only from regular files")]
+    NotAFile {
+        /// The path.
+        path: PathBuf,
+        /// What it is.
+        kind: &'static str,
+    },
     /// A message does not decode as its channel's schema.
     #[error("message {index} on channel `{topic}`: {message}")]
     BadMessage {
@@ -207,7 +305,11 @@ pub fn is_mcap(bytes: &[u8]) -> bool {
     bytes.starts_with(mcap::MAGIC)
 }
 
-/// Reads a recording from its bytes, MCAP or JSON Lines.
+/// Reads a recording from its bytes, MCAP or JSON Lines. No length an MCAP file states is trusted: records
+/// over [`MAX_RECORD`], chunks claiming over [`MAX_CHUNK`] uncompressed or more than the file's
+/// [`decompression_budget`], chunks inflating past their claim and files holding more messages than bytes
+/// are refused with an error naming the place, the claim and the limit; any input gives `Ok` or `Err`,
+/// never a panic.
 pub fn from_bytes(bytes: &[u8]) -> Result<Recording, RecordingError> {
     if is_mcap(bytes) {
         parse_mcap(bytes)
@@ -234,14 +336,10 @@ pub fn from_bytes(bytes: &[u8]) -> Result<Recording, RecordingError> {
     }
 }
 
-/// Reads a recording from a file or a recording directory, in either format.
+/// Reads a recording from a file or a recording directory, in either format: only a regular file of at
+/// most [`MAX_FILE`] bytes (`bounded_file`).
 pub fn load(path: &Path) -> Result<Recording, RecordingError> {
-    let file = recording_file(path);
-    let bytes = std::fs::read(&file).map_err(|source| RecordingError::Io {
-        path: file.clone(),
-        source,
-    })?;
-    from_bytes(&bytes)
+    from_bytes(&bounded_file::read(&recording_file(path))?)
 }
 
 /// One step of a recording in the order it happened.
