@@ -76,6 +76,9 @@ pub(crate) enum HordeCommand {
     Reset,
     /// Copy a checkpoint (while learning) and write it into `dir`, keeping `keep`.
     Checkpoint { dir: PathBuf, keep: usize },
+    /// Announce checkpoint failures on this event log from now on (the log exists only once the
+    /// pipeline is wired, after the Horde has started).
+    Events(crate::pipeline::events::EventLog),
     /// Stop: write a last checkpoint if asked, then say so.
     Finish {
         checkpoint: Option<Target>,
@@ -256,6 +259,12 @@ impl HordeHandle {
         if self.commands.try_send(command).is_err() {
             tracing::warn!("the Horde's command queue is full; a command was dropped");
         }
+    }
+
+    /// Announces the Horde's failed checkpoint writes on `events` (`checkpoint_failed`, counted in
+    /// `/metrics` as every checkpoint failure).
+    pub(crate) fn attach_events(&self, events: crate::pipeline::events::EventLog) {
+        self.command(HordeCommand::Events(events));
     }
 
     /// Every weight back to its initial value.

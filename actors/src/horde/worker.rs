@@ -53,7 +53,7 @@ pub(crate) struct Worker<W> {
 
 /// A checkpoint being written: the file's path or why not, and the snapshot back (its memory is the next
 /// one's).
-type Writer<W> = JoinHandle<(Result<PathBuf, String>, HordeSnapshot<W>)>;
+type Writer<W> = JoinHandle<(Result<PathBuf, (String, String)>, HordeSnapshot<W>)>;
 
 struct Progress<W> {
     last_seq: Option<u64>,
@@ -66,6 +66,8 @@ struct Progress<W> {
     written: u64,
     errors: u64,
     last_file: Option<String>,
+    /// Where a failed checkpoint write is announced (once the pipeline has attached it).
+    events: Option<crate::pipeline::events::EventLog>,
 }
 
 impl<W: Weight> Worker<W> {
@@ -81,12 +83,14 @@ impl<W: Weight> Worker<W> {
             written: 0,
             errors: 0,
             last_file: None,
+            events: None,
         };
         let mut finish = None;
         loop {
             while let Ok(command) = self.commands.try_recv() {
                 match command {
                     HordeCommand::Reset => self.horde.reset(),
+                    HordeCommand::Events(events) => p.events = Some(events),
                     HordeCommand::Checkpoint { dir, keep } => {
                         self.begin_checkpoint(&mut p, Target { dir, keep });
                     }
@@ -208,9 +212,15 @@ impl<W: Weight> Worker<W> {
                         p.written += 1;
                         p.last_file = Some(path.display().to_string());
                     }
-                    Err(e) => {
+                    Err((path, reason)) => {
                         p.errors += 1;
-                        tracing::error!("Horde checkpoint not written: {e}");
+                        tracing::error!("Horde checkpoint {path} not written: {reason}");
+                        if let Some(events) = &p.events {
+                            events.emit(
+                                p.last_seq,
+                                pavlov::event::EventKind::CheckpointFailed { path, reason },
+                            );
+                        }
                     }
                 }
             }
@@ -260,8 +270,16 @@ fn spawn_write<W: Weight>(
             if idle {
                 super::background::give_way_to_the_tick();
             }
-            let written = horde_file::write_atomic(&target.dir, tick, &snapshot)
-                .map_err(|e| format!("{}: {e}", target.dir.display()));
+            let written = horde_file::write_atomic(&target.dir, tick, &snapshot).map_err(|e| {
+                (
+                    target
+                        .dir
+                        .join(horde_file::file_name(tick))
+                        .display()
+                        .to_string(),
+                    e.to_string(),
+                )
+            });
             if written.is_ok()
                 && let Err(e) = horde_file::prune(&target.dir, target.keep)
             {
@@ -387,5 +405,42 @@ mod tests {
         assert_eq!(status.checkpoint_errors, 0);
         assert!(dir.join("horde-0.bin").exists());
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A checkpoint the disk refuses (here: its folder is a file) is announced as `checkpoint_failed`
+    /// on the attached event log, naming the file and the OS's reason, and counted.
+    #[test]
+    fn a_failed_checkpoint_is_announced_on_the_event_log() {
+        let (worker, tick_tx, command_tx, status_rx, _) = rig(Duration::from_millis(20), 0, 0);
+        let not_a_dir =
+            std::env::temp_dir().join(format!("pavlov-horde-notdir-{}", std::process::id()));
+        std::fs::write(&not_a_dir, b"a file where the folder should be").unwrap();
+        let events = crate::pipeline::events::EventLog::new();
+        let mut seen = events.subscribe();
+        command_tx.send(HordeCommand::Events(events)).unwrap();
+        let thread = std::thread::spawn(move || worker.run());
+        let (done_tx, done_rx) = std::sync::mpsc::channel();
+        command_tx
+            .send(HordeCommand::Finish {
+                checkpoint: Some(Target {
+                    dir: not_a_dir.clone(),
+                    keep: 5,
+                }),
+                done: done_tx,
+            })
+            .unwrap();
+        let _ = done_rx.recv();
+        drop(tick_tx);
+        thread.join().unwrap();
+        let _ = std::fs::remove_file(&not_a_dir);
+        assert_eq!(status_rx.borrow().checkpoint_errors, 1);
+        let event = seen.try_recv().expect("an event was announced");
+        match &event.kind {
+            pavlov::event::EventKind::CheckpointFailed { path, reason } => {
+                assert!(path.ends_with("horde-0.bin"), "{path}");
+                assert!(!reason.is_empty());
+            }
+            other => panic!("{other:?}"),
+        }
     }
 }

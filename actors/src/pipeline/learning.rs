@@ -445,6 +445,9 @@ pub(crate) async fn run(
         mut snapshots,
         followed,
     } = channels;
+    if let Some(horde) = &learning.horde {
+        horde.attach_events(events.clone());
+    }
     learning.events = Some(events);
     let mut seq = 0;
     loop {
