@@ -9,6 +9,44 @@ use super::{ConfigError, invalid};
 /// Shortest token accepted on a non-loopback bind, in characters. A 16-character token of letters and
 /// digits has about 95 bits; `pavlov serve` generates 32 hex digits (128 bits) when none is given.
 pub const MIN_PUBLIC_TOKEN_CHARS: usize = 16;
+/// The least estimated strength of a token on a non-loopback bind, bits ([`token_strength_bits`]). A
+/// 16-character token needs at least 14 distinct characters; `pavlov serve`'s generated 32 hex digits have
+/// about 120 by this estimate.
+pub const MIN_PUBLIC_TOKEN_BITS: f64 = 60.0;
+
+/// A token's estimated strength, bits: its length times log₂ of the number of distinct characters in it.
+/// It judges variety, not only length, so `aaaaaaaaaaaaaaaa` (0 bits) or 16 spaces are refused where a
+/// length rule took them; it cannot see a dictionary word, so it is an upper bound, not a guarantee.
+pub fn token_strength_bits(token: &str) -> f64 {
+    let mut distinct: Vec<char> = token.chars().collect();
+    let length = distinct.len();
+    distinct.sort_unstable();
+    distinct.dedup();
+    length as f64 * (distinct.len().max(1) as f64).log2()
+}
+
+/// Why `token` is too weak to guard a non-loopback address (`None`: strong enough): shorter than
+/// [`MIN_PUBLIC_TOKEN_CHARS`] or below [`MIN_PUBLIC_TOKEN_BITS`].
+pub fn public_token_problem(token: &str) -> Option<String> {
+    let chars = token.chars().count();
+    let bits = token_strength_bits(token);
+    let advice = "e.g. 32 random hex digits (`openssl rand -hex 16`), or leave --token out and use the \
+                  one `pavlov serve` generates";
+    if chars < MIN_PUBLIC_TOKEN_CHARS {
+        Some(format!(
+            "needs a token of at least {MIN_PUBLIC_TOKEN_CHARS} characters, got {chars}: {advice}"
+        ))
+    } else if bits < MIN_PUBLIC_TOKEN_BITS {
+        Some(format!(
+            "needs a token with more variety: about {bits:.0} bits (its {chars} characters, {} of them \
+             distinct), at least {MIN_PUBLIC_TOKEN_BITS:.0} needed: {advice}",
+            (2f64.powf(bits / chars.max(1) as f64)).round()
+        ))
+    } else {
+        None
+    }
+}
+
 /// The longest per-client outgoing queue, messages: 200 s of ticks at 50 Hz, about 10 MB. A client that
 /// reads nothing is disconnected after 10 s anyway; a longer queue only holds memory and delay.
 pub const MAX_CLIENT_QUEUE: usize = 10_000;
@@ -117,17 +155,14 @@ impl DashboardConfig {
                         ),
                     ));
                 }
-                Some(t) if t.chars().count() < MIN_PUBLIC_TOKEN_CHARS => {
-                    return Err(invalid(
-                        "dashboard.token",
-                        format!(
-                            "binding {} (not loopback) needs a token of at least {MIN_PUBLIC_TOKEN_CHARS} characters, got {}",
-                            self.bind,
-                            t.chars().count()
-                        ),
-                    ));
+                Some(t) => {
+                    if let Some(problem) = public_token_problem(t) {
+                        return Err(invalid(
+                            "dashboard.token",
+                            format!("binding {} (not loopback) {problem}", self.bind),
+                        ));
+                    }
                 }
-                Some(_) => {}
             }
         }
         within(
@@ -183,6 +218,16 @@ mod tests {
     }
 
     #[test]
+    fn token_strength_is_length_times_log2_of_the_distinct_characters() {
+        assert_eq!(token_strength_bits(""), 0.0);
+        assert_eq!(token_strength_bits("aaaa"), 0.0);
+        assert_eq!(token_strength_bits("abab"), 4.0);
+        assert_eq!(token_strength_bits("0123456789abcdef"), 64.0);
+        // A generated token: 32 hex digits, at least 8 distinct.
+        assert!(token_strength_bits("3f2a9c0d7e1b4a5c6d8e9f0a1b2c3d4e") > 120.0);
+    }
+
+    #[test]
     fn the_defaults_are_valid() {
         assert_eq!(DashboardConfig::default().validate(), Ok(()));
     }
@@ -200,7 +245,25 @@ mod tests {
         let e = public(Some("a")).unwrap_err().to_string();
         assert!(e.starts_with("dashboard.token:") && e.contains("16"), "{e}");
         assert_eq!(key_of(public(Some("fifteen-chars!!"))), "dashboard.token");
-        assert_eq!(public(Some("sixteen-chars!!!")), Ok(()));
+        assert_eq!(public(Some("Sixteen-chars:7Q")), Ok(()));
+        // Length alone is not strength: no variety, no token.
+        for weak in [
+            "                ",
+            "aaaaaaaaaaaaaaaa",
+            "abababababababab",
+            "sixteen-chars!!!",
+        ] {
+            let e = public(Some(weak)).unwrap_err().to_string();
+            assert!(
+                e.contains("more variety") && e.contains("openssl"),
+                "{weak:?}: {e}"
+            );
+        }
+        assert_eq!(
+            public(Some("0123456789abcdef")),
+            Ok(()),
+            "16 distinct: 64 bits"
+        );
         // Loopback needs none, and takes a short one.
         assert_eq!(with(|d| d.token = Some("a".into())), Ok(()));
         assert_eq!(with(|d| d.bind = "[::1]:0".into()), Ok(()));

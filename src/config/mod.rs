@@ -18,7 +18,10 @@ mod rules;
 mod tick;
 mod zenoh;
 pub use bounds::MAX_SAFETY_TIMEOUT_MS;
-pub use dashboard::{DashboardConfig, MAX_CLIENT_QUEUE, MIN_PUBLIC_TOKEN_CHARS};
+pub use dashboard::{
+    DashboardConfig, MAX_CLIENT_QUEUE, MIN_PUBLIC_TOKEN_BITS, MIN_PUBLIC_TOKEN_CHARS,
+    public_token_problem, token_strength_bits,
+};
 pub use horde::{HordeConfig, Precision, Scheduling};
 pub use link::LinkConfig;
 pub use rules::{MAX_RULES, RuleSpec};

@@ -63,10 +63,11 @@ pub enum FoxgloveError {
     BadAddress(String),
     /// A non-loopback address without a token, or with one shorter than the dashboard requires.
     #[error(
-        "--foxglove {0}: listening on an address that is not loopback requires a token of at least \
-         {min} characters (--token or [dashboard] token); clients then connect to \
-         ws://HOST:PORT/?token=…",
-        min = pavlov::config::MIN_PUBLIC_TOKEN_CHARS
+        "--foxglove {0}: listening on an address that is not loopback requires a strong token (at \
+         least {min} characters and {bits} bits of variety; --token or [dashboard] token); clients then \
+         connect to ws://HOST:PORT/?token=…",
+        min = pavlov::config::MIN_PUBLIC_TOKEN_CHARS,
+        bits = pavlov::config::MIN_PUBLIC_TOKEN_BITS
     )]
     TokenRequired(String),
     /// The address could not be bound.
@@ -165,7 +166,7 @@ impl Foxglove {
         let strong_token = dashboard
             .token
             .as_deref()
-            .is_some_and(|t| t.chars().count() >= pavlov::config::MIN_PUBLIC_TOKEN_CHARS);
+            .is_some_and(|t| pavlov::config::public_token_problem(t).is_none());
         let allowed = parsed.ip().is_loopback() || (policy.has_token() && strong_token);
         if !allowed {
             return Err(FoxgloveError::TokenRequired(addr.to_string()));

@@ -61,17 +61,12 @@ pub enum ZenohError {
          limited to this machine, so commands over Zenoh always need one"
     )]
     CommandsNeedToken,
-    /// Commands are on but the token is short enough to guess.
+    /// Commands are on but the token is weak enough to guess (too short, or too little variety).
     #[error(
-        "[zenoh] commands = true needs a token of at least {min} characters, got {got}: Zenoh peers \
-         are not limited to this machine, and wrong tokens are counted, not throttled"
+        "[zenoh] commands = true {0}; Zenoh peers are not limited to this machine, and wrong tokens \
+         are counted, not throttled"
     )]
-    CommandsNeedLongToken {
-        /// The least.
-        min: usize,
-        /// The token's.
-        got: usize,
-    },
+    CommandsNeedStrongToken(String),
     /// The session could not be opened (e.g. a listen endpoint in use).
     #[error("cannot open the Zenoh session: {0}")]
     Open(String),
@@ -129,16 +124,13 @@ impl ZenohBridge {
     ) -> Result<ZenohBridge, ZenohError> {
         let settings = server.config.zenoh.clone();
         if settings.commands {
-            let min = pavlov::config::MIN_PUBLIC_TOKEN_CHARS;
             match &server.config.dashboard.token {
                 None => return Err(ZenohError::CommandsNeedToken),
-                Some(t) if t.chars().count() < min => {
-                    return Err(ZenohError::CommandsNeedLongToken {
-                        min,
-                        got: t.chars().count(),
-                    });
+                Some(t) => {
+                    if let Some(problem) = pavlov::config::public_token_problem(t) {
+                        return Err(ZenohError::CommandsNeedStrongToken(problem));
+                    }
                 }
-                Some(_) => {}
             }
         }
         pavlov::config::check_robot_name(&settings.robot).map_err(|reason| {
