@@ -1,7 +1,7 @@
 //! [`Gtd`]: off-policy prediction learning with GTD(λ), the gradient-TD algorithm with a secondary
 //! weight vector, linear in binary features given as lists of active indices.
 //!
-//! The algorithm is GTD(λ) of Maei's thesis ([GTD] in `docs/SOURCES.md`: H. R. Maei, *Gradient
+//! The algorithm is GTD(λ) of Maei's thesis (\[GTD\] in `docs/SOURCES.md`: H. R. Maei, *Gradient
 //! Temporal-Difference Learning Algorithms*, PhD thesis, University of Alberta, 2011, ch. 6, "GTD(λ)"),
 //! the λ-extension of TDC (Sutton, Maei et al., ICML 2009), in the state-dependent-γ form the Horde
 //! architecture ran on a robot (Sutton et al., AAMAS 2011, its equations for GTD(λ)). For the transition
