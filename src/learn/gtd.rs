@@ -26,7 +26,7 @@
 //! configuration says so, [`super::spec`]). Convergence of GTD(λ) to the λ-projected fixed point under
 //! the target policy holds for a stationary behaviour policy with α, β small enough (β of the order of
 //! α, or larger, in practice); a Pavlovian behaviour that depends on the learned prediction is not
-//! stationary, which the stall study's README section discusses.
+//! stationary, which the stall study's section of `docs/src/results.md` discusses.
 //!
 //! The weights, traces and secondary weights are dense `f64` vectors: the paper's sizes (440 features)
 //! make a dense step a few microseconds. A step is computed into scratch vectors and committed only if
