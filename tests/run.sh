@@ -57,8 +57,9 @@ cargo clippy --workspace --all-targets --features pavlov-actors/zenoh -- -D warn
 # of that version is on the PATH; it goes into its own folder beside the build, never into ~/.cargo/bin.
 # The book's links, and those of README.md, ARCHITECTURE.md and web/PROTOCOL.md, are checked by
 # tests/e2e/docs.rs in `cargo test` below.
-step "cargo doc --no-deps with -D warnings"
+step "cargo doc --no-deps with -D warnings (without and with the optional zenoh feature)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --features pavlov-actors/zenoh
 MDBOOK_VERSION="0.4.52"
 MDBOOK="mdbook"
 if [ "$(mdbook --version 2>/dev/null)" != "mdbook v$MDBOOK_VERSION" ]; then
