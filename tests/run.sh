@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# The one test command (README "Test"): installs what the tests need, then runs the format check, clippy
-# with -D warnings, every test of the workspace (unit tests next to the code, end-to-end tests in tests/), and
-# the 24-simulated-hour soak (tests/soak.rs) in release.
+# The one test command (README "Quick start"): installs what the tests need, then runs the format check,
+# clippy with -D warnings, the API docs and the book, every test of the workspace (unit tests next to the
+# code, end-to-end tests in tests/), and the 24-simulated-hour soak (tests/soak.rs) in release.
 #
 # It installs Debian's chromium (the dashboard's browser test drives it with playwright-core) when it is
 # missing, the dashboard's npm packages from web/package-lock.json, the Foxglove test client's from
@@ -49,6 +49,30 @@ cargo fmt --all -- --check
 step "cargo clippy --all-targets -- -D warnings (without and with the optional zenoh feature)"
 cargo clippy --workspace --all-targets -- -D warnings
 cargo clippy --workspace --all-targets --features pavlov-actors/zenoh -- -D warnings
+
+# --- the documentation: API docs and the book (docs/) ----------------------------------------------------
+# rustdoc with warnings as errors (broken intra-doc links, links to private items, stray HTML), then the
+# mdBook book into target/book. mdBook comes from crates.io, pinned, without its default features (no local
+# web server, file watcher or search index: a smaller build, about 2.5 min of CPU), and only when no mdbook
+# of that version is on the PATH; it goes into its own folder beside the build, never into ~/.cargo/bin.
+# The book's links, and those of README.md, ARCHITECTURE.md and web/PROTOCOL.md, are checked by
+# tests/e2e/docs.rs in `cargo test` below.
+step "cargo doc --no-deps with -D warnings (without and with the optional zenoh feature)"
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --features pavlov-actors/zenoh
+MDBOOK_VERSION="0.4.52"
+MDBOOK="mdbook"
+if [ "$(mdbook --version 2>/dev/null)" != "mdbook v$MDBOOK_VERSION" ]; then
+  MDBOOK_ROOT="${CARGO_TARGET_DIR:-target}/mdbook-$MDBOOK_VERSION"
+  MDBOOK="$MDBOOK_ROOT/bin/mdbook"
+  if [ ! -x "$MDBOOK" ]; then
+    step "installing mdBook $MDBOOK_VERSION into $MDBOOK_ROOT (cargo install --locked --no-default-features)"
+    time cargo install mdbook --locked --no-default-features --version "$MDBOOK_VERSION" --root "$MDBOOK_ROOT"
+  fi
+fi
+step "mdbook build docs (into target/book)"
+"$MDBOOK" build docs
+# --- end of the documentation ----------------------------------------------------------------------------
 
 step "cargo test (unit and end-to-end; with the zenoh feature, so the fleet test runs)"
 cargo test --workspace --all-targets --features pavlov-actors/zenoh

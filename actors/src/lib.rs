@@ -14,7 +14,7 @@
 //! - [`telemetry`]: tick health, histograms, Prometheus;
 //! - [`storage`]: recordings, replay, checkpoint files;
 //! - [`experiment`]: the paper's experiments on the real runtime under virtual time;
-//! - [`bench`]: the real-time benchmark and its load and abuse clients.
+//! - [`mod@bench`]: the real-time benchmark and its load and abuse clients.
 
 pub mod bench;
 pub mod command;

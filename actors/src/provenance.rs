@@ -3,7 +3,7 @@
 //! [`BUILD`] is fixed at compile time by `actors/build.rs` (the git commit and whether the tree differed
 //! from it, the cargo features, the compiler, the target, the profile). [`Provenance::of`] adds what only
 //! the running process knows: its command line (with any token replaced by
-//! [`REDACTED`](pavlov::config::REDACTED)) and a SHA-256 of the configuration in force (redacted too, so the
+//! [`REDACTED`]) and a SHA-256 of the configuration in force (redacted too, so the
 //! hash cannot be used to test guesses of the token). Every recording's metadata, every study's
 //! `summary.json`, `policies.json` and shard file, and `pavlov --version` carry it.
 

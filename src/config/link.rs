@@ -12,7 +12,7 @@ use crate::supervision::monitor::MonitorConfig;
 #[serde(deny_unknown_fields, default)]
 pub struct LinkConfig {
     /// No valid frame for this long, ms, and the stream is stale: Start and Stream are re-sent (the
-    /// stream period is 15 ms; drivers use 100–200 ms, e.g. [CR]'s 0.2 s latch).
+    /// stream period is 15 ms; drivers use 100–200 ms, e.g. \[CR\]'s 0.2 s latch).
     pub stale_ms: u64,
     /// How long to wait for a frame after each re-sync, ms (libcreate waits 500 ms).
     pub resync_wait_ms: u64,

@@ -1,7 +1,7 @@
 //! [`Gtd`]: off-policy prediction learning with GTD(λ), the gradient-TD algorithm with a secondary
 //! weight vector, linear in binary features given as lists of active indices.
 //!
-//! The algorithm is GTD(λ) of Maei's thesis ([GTD] in `docs/SOURCES.md`: H. R. Maei, *Gradient
+//! The algorithm is GTD(λ) of Maei's thesis (\[GTD\] in `docs/SOURCES.md`: H. R. Maei, *Gradient
 //! Temporal-Difference Learning Algorithms*, PhD thesis, University of Alberta, 2011, ch. 6, "GTD(λ)"),
 //! the λ-extension of TDC (Sutton, Maei et al., ICML 2009), in the state-dependent-γ form the Horde
 //! architecture ran on a robot (Sutton et al., AAMAS 2011, its equations for GTD(λ)). For the transition
@@ -26,7 +26,7 @@
 //! configuration says so, [`super::spec`]). Convergence of GTD(λ) to the λ-projected fixed point under
 //! the target policy holds for a stationary behaviour policy with α, β small enough (β of the order of
 //! α, or larger, in practice); a Pavlovian behaviour that depends on the learned prediction is not
-//! stationary, which the stall study's README section discusses.
+//! stationary, which the stall study's section of `docs/src/results.md` discusses.
 //!
 //! The weights, traces and secondary weights are dense `f64` vectors: the paper's sizes (440 features)
 //! make a dense step a few microseconds. A step is computed into scratch vectors and committed only if

@@ -17,8 +17,8 @@
 //! - [`set`]: [`PredictionSet`], many predictions learned side by side, act first then learn.
 //! - [`snapshot`]: [`SetSnapshot`], checkpoints of weights, traces and the previous step.
 //!
-//! Facts: the paper's update equations (TD(λ) with an output nonlinearity σ), tile coding as in [SB] and
-//! [tiles3] (`docs/SOURCES.md`).
+//! Facts: the paper's update equations (TD(λ) with an output nonlinearity σ), tile coding as in \[SB\] and
+//! \[tiles3\] (`docs/SOURCES.md`).
 
 pub mod bounds;
 pub mod checkpoint;

@@ -7,7 +7,7 @@
 //! Two layouts, as in Modayil & Sutton:
 //! - [`TileSpec::OneDimTilings`]: T tilings of N tiles per input dimension, tiling k shifted by k/T of a
 //!   tile (stall experiment: T = 1, 44 dimensions × 10 tiles = 440 features, 44 active; a nexting-style
-//!   Horde uses several, e.g. 44 × 11 tilings × 12 tiles = 5,808 features, 484 active, as in [tiles3]'s
+//!   Horde uses several, e.g. 44 × 11 tilings × 12 tiles = 5,808 features, 484 active, as in \[tiles3\]'s
 //!   offsets for one dimension). Feature of dimension d, tiling k: `(d·T + k)·N + bin(x_d, k/T)`.
 //! - [`TileSpec::PairTilings`]: 2-D tilings of N × N tiles over pairs of inputs, each with its own
 //!   offset (interaction experiment: 5 tilings × 100 = 500 features, 5 active). Feature of pair k over

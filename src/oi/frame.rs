@@ -3,7 +3,7 @@
 //! `N` counts the id and data bytes between the length byte and the checksum. The checksum makes the
 //! sum of every byte of the frame, header through checksum, ≡ 0 (mod 256) [C2 p22], on both models:
 //! [C1 p14] words it as excluding the header (and prints checksum 182 for the same example), but every
-//! working Create 1 driver includes the header ([C1 p14] and [R500] print a checksum without it, yet
+//! working Create 1 driver includes the header ([C1 p14] and \[R500\] print a checksum without it, yet
 //! libcreate, RLPark and the real robot include it).
 //! A frame must fit in one 15 ms slot at the link's baud rate or the stream corrupts [C1 p14; C2 p22].
 

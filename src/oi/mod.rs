@@ -14,7 +14,7 @@
 //! - [`mode`]: the OI modes (packet 35 codes; Safe or Full to drive in).
 //! - [`handshake`]: the byte sequences of start-up, re-sync, re-arm and shut-down.
 //!
-//! Facts: the two OI specifications, cited as [C1] (Create 1) and [C2] (Create 2) with their page numbers
+//! Facts: the two OI specifications, cited as \[C1\] (Create 1) and \[C2\] (Create 2) with their page numbers
 //! (`docs/SOURCES.md`).
 
 pub mod command;

@@ -24,7 +24,7 @@
 //! | 15 C1 unused / C2 dirt detect | 0 | — | C1 "always 0"; C2 0–255 |
 //! | 16 unused | 0 | 0 | "always 0" on both |
 //! | 21 charging state | 0–5 | 0–6 | codes 0–5 [C1 p19; C2 p27]; the C2 membership table says 0–6 |
-//! | 22 voltage | 0–25 000 mV | 0–25 000 mV | *derived*: battery rail 10–20.5 V incl. charger [BATT], + 20 % |
+//! | 22 voltage | 0–25 000 mV | 0–25 000 mV | *derived*: battery rail 10–20.5 V incl. charger \[BATT\], + 20 % |
 //! | 27 wall signal | 0–4095 | 0–1023 | "0–4095" / "0–1023" |
 //! | 28–31 cliff signals | 0–4095 | 0–4095 | "0–4095"; drivers check it to detect misaligned replies |
 //! | 32 cargo-bay digital inputs | 0–31 | — | C1 bits 0–4; the C2 "unused" byte is not said to be 0 |
@@ -38,7 +38,7 @@
 //! | 41, 42 requested right / left velocity | ±500 | ±500 | "−500..500 mm/s" |
 //! | 45 light bumper | — | 0–127 | "0–127" [C2 p38] |
 //! | 46–51 light-bump signals | — | 0–4095 | "0–4095" |
-//! | 54–57 wheel / brush motor currents | — | ±10 000 mA | *derived*: no documented range; brush drivers rated ≤ 1.45 A [BATT], wheels limited at 1 A [C1 p10]; 10 A is several times any stall |
+//! | 54–57 wheel / brush motor currents | — | ±10 000 mA | *derived*: no documented range; brush drivers rated ≤ 1.45 A \[BATT\], wheels limited at 1 A [C1 p10]; 10 A is several times any stall |
 //! | 58 stasis | — | 0–3 | bits 0–1 [C2 p32, p38] |
 //! | 19 distance (frame after a frame) | ±500 mm | ±500 mm | 15 ms at 500 mm/s is 7.5 mm; see below |
 //! | 20 angle (frame after a frame) | ±360° | ±360° | 15 ms at 4.3 rad/s is 3.7° (×3.1 on C2 fw ≤ 3.4.0 [C2 p27]) |

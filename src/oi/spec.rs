@@ -15,10 +15,10 @@
 //! Adding a model is one entry here plus its packet facts: a new key (and a row in each table the
 //! compiler then lists, as every lookup matches the key exhaustively), or an existing key when the
 //! model answers the same packets with the same body — a Roomba 600-class robot speaks the
-//! Create 2's OI, which [C2] is "based on".
+//! Create 2's OI, which \[C2\] is "based on".
 //!
-//! Facts: the two OI specifications, [C1] (Create 1) and [C2] (Create 2) with page numbers, and
-//! [KT] for a measured speed step (tags: `docs/SOURCES.md`).
+//! Facts: the two OI specifications, \[C1\] (Create 1) and \[C2\] (Create 2) with page numbers, and
+//! \[KT\] for a measured speed step (tags: `docs/SOURCES.md`).
 
 /// How many data bytes follow an opcode [C1 pp7–16; C2 pp8–22].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

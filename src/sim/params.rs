@@ -1,7 +1,7 @@
 //! [`SimParams`]: every physical parameter of the simulated Create in one documented place.
 //!
 //! Each field says where its value comes from. Source tags (`docs/SOURCES.md`): [C1 pN] Create 1 OI spec,
-//! [C2 pN] Create 2 OI spec, [HR] *Hacking Roomba*, [BATT] iRobot's Create 2 battery note; "paper" is
+//! [C2 pN] Create 2 OI spec, \[HR\] *Hacking Roomba*, \[BATT\] iRobot's Create 2 battery note; "paper" is
 //! Modayil & Sutton, *Prediction Driven Behavior*. Values marked *estimate* have no primary source; the comment gives the reasoning.
 //!
 //! ## How the parameters produce the paper's latencies
@@ -71,7 +71,7 @@ pub struct SimParams {
     /// [`crate::oi::ModelSpec::max_wheel_speed_mm_s`]).
     pub max_wheel_speed_mm_s: f64,
     /// Commanded wheel speeds at or below this magnitude do not move the wheel, mm/s: 10 on the
-    /// Create 2 (measured [KT]); 0 on the Create 1 (no data).
+    /// Create 2 (measured \[KT\]); 0 on the Create 1 (no data).
     pub speed_dead_band_mm_s: f64,
     /// The Create 2 speed controller runs at discrete speeds ≈28.5 mm/s apart [C2 p13–14; KT]:
     /// anything in `[11 + 28.5k, 11 + 28.5(k+1))` mm/s drives at `11 + 28.5(k+1)`. `None` on the

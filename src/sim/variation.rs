@@ -12,7 +12,7 @@
 //!   uniform in [`FRICTION_SCALE_RANGE`] (*estimate*: floor finish, dust, tyre wear and where the 2 kg weight
 //!   sits plausibly change the wheels' friction by a fifth either way; no source gives the spread).
 //!
-//! None of these ranges was chosen by looking at a result; the README reports what comes out with them.
+//! None of these ranges was chosen by looking at a result; `docs/src/results.md` reports what comes out with them.
 
 use super::params::SimParams;
 use crate::rng::Rng;

@@ -85,7 +85,7 @@ impl Default for ElbowFeatureTracker {
 }
 
 impl ElbowFeatureTracker {
-    /// A tracker with the paper's 0.8 averaging and [`DEFAULT_MAX_HOLD_TICKS`].
+    /// A tracker with the paper's 0.8 averaging and `DEFAULT_MAX_HOLD_TICKS`.
     pub fn new() -> Self {
         ElbowFeatureTracker {
             left: SmoothedElbow::new(),

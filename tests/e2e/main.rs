@@ -4,6 +4,7 @@
 mod cli;
 mod common;
 mod dashboard;
+mod docs;
 mod experiment;
 #[cfg(feature = "zenoh")]
 mod fleet;

@@ -1,7 +1,7 @@
 //! Abusive websocket clients for the dashboard benchmark (`pavlov bench --ws-clients N --ws-abuse`):
 //! connections that flood valid commands and malformed messages as fast as the server takes them, a
 //! churn of over-size messages, connection storms once a second, clients that never read, and (in
-//! [`super::floods`]) a flood of watchers and one of idle sockets reopened as soon as they are closed.
+//! `super::floods`) a flood of watchers and one of idle sockets reopened as soon as they are closed.
 //! The command flooders hold the operators' token (the worst case: a runaway script of an operator); the
 //! storms and the watchers have none. They run until told to stop and count what they threw and what
 //! came back.

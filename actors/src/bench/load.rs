@@ -39,7 +39,7 @@ pub struct Load {
     /// Whether to add one client that never reads.
     pub stalled: bool,
     /// With a value, the reading clients close and connect again this often, reading the server's history
-    /// every time ([`super::reconnect`]).
+    /// every time (`super::reconnect`).
     pub reconnect_every: Option<Duration>,
 }
 

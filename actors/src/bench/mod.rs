@@ -3,14 +3,14 @@
 //! prints figures and asserts nothing about them.
 //!
 //! - [`load`]: websocket clients reading the dashboard stream during the run;
-//! - [`abuse`]: abusive clients (floods, storms, never-reading sockets) for `--ws-abuse`, and [`floods`],
+//! - [`abuse`]: abusive clients (floods, storms, never-reading sockets) for `--ws-abuse`, and `floods`,
 //!   its watcher and idle-socket floods;
 //! - [`estop_probe`]: the operator's e-stop, timed from send to ack, during the run;
 //! - [`foxglove_load`]: Foxglove clients subscribed to every channel, for `--foxglove-clients`;
 //! - [`timers`]: the timer thread against tokio's interval, interleaved in one invocation.
 //! - [`horde`]: the server with a Horde against the same server without one, interleaved.
-//! - [`reconnect`]: clients that reconnect again and again, timing the history each connection gets.
-//! - [`zenoh_load`]: the Zenoh bridge on and off, interleaved, for `--zenoh`.
+//! - `reconnect`: clients that reconnect again and again, timing the history each connection gets.
+//! - `zenoh_load`: the Zenoh bridge on and off, interleaved, for `--zenoh`.
 
 pub mod abuse;
 pub mod estop_probe;

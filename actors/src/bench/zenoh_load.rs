@@ -1,10 +1,10 @@
 //! `pavlov bench --zenoh`: what publishing on Zenoh costs the tick. Runs a fresh server on the simulated
-//! Create without and with the Zenoh bridge, interleaved ([`ORDER`]: off, on, on, off, twice; each an
+//! Create without and with the Zenoh bridge, interleaved (`ORDER`: off, on, on, off, twice; each an
 //! eighth of the time), and with the bridge a second Zenoh session on loopback subscribed to
 //! `pavlov/<robot>/**`, so every tick and status really crosses a TCP link. Reports ticks skipped and
 //! tick → command for both, and what the bridge published, lost, and the subscriber received.
 //!
-//! Each run measures the steady state: the first [`WARM_UP`] after the server (and the bridge, and the
+//! Each run measures the steady state: the first `WARM_UP` after the server (and the bridge, and the
 //! subscriber) started is left out of the figures, in both arms alike, and reported on its own line, so a
 //! one-time start-up (Zenoh spawning its threads, the session handshake) is seen but not mistaken for the
 //! cost of publishing at 50 Hz. A benchmark, not a test: it asserts nothing.

@@ -28,7 +28,7 @@ pub struct ConfigArgs {
     #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
     /// Override [sim] faults: what the simulated Create injects, e.g. `soak`, `all` or
-    /// `drop=1e-4,flip=1e-4,text=0.002,hang=2e-5,eof=1e-5,trip=1e-5,quirk` (see README, "Fault injection").
+    /// `drop=1e-4,flip=1e-4,text=0.002,hang=2e-5,eof=1e-5,trip=1e-5,quirk` (see the book, docs/src/faults.md).
     #[arg(long, value_name = "SPEC")]
     pub faults: Option<String>,
 }

@@ -22,7 +22,7 @@ pub struct SimArgs {
     /// Seed of the simulation's random draws.
     #[arg(long, default_value_t = 1, value_name = "N")]
     seed: u64,
-    /// Faults to inject: a preset (none, soak, all) or `key=value,...` (see README, "Fault injection").
+    /// Faults to inject: a preset (none, soak, all) or `key=value,...` (see the book, docs/src/faults.md).
     /// On a PTY an end-of-file cannot be signalled without destroying the device, so `eof` hangs instead.
     #[arg(long, default_value = "none", value_name = "SPEC")]
     faults: String,

@@ -1,15 +1,15 @@
-//! Limits below HTTP: every TCP connection that is not (yet) a websocket sits in the [`PendingPool`]
+//! Limits below HTTP: every TCP connection that is not (yet) a websocket sits in the `PendingPool`
 //! (bounded in total and per source address, evicting its oldest rather than refusing newcomers), and has
 //! [`PRE_UPGRADE_LIMIT`] to become a websocket.
 //!
 //! A TCP connection costs memory before it is a websocket, and the operator and watcher limits only apply
 //! at the handshake: an abuser could open thousands of sockets and send nothing (or half a request), and
-//! reopen each one as soon as it is closed. [`GuardedListener`] admits every new connection into the pool,
+//! reopen each one as soon as it is closed. `GuardedListener` admits every new connection into the pool,
 //! evicting the oldest pending connection of the source holding the most when the pool (or the new
 //! connection's own source) is full, so a fresh connection — the operator's handshake, a `/healthz`
 //! probe — from an address holding fewer always gets in. Only a source bursting past its own share
 //! faster than [`super::pending::GRACE`] has its newest connections closed at once (refused), so that it does
-//! not kill its own handshakes in flight. [`GuardedIo`] ends a connection that is evicted, or that has not switched to
+//! not kill its own handshakes in flight. `GuardedIo` ends a connection that is evicted, or that has not switched to
 //! the websocket protocol within [`PRE_UPGRADE_LIMIT`] (page and asset requests take milliseconds, and
 //! browsers simply reopen an idle keep-alive connection). It recognises the switch by the `101` status line
 //! the server writes; from then on the connection is a websocket and leaves the pool.

@@ -2,26 +2,27 @@
 //! (`/healthz`), Prometheus metrics (`/metrics`) and the websocket (`/ws`) that streams every tick and
 //! takes commands.
 //!
-//! - [`protocol`]: the client commands (see `web/PROTOCOL.md`), parsed with precise errors, and the replies;
-//! - [`messages`]: the server's `hello`, `tick` and `status` messages;
-//! - [`hub`]: serialises each tick and event once and fans them out, and keeps the run counters, the
-//!   [`history`] (sent to a new client as [`history_messages`]) and the [`learning`] figures;
-//! - [`horde_feed`]: the Horde's names and values for the clients that ask (`horde_watch`);
-//! - [`client`]: each client's bounded, drop-oldest queue and its tick-rate decimation;
+//! - `protocol`: the client commands (see `web/PROTOCOL.md`), parsed with precise errors, and the replies;
+//! - `messages`: the server's `hello`, `tick` and `status` messages;
+//! - `hub`: serialises each tick and event once and fans them out, and keeps the run counters, the
+//!   `history` (sent to a new client as `history_messages`) and the `learning` figures;
+//! - `horde_feed`: the Horde's names and values for the clients that ask (`horde_watch`);
+//! - `out_queue`: each client's bounded, drop-oldest queue and its tick-rate decimation;
 //! - [`session`]: one connection's reader, writer and forwarder;
 //! - [`rate`]: the per-connection message rate limit;
-//! - [`metrics`]: the `/metrics` text (written with [`exposition`]), and [`metrics_check`], a strict reader
-//!   of it for tests;
-//! - [`auth`]: the handshake's Origin and token checks, and [`token_throttle`], the per-address limit on
+//! - `/metrics` is served here; its text is written in `crate::telemetry::prometheus` (with
+//!   `crate::telemetry::exposition`), and `crate::telemetry::prometheus_check` is a strict reader of it for tests;
+//! - `auth`: the handshake's Origin and token checks, and [`token_throttle`], the per-address limit on
 //!   wrong tokens;
-//! - [`admission`]: operator and watcher seats, counted apart (and watchers per address);
-//! - [`guard`]: the pool of connections that are not yet websockets ([`pending`], bounded in total and per
-//!   [`source`] address, evicting the oldest of the busiest address) and their deadline to become one;
-//! - [`strict_json`]: client messages parsed with duplicate keys refused;
-//! - [`hello_config`]: what of the configuration operators and watchers see;
-//! - [`http`]: routes, static files and the handshake; [`download`]: the recording being written,
-//!   finished for the download by [`download_copy`];
-//! - [`load`]: the websocket load behind `pavlov bench --ws-clients`, and [`abuse`], its abusive clients.
+//! - `admission`: operator and watcher seats, counted apart (and watchers per address);
+//! - [`guard`]: the pool of connections that are not yet websockets (`pending`, bounded in total and per
+//!   `source` address, evicting the oldest of the busiest address) and their deadline to become one;
+//! - `strict_json`: client messages parsed with duplicate keys refused;
+//! - `hello_config`: what of the configuration operators and watchers see;
+//! - `http`: routes, static files and the handshake; `download`: the recording being written,
+//!   finished for the download by `download_copy`;
+//! - the websocket load behind `pavlov bench --ws-clients` is [`crate::bench::load`], its abusive clients
+//!   [`crate::bench::abuse`].
 //!
 //! Nothing here can delay the tick: the hub reads the tick feed's lossy broadcast, every client reads the
 //! hub's lossy broadcast into its own bounded queue, and only the client's own writer waits on its socket.

@@ -6,15 +6,15 @@
 //! forwarder skips what the history already held.
 //!
 //! The forwarder never waits on the socket: when the client falls behind, its queue drops the oldest
-//! telemetry. The writer gives up on a client whose socket accepts nothing for [`WRITE_STALL`]. Bad
+//! telemetry. The writer gives up on a client whose socket accepts nothing for `WRITE_STALL`. Bad
 //! messages get an error reply and the connection stays open; only what the websocket layer cannot
 //! resynchronise after closes it, with the code RFC 6455 gives: 1009 for an over-size message, 1007 for a
 //! text message that is not UTF-8, 1002 for any other protocol violation. Every message draws on the
-//! connection's [`TokenBucket`]: one over the limit is answered `rate_limited` and not processed, and a
-//! connection over its limit is read at most [`OVER_LIMIT_READS_PER_SECOND`] messages a second. When
-//! [`super::out_queue::CONTROL_CAPACITY`] replies are waiting, the reader stops reading (so a fast client is
+//! connection's `TokenBucket`: one over the limit is answered `rate_limited` and not processed, and a
+//! connection over its limit is read at most `OVER_LIMIT_READS_PER_SECOND` messages a second. When
+//! `super::out_queue::CONTROL_CAPACITY` replies are waiting, the reader stops reading (so a fast client is
 //! slowed by TCP, not by memory) for up to [`UNREAD_PATIENCE`], then disconnects the client. Each way a
-//! connection can be closed for misbehaving is counted in [`SessionCounters`].
+//! connection can be closed for misbehaving is counted in `SessionCounters`.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};

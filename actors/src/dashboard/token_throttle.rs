@@ -1,10 +1,10 @@
-//! The throttle on wrong tokens: each [`Source`] may present a wrong token [`FAILURE_BURST`] times in a
+//! The throttle on wrong tokens: each `Source` may present a wrong token [`FAILURE_BURST`] times in a
 //! row, then about once every [`FAILURE_REFILL`] (a token bucket that only failures draw from). A source
 //! with no failure left is answered 429 at once, before its token is even compared, so guessing a token
 //! costs a second per guess per address instead of a fraction of a millisecond. A right token never
 //! draws from the bucket, and other sources are not affected.
 //!
-//! The table is bounded: past [`MAX_SOURCES`] entries, the sources whose buckets have refilled are
+//! The table is bounded: past `MAX_SOURCES` entries, the sources whose buckets have refilled are
 //! forgotten (they are indistinguishable from new ones), and if that frees nothing the table starts
 //! over (an attack from that many addresses at once is counted, not remembered).
 

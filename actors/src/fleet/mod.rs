@@ -1,7 +1,7 @@
 //! `pavlov fleet`: one page for a lab's robots. It subscribes to `pavlov/*/tick`, `pavlov/*/event` and
 //! `pavlov/*/status` on Zenoh (what `pavlov serve --zenoh` publishes), keeps one row per robot, and serves
 //! a small dashboard (`web/fleet.html`, `web/fleet.js`) listing each robot's mode, link, tick health, key
-//! counters, when it was last seen, and a link to its own dashboard ([`http`]).
+//! counters, when it was last seen, and a link to its own dashboard (`http`).
 //!
 //! Commands typed on the fleet page are forwarded as Zenoh queries to `pavlov/<robot>/command` with the
 //! token the user gives; the fleet holds no token of its own, so each robot decides (see

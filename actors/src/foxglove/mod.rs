@@ -14,14 +14,14 @@
 //!
 //! Foxglove clients only read. The endpoint advertises no capability to publish, set parameters or call
 //! services, so the SDK refuses all of those, and nothing from Foxglove reaches `server.commands`. The
-//! dashboard's token decides who may watch ([`access`]): checked by the [`gate`] on the public port before
+//! dashboard's token decides who may watch (`access`): checked by the `gate` on the public port before
 //! the websocket upgrade. It listens on loopback unless told otherwise, and any other address needs a
 //! token.
 //!
-//! - [`access`]: the token rule, on the request head;
-//! - [`gate`]: the public socket, its limits, the token check and the splice to the SDK's loopback port;
-//! - [`publish`]: the task that reads the feed and the events and logs them;
-//! - [`schema`]: the channels' JSON Schemas; [`signals`]: the flat tick message.
+//! - `access`: the token rule, on the request head;
+//! - `gate`: the public socket, its limits, the token check and the splice to the SDK's loopback port;
+//! - `publish`: the task that reads the feed and the events and logs them;
+//! - `schema`: the channels' JSON Schemas; `signals`: the flat tick message.
 //!
 //! Nothing here can delay the tick: the publisher reads lossy broadcasts and counts what it misses, the
 //! SDK's per-client queues drop their oldest messages, and all of it runs on a runtime of its own (one

@@ -1,7 +1,7 @@
 //! The Horde, off the control path: `[horde]`'s predictions learned on a thread of their own.
 //!
 //! Learning's task acts first (the control predictions go to gating), learns the control predictions,
-//! and then *offers* the tick's signals to the Horde: a `try_send` into a queue of [`QUEUE`] ticks.
+//! and then *offers* the tick's signals to the Horde: a `try_send` into a queue of `QUEUE` ticks.
 //! When the Horde is still busy and the queue is full, the tick is not learned from by the Horde; it is
 //! counted (`skipped_busy`), and the Horde breaks its chain of ticks there rather than learn a
 //! transition it did not see. Nothing the Horde does can delay gating or actuation: the tick path never
@@ -11,7 +11,7 @@
 //! time, [`pavlov::learn::group`]) and written on another thread ([`crate::storage::horde_file`]), so
 //! a checkpoint of 10⁸ weights skips no tick either.
 //!
-//! - [`worker`]: the thread's loop; [`status`]: what it reports.
+//! - `worker`: the thread's loop; [`status`]: what it reports.
 
 mod background;
 pub mod status;

@@ -1,10 +1,10 @@
 //! The robot link: the byte stream to an iRobot Create, real (tokio-serial) or simulated, its writer and
 //! its supervision. The byte sequences spoken over it are the core's (`pavlov::oi::handshake`).
 //!
-//! - [`serial`]: opening (and reopening) a serial port.
-//! - [`writer`]: the writer actor, the only task that writes to the robot.
-//! - [`opener`]: what link supervision reopens a port through, with the baud rescue.
-//! - [`supervisor`]: stale-stream detection, re-sync, reconnect with backoff, trips (see `pavlov::supervision`).
+//! - `serial`: opening (and reopening) a serial port.
+//! - `writer`: the writer actor, the only task that writes to the robot.
+//! - `opener`: what link supervision reopens a port through, with the baud rescue.
+//! - `supervisor`: stale-stream detection, re-sync, reconnect with backoff, trips (see `pavlov::supervision`).
 
 pub(crate) mod opener;
 pub(crate) mod serial;

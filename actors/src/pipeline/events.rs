@@ -1,7 +1,7 @@
 //! The event log: every change made at run time (see [`pavlov::event`]) goes out from here, numbered, to
 //! the log (once, at INFO with its arguments; teleop at DEBUG), to live subscribers (the dashboard hub,
 //! tests) and to the recorder, without ever blocking the actor that made it. It also keeps the last
-//! [`RECENT_CAPACITY`] events (teleop aside), so that a subscriber that starts late (the dashboard hub starts
+//! `RECENT_CAPACITY` events (teleop aside), so that a subscriber that starts late (the dashboard hub starts
 //! after a recording begun with `--record`) still learns what happened before it.
 
 use std::collections::VecDeque;

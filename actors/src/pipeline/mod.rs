@@ -9,12 +9,12 @@
 //! router ──────────┴───────────────────────────┴───────┘────────────┘──────┴───────────┘      TickRecord ─► feed
 //! ```
 //!
-//! - [`ticker`]: the only clock that drives control (its own timer thread in real time).
-//! - [`sensor_ingest`]: robot bytes → the newest observation on every tick (hosts link supervision).
+//! - `ticker`: the only clock that drives control (its own timer thread in real time).
+//! - `sensor_ingest`: robot bytes → the newest observation on every tick (hosts link supervision).
 //! - [`skeleton_ingest`]: OSC skeletons over UDP → the newest pose.
-//! - [`learning`], [`gating`], [`actuation`]: thin shells over the core's stages; actuation assembles
+//! - `learning`, `gating`, `actuation`: thin shells over the core's stages; actuation assembles
 //!   each tick's record.
-//! - [`feed`]: every tick record out to the dashboard, the recorder and the tests, without blocking.
+//! - `feed`: every tick record out to the dashboard, the recorder and the tests, without blocking.
 //!
 //! Every channel on the tick path is bounded and written with `try_send`: a stage that falls behind loses
 //! its oldest input (and actuation's watchdog stops the wheels), it never makes an earlier stage wait.

@@ -7,7 +7,7 @@
 //!   bundle per frame holding `/joint ,sifff name user x y z` for every joint the frame reports (dropped joints
 //!   are left out, as OSCeleton leaves out joints below confidence 0.5); `/lost_user` at the end.
 //! - KinectV2-OSC (`kinect_v2`): one unbundled `/bodies/<id>/joints/<JointType> ,fffs x y z "Tracked"` message per
-//!   reported joint, in metres (the body id is [`KINECT_ID_BASE`] + the user id).
+//!   reported joint, in metres (the body id is `KINECT_ID_BASE` + the user id).
 
 use std::net::SocketAddr;
 use std::time::Duration;

@@ -5,7 +5,7 @@
 //!
 //! A [`FaultInjector`] sits between the robot and the line (`--faults`): it damages, delays and interleaves
 //! the robot's bytes, hangs or unplugs the line, and trips the robot. In process, an unplugged robot keeps
-//! running and takes the next connection from its [`SimDevice`], which is how link supervision reconnects.
+//! running and takes the next connection from its `SimDevice`, which is how link supervision reconnects.
 
 use std::time::Duration;
 

@@ -13,7 +13,7 @@
 //! checksum                          u64, FNV-1a of every byte before it
 //! ```
 //!
-//! It is written to a hidden temporary file a few megabytes at a time ([`super::paced_file`]), fsynced
+//! It is written to a hidden temporary file a few megabytes at a time (`super::paced_file`), fsynced
 //! and renamed, so a crash leaves the old file or the
 //! new one; a write that fails (a full disk) removes its temporary file again. A file cut short,
 //! corrupted, of another precision or holding a non-finite weight is refused with a precise error.

@@ -2,11 +2,11 @@
 //! through one [`Health`] handle by the dashboard's status messages, `/metrics`, the periodic log line
 //! and the benchmarks.
 //!
-//! - [`counters`]: the counters each actor keeps (one writer each);
-//! - [`histogram`]: the allocation-free latency histogram that sits on the tick path;
-//! - [`exposition`]: a writer of the Prometheus text format; [`prometheus`]: the `/metrics` text;
+//! - `counters`: the counters each actor keeps (one writer each);
+//! - `histogram`: the allocation-free latency histogram that sits on the tick path;
+//! - `exposition`: a writer of the Prometheus text format; `prometheus`: the `/metrics` text;
 //!   [`prometheus_check`]: a strict reader of that format, for tests;
-//! - [`health_log`]: the tick-health line logged once a minute;
+//! - `health_log`: the tick-health line logged once a minute;
 //! - [`logging`]: logging that never blocks or fails the caller (a queue and a writer thread).
 
 pub(crate) mod counters;

@@ -3,7 +3,7 @@
 //! [`render`] is a pure function of a [`MetricsSnapshot`] (tick timing, the robot link as the newest tick
 //! record saw it, the websocket endpoint's counters, the recorder's queue and actuation's safety counters),
 //! so the format is tested without a server; [`crate::dashboard::http`] takes the snapshot and serves the text with
-//! [`CONTENT_TYPE`]. Every metric is listed in the README's "Metrics" section.
+//! [`CONTENT_TYPE`]. Every metric is listed in the book's dashboard chapter (`docs/src/dashboard.md`).
 
 use pavlov::config::TickTimer;
 use pavlov::record::LinkStatus;

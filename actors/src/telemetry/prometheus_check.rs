@@ -1,7 +1,7 @@
 //! A strict reader of the Prometheus text exposition format (0.0.4), for checking what `/metrics` serves:
-//! in unit tests of [`super::prometheus`] and in the end-to-end tests, which read a live server's text.
+//! in unit tests of `super::prometheus` and in the end-to-end tests, which read a live server's text.
 //!
-//! [`parse`] refuses what a scraper would refuse or misread: invalid metric or label names, bad escapes or
+//! `parse` refuses what a scraper would refuse or misread: invalid metric or label names, bad escapes or
 //! values, a sample without `# HELP` and `# TYPE` before it, a family split in two, a negative counter, and a
 //! histogram whose buckets are not cumulative, do not end at `+Inf`, or whose `+Inf` differs from `_count`.
 

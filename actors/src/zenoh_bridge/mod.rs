@@ -5,11 +5,11 @@
 //! - `pavlov/<robot>/tick`: every [`TickRecord`](pavlov::record::TickRecord) as JSON (put, dropped by Zenoh
 //!   under congestion rather than queued);
 //! - `pavlov/<robot>/event`: every [`Event`](pavlov::event::Event) as JSON;
-//! - `pavlov/<robot>/status`: every `[zenoh] status_every_ms`, the fleet's row ([`status`]): mode, link,
+//! - `pavlov/<robot>/status`: every `[zenoh] status_every_ms`, the fleet's row (`status`): mode, link,
 //!   tick health, key counters, the dashboard's URL;
 //! - `pavlov/<robot>/config` (query): the configuration in force, token redacted;
 //! - `pavlov/<robot>/checkpoint` (query): this run's newest automatic checkpoint file, or an error reply;
-//! - `pavlov/<robot>/command` (query): a command ([`commands`]), answered with the outcome.
+//! - `pavlov/<robot>/command` (query): a command (`commands`), answered with the outcome.
 //!
 //! Commands are off unless `[zenoh] commands = true`, and then each must carry the dashboard's token (so
 //! a token must be configured): one secret for the websocket and Zenoh, checked in constant time, counted
@@ -19,7 +19,7 @@
 //!
 //! Nothing here can delay the tick: the publisher reads the feed's and the event log's lossy broadcasts
 //! (bounded rings that drop the oldest; what it loses is counted as `pavlov_zenoh_missed_total`) without
-//! waiting on them, waking half a tick period away from the tick ([`publish`]), and the bridge runs on a
+//! waiting on them, waking half a tick period away from the tick (`publish`), and the bridge runs on a
 //! runtime of its own (one worker thread, `zenoh-bridge`) besides Zenoh's own threads.
 
 pub(crate) mod commands;

@@ -5,7 +5,7 @@
 //! output (σ = identity), have the same accumulating trace whatever their cumulant or step size: the
 //! trace `e_t = γ_t λ e_{t−1} + x_t` depends only on the features and the discounts. A group stores their
 //! weights feature-major (the weights of all its predictions for one feature are one contiguous row,
-//! [`weight`]) and defers the trace's updates ([`epochs`]), so a tick reads the rows of the active
+//! [`weight`]) and defers the trace's updates (`epochs`), so a tick reads the rows of the active
 //! features and touches the rows of the previous tick's, and nothing else. With the logistic σ the trace
 //! holds σ′(wᵀx), which is each prediction's own: such a group has one prediction.
 //!

@@ -67,7 +67,7 @@ impl<W: Weight> TraceGroup<W> {
         s
     }
 
-    /// Starts a snapshot taken a few rows at a time ([`super::copy`]): the state as it is now, whose
+    /// Starts a snapshot taken a few rows at a time (`super::copy`): the state as it is now, whose
     /// weights [`TraceGroup::advance_snapshot`] copies between ticks while the group keeps learning.
     /// False when one is in progress.
     pub fn begin_snapshot(&mut self) -> bool {

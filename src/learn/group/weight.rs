@@ -14,7 +14,7 @@ pub trait Weight:
     /// `"f32"` or `"f64"`, for messages and checkpoints.
     const NAME: &'static str;
     /// The smallest product of trace decays an epoch runs down to before a new one starts (see
-    /// [`super::epochs`]). Within an epoch a row's deferred base holds `w − c·A`, where `c` grows to
+    /// `super::epochs`). Within an epoch a row's deferred base holds `w − c·A`, where `c` grows to
     /// about `1/FLOOR` times the trace; `1/FLOOR` is how many times larger than the weight the
     /// cancelling terms can get, so the floor costs `log10(1/FLOOR)` decimal digits of the weight's
     /// precision: 4 of f64's 16, 2 of f32's 7.

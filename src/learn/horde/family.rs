@@ -4,7 +4,7 @@
 //! A prediction of cumulant `C` at timescale τ learns `E[Σ_k γ^k C_{t+k+1}]` with `γ = 1 − 1/τ`, the
 //! discounted sum over about the next τ ticks; with `terminate_on = "<stimulus>"` the sum also ends when
 //! that stimulus comes on (γ = 0 there), as the paper's predictions end at their event. Nexting
-//! predicted every sensor at several timescales this way [nexting]:
+//! predicted every sensor at several timescales this way \[nexting\]:
 //!
 //! ```toml
 //! [[horde.families]]

@@ -1,5 +1,5 @@
 //! [`Horde`]: thousands of general predictions (GVFs) learned side by side every tick, after Sutton
-//! et al.'s Horde and Modayil, White & Sutton's nexting [Horde] [nexting].
+//! et al.'s Horde and Modayil, White & Sutton's nexting [Horde] \[nexting\].
 //!
 //! Predictions come in families ([`family`]): every cumulant ([`signals`]) at every timescale over one
 //! feature construction. The Horde builds each distinct feature construction once per tick, however

@@ -12,7 +12,7 @@
 //!
 //! In a family, `obs/*`, `raw/*`, `input/*`, `stimulus/*` and `features/*` stand for every signal of
 //! the kind: `features/*` makes one prediction per feature, as nexting did with its feature cumulants
-//! [nexting]. A signal missing on a tick (a packet absent from the snapshot, no skeleton) is NaN: that
+//! \[nexting\]. A signal missing on a tick (a packet absent from the snapshot, no skeleton) is NaN: that
 //! tick's update is skipped for the predictions about it.
 
 use super::super::LearnError;

@@ -20,7 +20,7 @@ impl ByteRates {
     }
 }
 
-/// What [`corrupt`] did.
+/// What `corrupt` did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct ByteTally {
     /// Bytes lost.

@@ -1,16 +1,16 @@
 //! The paper's interaction experiment ("Reducing Lag By Predicting the Next Command") on the simulated
 //! Create: a simulated operator commands a left spin with the left elbow; runs alternate reactive /
 //! Pavlovian (config/interaction.toml: π = stay still, ϱ = spin left, E = left elbow below 90°), each
-//! learning from scratch through the one [`super::runner`]. Run `i` draws its robot seed and its pair's operator seed
-//! from [`super::run_rng`]. Per policy: when the response started relative to each ground-truth command
+//! learning from scratch through the one `super::runner`. Run `i` draws its robot seed and its pair's operator seed
+//! from `super::run_rng`. Per policy: when the response started relative to each ground-truth command
 //! onset ([`pavlov::analysis::interaction`]), and the battery current and rotation averaged over the last
 //! N observed command onsets of each run (`--commands`, the paper: 40; the paper's Figure 4); the shifts of
 //! the physical and decision onsets with bootstrap intervals; and the time course over windows of learning
 //! ([`pavlov::analysis::interaction::curve`]), from which the Figure 3 analogue takes its moment: when
 //! anticipation first holds, or the end of the run.
 //!
-//! - [`run`]: one run; [`analysis`]: the statistics; [`report`]: files and the terminal table;
-//!   [`plots`]: the Figure 3 and Figure 4 analogues and the time course; [`sensitivity`]: the study over
+//! - `run`: one run; `analysis`: the statistics; [`report`]: files and the terminal table;
+//!   `plots`: the Figure 3 and Figure 4 analogues and the time course; [`sensitivity`]: the study over
 //!   operator and learner variants; [`sharded`]: one slice of the study (`--shard I/N`), and merging the
 //!   slices back (`assemble` makes the study from its runs, whoever ran them).
 

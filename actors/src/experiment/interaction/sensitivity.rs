@@ -171,7 +171,7 @@ fn ci(d: Option<MeanDifference>, scale: f64) -> String {
     })
 }
 
-/// The sensitivity table (Markdown, as the README shows it).
+/// The sensitivity table (Markdown, as `docs/src/results.md` shows it).
 pub fn table(rows: &[SensitivityRow], o: &InteractionOptions) -> String {
     let mut t = String::new();
     let _ = writeln!(

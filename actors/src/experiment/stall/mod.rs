@@ -2,10 +2,10 @@
 //!
 //! `2 × runs_per_policy` runs are interleaved: run 0 reactive, run 1 Pavlovian, run 2 reactive, … Each run
 //! starts a fresh server (learning from scratch) on a simulator whose seed is drawn from the study's seed
-//! ([`super::run_rng`]), through the one [`super::runner`].
+//! (`super::run_rng`), through the one `super::runner`.
 //!
-//! - [`run`]: what one run keeps (metrics, per-window counts, the Figure 1 excerpt);
-//! - [`analysis`]: the statistics; [`report`]: files and the terminal table; [`plots`]: the SVG figures.
+//! - `run`: what one run keeps (metrics, per-window counts, the Figure 1 excerpt);
+//! - [`analysis`]: the statistics; [`report`]: files and the terminal table; `plots`: the SVG figures.
 
 pub(crate) mod accuracy;
 pub mod analysis;

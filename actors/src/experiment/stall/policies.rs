@@ -7,7 +7,7 @@
 //! derivation ([`super::run_seed`]). Every run, whatever its policy, carries both predictions — the
 //! paper's on-policy `stall` and the off-policy [`OFFPOLICY_PREDICTION`] — and only the gate's prediction
 //! differs (`pavlovian`: `stall`, `offpolicy`: `stall_pi`; reactive ignores both), so each run also
-//! scores both against the return π would have earned where π was followed ([`super::accuracy`]).
+//! scores both against the return π would have earned where π was followed (`super::accuracy`).
 //!
 //! The off-policy prediction copies the paper's stall prediction (τ, λ, α, features, θ) and adds
 //! GTD(λ)'s β = α/10, a usual choice for the secondary step size, fixed before any run and not tuned.

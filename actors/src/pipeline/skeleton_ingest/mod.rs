@@ -2,10 +2,10 @@
 //! that learning reads every tick.
 //!
 //! A thin shell: it receives datagrams into a 64 KiB buffer, decodes them with `rosc`, turns them into joint
-//! updates with the pure [`decode::Decoder`], picks one person with the pure [`select::UserSelector`], stamps
+//! updates with the pure `decode::Decoder`, picks one person with the pure `select::UserSelector`, stamps
 //! every joint with milliseconds since the server's `started` instant (the same clock as learning's `now_ms`,
 //! so joint ages are right) and publishes the pose with `send_modify`. Malformed datagrams are counted by kind
-//! in [`IngestStats`] and logged at most once per [`LOG_EVERY`]; nothing a sender does can stop the actor.
+//! in [`IngestStats`] and logged at most once per `LOG_EVERY`; nothing a sender does can stop the actor.
 
 pub(crate) mod decode;
 pub(crate) mod select;

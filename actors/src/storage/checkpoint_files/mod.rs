@@ -4,9 +4,9 @@
 //!
 //! - [`layout`]: where files go (`runs/<run id>/`, `saved/`, the flat files of earlier versions),
 //!   atomic writes, pruning;
-//! - [`saves`]: `save_weights`' names, its never-overwrite rule and its quota;
+//! - `saves`: `save_weights`' names, its never-overwrite rule and its quota;
 //! - [`resume`]: candidates across runs, newest first, each checked, with the reasons for those skipped;
-//! - [`writer`]: the thread that writes them.
+//! - `writer`: the thread that writes them.
 
 pub mod layout;
 pub mod resume;

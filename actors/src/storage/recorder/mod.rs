@@ -2,8 +2,8 @@
 //!
 //! The tick feed and the event log hand everything to the recorder's one bounded queue with `try_send` (a
 //! full queue drops the item and counts it; the tick never waits). The recorder's own OS thread takes them
-//! off the queue and writes them as MCAP ([`writer`]; serialising and compressing happen here, never on
-//! the tick path), finishing a chunk when it is full and at least every [`FLUSH_EVERY`], so a killed
+//! off the queue and writes them as MCAP (`writer`; serialising and compressing happen here, never on
+//! the tick path), finishing a chunk when it is full and at least every `FLUSH_EVERY`, so a killed
 //! process loses at most about a second (the reader reads every complete chunk of a cut file). It also
 //! takes `start_recording` / `stop_recording` commands from the command router.
 //!
@@ -15,7 +15,7 @@
 //! for at spawn waits.
 //!
 //! A client names a recording, never a place: `start_recording`'s `dir` is a plain name
-//! ([`crate::storage::names`]) of a folder inside the recordings root, and the default name
+//! (`crate::storage::names`) of a folder inside the recordings root, and the default name
 //! (`recording-<UTC time>`, with `-2`, `-3`, … if taken) is always new. A recording file is never
 //! overwritten, neither by a client, nor by `pavlov serve --record`, nor by the experiments
 //! ([`Recorder::spawn_new`]; an experiment's run records beside a folder that holds one). A refused start

@@ -1,4 +1,4 @@
-//! The JSON Lines format: a header line ([`RecordingHeader`], format [`FORMAT`]), then one
+//! The JSON Lines format: a header line ([`RecordingHeader`], format `FORMAT`), then one
 //! [`TickRecord`] per line and, between them, `{"event": …}` lines ([`Event`]). Earlier versions
 //! recorded in it; `pavlov convert --to jsonl` writes it for `jq`, `grep` and `pandas`. A process killed
 //! mid-write leaves at most a torn last line, which the reader skips and reports

@@ -8,8 +8,8 @@
 //!
 //! - **MCAP** (`recording.mcap`, what the recorder writes): zstd-compressed chunks, one channel per kind
 //!   of message (`ticks` in protobuf, `events`, `config`, `learner` in JSON), the provenance in a metadata
-//!   record ([`schema`], [`mcap_write`]). Foxglove, the `mcap` CLI and the `mcap` Python package open it.
-//!   A file cut by a kill is read up to its last complete chunk and reported torn ([`mcap_read`]).
+//!   record ([`schema`], `mcap_write`). Foxglove, the `mcap` CLI and the `mcap` Python package open it.
+//!   A file cut by a kill is read up to its last complete chunk and reported torn (`mcap_read`).
 //! - **JSON Lines** (`ticks.jsonl`, what earlier versions wrote, and what `pavlov convert --to jsonl`
 //!   makes for `jq` and `pandas`): a header line, then one tick or `{"event": …}` per line ([`jsonl`]).
 //!

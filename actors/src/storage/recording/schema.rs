@@ -1,9 +1,9 @@
 //! What an MCAP recording declares: its channels (topics), the schema of each, and the provenance
-//! metadata record. The writer ([`super::mcap_write`]) and the reader ([`super::mcap_read`]) both take
-//! their names from here, and so does the README's channel table.
+//! metadata record. The writer (`super::mcap_write`) and the reader (`super::mcap_read`) both take
+//! their names from here, and so does the channel table in `docs/src/recordings.md`.
 //!
 //! - `ticks`: one `pavlov.Tick` per tick, protobuf; the schema is a `FileDescriptorSet` built here by hand
-//!   to match [`super::tick_pb`] field for field (the independent-reader test decodes every message with
+//!   to match `super::tick_pb` field for field (the independent-reader test decodes every message with
 //!   it, so a mismatch fails there).
 //! - `events`, `config`, `learner`: JSON with a JSON Schema.
 //! - Metadata `pavlov.recording`: format, program, label, UTC start, seed, where the run stood.

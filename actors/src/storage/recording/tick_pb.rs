@@ -4,7 +4,7 @@
 //! Why protobuf and not JSON for ticks: a tick is written 50 times a second in real time and ~50 000 times
 //! a second in an experiment under virtual time, on the same two cores that compute the runs; encoding a
 //! tick as protobuf takes a fraction of the time JSON needs (floats are copied, not printed) and gives a
-//! third of the bytes to compress (README "Recording format" has the measurements). Foxglove, the `mcap`
+//! third of the bytes to compress (the book's "Recording format", `docs/src/recordings.md`, has the measurements). Foxglove, the `mcap`
 //! CLI and `mcap-protobuf-support` decode it with the schema the file carries ([`super::schema`]).
 //!
 //! What is not in the message: the scaled observation vector `obs`. It is a pure function of the raw
