@@ -138,6 +138,19 @@ mod tests {
             (NEXTING.replace("0.0002", "0.01"), "exceeds 1/484"),
             (NEXTING.replace("\"stall\"", "\"bump\""), "bump"),
             (NEXTING.replace("tilings = 11", "tilings = 0"), "tilings"),
+            // Careless values: an endless timescale, a huge name, a cumulant listed twice.
+            (NEXTING.replace("10.0]", "1e300]"), "at most 1e6"),
+            (
+                NEXTING.replace("\"nexting\"", &format!("\"{}\"", "n".repeat(1 << 20))),
+                "1048576 characters; at most 64",
+            ),
+            (
+                NEXTING.replace(
+                    "\"raw/battery_charge\"",
+                    "\"raw/battery_charge\", \"obs/bump_left\"",
+                ),
+                "lists cumulant `obs/bump_left` twice",
+            ),
         ] {
             match Config::from_toml(&with_horde(&edit)) {
                 Err(super::ConfigError::Invalid { key, message }) => {

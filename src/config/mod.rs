@@ -609,6 +609,26 @@ mod tests {
     }
 
     #[test]
+    fn careless_names_and_timescales_are_refused_by_key() {
+        let long = "r".repeat(1 << 20);
+        let text = format!(
+            "{STALL}\n[[rules]]\nname = \"{long}\"\nprediction = \"stall\"\nresponse = {{ kind = \"stop\" }}\npriority = 1\n"
+        );
+        match Config::from_toml(&text) {
+            Err(ConfigError::Invalid { key, message }) => {
+                assert_eq!(key, "rules[0].name");
+                assert!(message.contains("at most 64"), "{message}");
+            }
+            other => panic!("{other:?}"),
+        }
+        let tau = STALL.replace("tau = 25.0", "tau = 1e300");
+        assert!(
+            Config::from_toml(&tau).is_err_and(|e| e.to_string().contains("at most 1e6")),
+            "tau = 1e300 is refused"
+        );
+    }
+
+    #[test]
     fn redacted_hides_the_token_and_nothing_else() {
         let with = format!(
             "{STALL}\n[dashboard]\nbind = \"0.0.0.0:8080\"\ntoken = \"0123456789abcdef\"\n"

@@ -74,6 +74,9 @@ impl Config {
                 ));
             };
             let name = r.name();
+            if let Err(e) = crate::learn::bounds::check_name_length(name) {
+                return Err(invalid(format!("rules[{i}].name"), e.to_string()));
+            }
             if name.is_empty() || name == STIMULUS_RULE {
                 return Err(invalid(
                     format!("rules[{i}].name"),

@@ -127,15 +127,39 @@ pub fn check_lambda(name: &str, lambda: f64) -> Result<(), LearnError> {
 }
 
 /// τ finite and > 1 (γ = 1 − 1/τ in `(0, 1)`).
+/// The longest timescale, ticks: a million (5.6 hours at 50 Hz), far past any horizon a lab run's
+/// predictions are scored over. Beyond it a cumulant's return grows to τ times its size and the
+/// continuation 1 − 1/τ nears 1 (at τ = 1e16 it rounds to exactly 1, an undiscounted sum that never
+/// converges), so `tau = 1e300` is refused rather than learned.
+pub const MAX_TAU: f64 = 1e6;
+
+/// The longest name of a prediction, a Horde family or a rule, characters: names travel in every tick's
+/// record and every dashboard message, so a long one costs on every tick.
+pub const MAX_NAME_CHARS: usize = 64;
+
+/// Checks a name's length against [`MAX_NAME_CHARS`].
+pub fn check_name_length(name: &str) -> Result<(), LearnError> {
+    let chars = name.chars().count();
+    if chars > MAX_NAME_CHARS {
+        let shown: String = name.chars().take(16).collect();
+        return Err(LearnError::NameTooLong {
+            start: shown,
+            chars,
+            max: MAX_NAME_CHARS,
+        });
+    }
+    Ok(())
+}
+
 pub fn check_tau(name: &str, tau: f64) -> Result<(), LearnError> {
-    if tau.is_finite() && tau > 1.0 {
+    if tau.is_finite() && tau > 1.0 && tau <= MAX_TAU {
         Ok(())
     } else {
         Err(out_of_bounds(
             name,
             "tau",
             tau,
-            "is not a finite number of ticks > 1".into(),
+            format!("is not a number of ticks > 1 and at most {MAX_TAU:e}"),
         ))
     }
 }

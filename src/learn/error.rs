@@ -9,6 +9,24 @@ pub enum LearnError {
     /// A prediction without a name.
     #[error("a prediction has an empty name")]
     EmptyName,
+    /// A name longer than the bound.
+    #[error("the name `{start}…` has {chars} characters; at most {max}")]
+    NameTooLong {
+        /// Its first characters.
+        start: String,
+        /// Its length.
+        chars: usize,
+        /// The bound.
+        max: usize,
+    },
+    /// A Horde family lists the same cumulant twice (after `obs/*` and the like are expanded).
+    #[error("family `{family}` lists cumulant `{cumulant}` twice")]
+    DuplicateCumulant {
+        /// The family.
+        family: String,
+        /// The cumulant, as expanded.
+        cumulant: String,
+    },
     /// Two predictions with the same name.
     #[error("prediction `{0}` is defined twice")]
     DuplicatePrediction(String),

@@ -192,6 +192,7 @@ impl PredictionSpec {
         if name.is_empty() {
             return Err(LearnError::EmptyName);
         }
+        super::bounds::check_name_length(name)?;
         check_tau(name, self.tau)?;
         self.td_params().validate(name)?;
         check_threshold(name, self.threshold)?;

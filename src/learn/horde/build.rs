@@ -141,7 +141,15 @@ fn blueprint(families: &[FamilySpec], names: &SignalNames) -> Result<Blueprint, 
         };
         let mut cumulants = Vec::new();
         for selector in &f.cumulants {
-            cumulants.extend(signals::expand(&f.name, selector, names, bounds.features)?);
+            for (canonical, source) in signals::expand(&f.name, selector, names, bounds.features)? {
+                if cumulants.iter().any(|(c, _)| *c == canonical) {
+                    return Err(LearnError::DuplicateCumulant {
+                        family: f.name.clone(),
+                        cumulant: canonical,
+                    });
+                }
+                cumulants.push((canonical, source));
+            }
         }
         let count = predictions.len() + cumulants.len() * f.taus.len();
         if count > MAX_HORDE_PREDICTIONS {

@@ -68,6 +68,7 @@ impl FamilySpec {
         if name.is_empty() || name.contains(['@', '/']) {
             return Err(LearnError::BadFamilyName(self.name.clone()));
         }
+        crate::learn::bounds::check_name_length(name)?;
         if self.cumulants.is_empty() || self.taus.is_empty() {
             return Err(LearnError::EmptyFamily(self.name.clone()));
         }
