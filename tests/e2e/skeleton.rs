@@ -395,7 +395,10 @@ async fn joints_that_stop_arriving_make_the_elbow_invalid_after_the_age_limit() 
     let received = ingest.pose.borrow().sample(Joint::LeftElbow).unwrap().at_ms;
     // Stamped on the ingest's clock (ms since `started`) when it arrived: after it was sent, before now.
     let now = ingest.now_ms();
-    assert!(sent <= received && received <= now, "{sent} {received} {now}");
+    assert!(
+        sent <= received && received <= now,
+        "{sent} {received} {now}"
+    );
     let fresh = features.step(&ingest.pose.borrow(), now);
     assert!(fresh.left.is_some() && !fresh.command);
     tokio::time::sleep(Duration::from_millis(130)).await;

@@ -675,3 +675,34 @@ async fn write(
     }
     let _ = sink.send(Message::Close(None)).await;
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_clients_drops_are_read_by_its_address_while_it_is_connected() {
+        let counters = Arc::new(SessionCounters::default());
+        let (a, b): (SocketAddr, SocketAddr) = (
+            "127.0.0.1:4000".parse().unwrap(),
+            "127.0.0.1:4001".parse().unwrap(),
+        );
+        let slow = Arc::new(OutQueue::new(1));
+        let fast = Arc::new(OutQueue::new(1));
+        let slow_seat = counters.register(a, &slow);
+        let fast_seat = counters.register(b, &fast);
+        for _ in 0..3 {
+            slow.push_telemetry(Out::Text(Utf8Bytes::from_static("tick")));
+        }
+        assert_eq!(counters.telemetry_dropped_for(a), Some(2));
+        assert_eq!(counters.telemetry_dropped_for(b), Some(0));
+        // A later connection from the same address replaces the entry; the earlier one's end leaves it.
+        let again = Arc::new(OutQueue::new(1));
+        let again_seat = counters.register(a, &again);
+        drop(slow_seat);
+        assert_eq!(counters.telemetry_dropped_for(a), Some(0));
+        drop((again_seat, fast_seat));
+        assert_eq!(counters.telemetry_dropped_for(a), None);
+        assert_eq!(counters.telemetry_dropped_for(b), None);
+    }
+}

@@ -586,6 +586,7 @@ async fn idle_tcp_connections_are_bounded_and_closed_while_a_websocket_keeps_str
         .await
         .unwrap();
     let addr = dash.local_addr();
+    let mut feed = server.feed.subscribe();
     let mut ws = abuse::connect(addr).await.unwrap();
     // Fill the pending pool (the websocket is not in it) and try ten more at once, sending nothing: the
     // ten are closed on arrival, since the twenty before them may still be handshakes in flight.
@@ -622,11 +623,11 @@ async fn idle_tcp_connections_are_bounded_and_closed_while_a_websocket_keeps_str
     }
     assert_eq!(dash.stats().closed_evicted, EXTRA as u64);
     assert_eq!(dash.stats().pending, PENDING);
-    let deadline = Instant::now() + PRE_UPGRADE_LIMIT + Duration::from_secs(5);
-    let mut last_seq = None;
-    let mut ticks = 0u64;
+    // (Generous: the server closes them after the limit, when its timer gets the CPU.)
+    let deadline = Instant::now() + PRE_UPGRADE_LIMIT + Duration::from_secs(30);
+    let mut seqs = Vec::new();
     // The websocket keeps streaming while the idle connections run out their time.
-    while dash.stats().closed_no_upgrade < PENDING as u64 {
+    while dash.stats().closed_no_upgrade < PENDING as u64 || seqs.is_empty() {
         assert!(Instant::now() < deadline, "{:?}", dash.stats());
         let msg = tokio::time::timeout(Duration::from_secs(5), ws.next())
             .await
@@ -636,24 +637,35 @@ async fn idle_tcp_connections_are_bounded_and_closed_while_a_websocket_keeps_str
         if let Message::Text(t) = msg {
             let v: Value = serde_json::from_str(&t).unwrap();
             if v["type"] == "tick" {
-                let seq = v["seq"].as_u64().unwrap();
-                if let Some(last) = last_seq {
-                    assert_eq!(seq, last + 1, "the websocket lost ticks");
-                }
-                last_seq = Some(seq);
-                ticks += 1;
+                seqs.push(v["seq"].as_u64().unwrap());
             }
         }
     }
+    // It lost no tick: every one the feed made over its span arrived, in order, but for any the endpoint
+    // counted as dropped for it (a busy machine may also skip ticks: then the feed made none).
+    let dropped = dash
+        .telemetry_dropped_for(abuse::local_addr(&ws))
+        .expect("the websocket is connected");
+    let (first, last) = (seqs[0], *seqs.last().unwrap());
+    let mut made = Vec::new();
+    while made.last().is_none_or(|&s| s < last) {
+        let seq = feed.recv().await.expect("the test's feed").seq;
+        if seq >= first {
+            made.push(seq);
+        }
+    }
+    assert!(seqs.windows(2).all(|w| w[0] < w[1]), "{seqs:?}");
+    assert!(
+        (made.len() - seqs.len()) as u64 <= dropped + dash.stats().records_missed,
+        "the websocket lost ticks: {} of {} made, {dropped} dropped for it",
+        made.len() - seqs.len(),
+        made.len()
+    );
     let stats = dash.stats();
     assert_eq!(stats.tcp_refused, EXTRA as u64, "{stats:?}");
     assert_eq!(stats.closed_evicted, EXTRA as u64, "{stats:?}");
     assert_eq!(stats.closed_no_upgrade, PENDING as u64, "{stats:?}");
     assert_eq!(stats.pending, 0, "{stats:?}");
-    assert!(
-        ticks as f64 >= (PRE_UPGRADE_LIMIT.as_secs_f64() - 1.0) * 50.0 * 0.5,
-        "{ticks}"
-    );
     // Every idle connection has been closed by the server.
     for mut s in idle {
         let mut buf = [0u8; 16];
