@@ -12,6 +12,36 @@ cd "$(dirname "$0")/.."
 
 step() { printf '\n==> %s\n' "$*"; }
 
+# ---- load mode (PAVLOV_TEST_LOAD=N): N busy loops beside the whole run ---------------------------------
+# The suite must pass on a machine that is busy with other work (issue 23): PAVLOV_TEST_LOAD=2 starts two
+# busy loops before the first step and kills them when the script exits, however it exits. The load
+# average is printed at the start and at the end.
+LOAD_PIDS=()
+load_average() { cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || uptime; }
+stop_load() {
+  local rc=$?
+  if [ "${#LOAD_PIDS[@]}" -gt 0 ]; then
+    printf '\n==> load mode: load average at the end: %s; stopping %s busy loops\n' \
+      "$(load_average)" "${#LOAD_PIDS[@]}"
+    kill "${LOAD_PIDS[@]}" 2>/dev/null || true
+    wait "${LOAD_PIDS[@]}" 2>/dev/null || true
+  fi
+  exit "$rc"
+}
+if [ -n "${PAVLOV_TEST_LOAD:-}" ]; then
+  case "$PAVLOV_TEST_LOAD" in
+    '' | *[!0-9]*) echo "PAVLOV_TEST_LOAD must be a number of busy loops, not '$PAVLOV_TEST_LOAD'" >&2; exit 2 ;;
+  esac
+  trap stop_load EXIT
+  trap 'exit 130' INT TERM
+  for _ in $(seq 1 "$PAVLOV_TEST_LOAD"); do
+    sh -c 'while :; do :; done' &
+    LOAD_PIDS+=("$!")
+  done
+  step "load mode: $PAVLOV_TEST_LOAD busy loops beside the suite (pids ${LOAD_PIDS[*]}); load average at the start: $(load_average)"
+fi
+# ---- end of load mode ------------------------------------------------------------------------------------
+
 if ! command -v chromium >/dev/null 2>&1 && [ ! -x /usr/bin/chromium ]; then
   step "installing Debian's chromium for the browser test"
   SUDO=""

@@ -422,6 +422,7 @@ async fn ws_handler(
         &state.hello_run,
     );
     let session = Session {
+        peer,
         hub: state.hub.clone(),
         commands: state.commands.clone(),
         access,

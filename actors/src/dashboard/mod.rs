@@ -344,6 +344,13 @@ impl Dashboard {
         self.state.stats()
     }
 
+    /// Telemetry dropped so far for the websocket client connected from `client` (its local address),
+    /// `None` when no such client is connected: a slow client's losses are its own, and a test can tell
+    /// them from another client's.
+    pub fn telemetry_dropped_for(&self, client: SocketAddr) -> Option<u64> {
+        self.state.session_counters.telemetry_dropped_for(client)
+    }
+
     /// Closes every connection (code 1001) and stops listening.
     pub async fn shutdown(mut self) {
         self.cancel.cancel();

@@ -257,7 +257,6 @@ impl<T> OutQueue<T> {
     }
 
     /// Telemetry dropped so far.
-    #[cfg(test)]
     pub(crate) fn dropped(&self) -> u64 {
         self.dropped.load(Ordering::Relaxed)
     }

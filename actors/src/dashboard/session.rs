@@ -16,8 +16,10 @@
 //! slowed by TCP, not by memory) for up to [`UNREAD_PATIENCE`], then disconnects the client. Each way a
 //! connection can be closed for misbehaving is counted in `SessionCounters`.
 
-use std::sync::Arc;
+use std::collections::HashMap;
+use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError, Weak};
 use std::time::Duration;
 
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, close_code};
@@ -81,10 +83,62 @@ pub(crate) struct SessionCounters {
     pub(crate) closed_protocol: AtomicU64,
     /// Connections closed with 1007 for a text message that is not UTF-8.
     pub(crate) closed_invalid_utf8: AtomicU64,
+    /// Each connected client's queue, by the client's address: what it dropped, for the tests that check
+    /// that a slow client's losses are its own ([`SessionCounters::telemetry_dropped_for`]).
+    queues: Mutex<HashMap<SocketAddr, Weak<OutQueue<Out>>>>,
+}
+
+impl SessionCounters {
+    /// Telemetry dropped so far for the client connected from `peer` (`None`: no such client now).
+    pub(crate) fn telemetry_dropped_for(&self, peer: SocketAddr) -> Option<u64> {
+        let queues = self.queues.lock().unwrap_or_else(PoisonError::into_inner);
+        queues
+            .get(&peer)
+            .and_then(Weak::upgrade)
+            .map(|q| q.dropped())
+    }
+
+    /// Lists `queue` as `peer`'s until the returned guard is dropped.
+    fn register(self: &Arc<Self>, peer: SocketAddr, queue: &Arc<OutQueue<Out>>) -> Registered {
+        let queue = Arc::downgrade(queue);
+        let mut queues = self.queues.lock().unwrap_or_else(PoisonError::into_inner);
+        queues.insert(peer, queue.clone());
+        Registered {
+            counters: self.clone(),
+            peer,
+            queue,
+        }
+    }
+}
+
+/// A connection's place in [`SessionCounters`]'s list of queues, taken out when the connection ends.
+struct Registered {
+    counters: Arc<SessionCounters>,
+    peer: SocketAddr,
+    queue: Weak<OutQueue<Out>>,
+}
+
+impl Drop for Registered {
+    fn drop(&mut self) {
+        let mut queues = self
+            .counters
+            .queues
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        // Only this connection's: a later one may have the same address once this socket is gone.
+        if queues
+            .get(&self.peer)
+            .is_some_and(|q| q.ptr_eq(&self.queue))
+        {
+            queues.remove(&self.peer);
+        }
+    }
 }
 
 /// Everything a session needs.
 pub(crate) struct Session {
+    /// The client's address.
+    pub(crate) peer: SocketAddr,
     /// Where the telemetry comes from.
     pub(crate) hub: HubHandle,
     /// The server's command inbox.
@@ -148,6 +202,7 @@ impl Session {
         tracing::debug!(access = ?self.access, "websocket client connected");
         let (sink, stream) = socket.split();
         let queue = Arc::new(OutQueue::new(self.queue));
+        let _registered = self.counters.register(self.peer, &queue);
         let stride = Arc::new(AtomicU64::new(1));
         let watcher = self.access == Access::Watch;
         let (rx, snapshot) = self.hub.join();
@@ -619,4 +674,35 @@ async fn write(
         }
     }
     let _ = sink.send(Message::Close(None)).await;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_clients_drops_are_read_by_its_address_while_it_is_connected() {
+        let counters = Arc::new(SessionCounters::default());
+        let (a, b): (SocketAddr, SocketAddr) = (
+            "127.0.0.1:4000".parse().unwrap(),
+            "127.0.0.1:4001".parse().unwrap(),
+        );
+        let slow = Arc::new(OutQueue::new(1));
+        let fast = Arc::new(OutQueue::new(1));
+        let slow_seat = counters.register(a, &slow);
+        let fast_seat = counters.register(b, &fast);
+        for _ in 0..3 {
+            slow.push_telemetry(Out::Text(Utf8Bytes::from_static("tick")));
+        }
+        assert_eq!(counters.telemetry_dropped_for(a), Some(2));
+        assert_eq!(counters.telemetry_dropped_for(b), Some(0));
+        // A later connection from the same address replaces the entry; the earlier one's end leaves it.
+        let again = Arc::new(OutQueue::new(1));
+        let again_seat = counters.register(a, &again);
+        drop(slow_seat);
+        assert_eq!(counters.telemetry_dropped_for(a), Some(0));
+        drop((again_seat, fast_seat));
+        assert_eq!(counters.telemetry_dropped_for(a), None);
+        assert_eq!(counters.telemetry_dropped_for(b), None);
+    }
 }

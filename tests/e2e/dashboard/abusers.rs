@@ -21,6 +21,14 @@ const WINDOW: u64 = 200;
 /// How long any one step may take before the test gives up.
 pub const PATIENCE: Duration = Duration::from_secs(60);
 
+/// The local address of a client's socket (the endpoint knows the client by it).
+pub fn local_addr(ws: &Ws) -> SocketAddr {
+    match ws.get_ref() {
+        MaybeTlsStream::Plain(s) => s.local_addr().expect("a connected socket"),
+        _ => unreachable!("the tests connect without TLS"),
+    }
+}
+
 /// Connects and reads the `hello`.
 pub async fn connect(addr: SocketAddr) -> Result<Ws, WsError> {
     let (mut ws, _) = tokio_tungstenite::connect_async(format!("ws://{addr}/ws")).await?;

@@ -25,6 +25,50 @@ use futures_util::StreamExt;
 use serde_json::Value;
 use tokio_tungstenite::tungstenite::Message;
 
+/// The value of the unlabelled sample `name` on the `/metrics` of the server whose dashboard is at
+/// `url` (`None` while it does not answer, or has no such sample).
+pub(super) async fn metric(url: &str, name: &str) -> Option<f64> {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let host = url
+        .trim_start_matches("http://")
+        .split('/')
+        .next()
+        .unwrap_or_default()
+        .to_string();
+    let mut s = tokio::net::TcpStream::connect(&host).await.ok()?;
+    s.write_all(
+        format!("GET /metrics HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n").as_bytes(),
+    )
+    .await
+    .ok()?;
+    let mut text = String::new();
+    tokio::time::timeout(Duration::from_secs(10), s.read_to_string(&mut text))
+        .await
+        .ok()?
+        .ok()?;
+    text.lines().find_map(|l| {
+        let (n, v) = l.split_once(' ')?;
+        (n == name).then(|| v.trim().parse().ok()).flatten()
+    })
+}
+
+/// Waits until the server at `url` says (on `/metrics`) that `name` has reached `at_least`: what a page
+/// is opened after, instead of a fixed time that a busy machine may not fill. Fails after 3 minutes.
+pub(super) async fn wait_for_metric(url: &str, name: &str, at_least: f64) {
+    let deadline = Instant::now() + Duration::from_secs(180);
+    loop {
+        let now = metric(url, name).await;
+        if now.is_some_and(|v| v >= at_least) {
+            return;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "{name} is {now:?} after 3 minutes; {at_least} wanted"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
 pub(super) fn repo() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
 }

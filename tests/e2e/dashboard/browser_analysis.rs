@@ -12,10 +12,11 @@ use std::time::Duration;
 use serde_json::Value;
 use tokio::io::{AsyncBufReadExt, BufReader};
 
-use super::browser::{Serve, preflight, repo, start_server_at, target_dir};
+use super::browser::{Serve, preflight, repo, start_server_at, target_dir, wait_for_metric};
 
-/// How long the server runs before the page is opened, so that the page has a past to be told of.
-const RUN_BEFORE_OPENING: Duration = Duration::from_secs(5);
+/// Ticks the server has fired before the page is opened, so that the page has a past to be told of (the
+/// page wants to open at least 150 ticks into the run): 5 s of them at 50 Hz, however long they take.
+const TICKS_BEFORE_OPENING: f64 = 250.0;
 
 /// Stops a server on a blocking thread (its drop waits for the process to exit).
 async fn stop(serve: Serve) {
@@ -32,7 +33,7 @@ async fn the_dashboard_pauses_zooms_marks_events_and_greys_out_when_the_server_s
         .trim_start_matches("http://")
         .trim_end_matches('/')
         .to_string();
-    tokio::time::sleep(RUN_BEFORE_OPENING).await;
+    wait_for_metric(&url, "pavlov_ticks_fired_total", TICKS_BEFORE_OPENING).await;
     let screenshot = target_dir().join("dashboard-analysis.png");
     let disconnected = target_dir().join("dashboard-analysis-disconnected.png");
     let _ = std::fs::remove_file(&screenshot);

@@ -10,16 +10,17 @@ use std::time::Duration;
 
 use serde_json::Value;
 
-use super::browser::{Serve, preflight, repo, start_server_at, target_dir};
+use super::browser::{Serve, preflight, repo, start_server_at, target_dir, wait_for_metric};
 
-/// How long the server runs before the page is opened, so that returns are already being paired.
-const RUN_BEFORE_OPENING: Duration = Duration::from_secs(3);
+/// Ticks the server has fired before the page is opened, so that returns are already being paired: 3 s
+/// of them at 50 Hz, however long they take.
+const TICKS_BEFORE_OPENING: f64 = 150.0;
 
+/// The Horde runs under `SCHED_IDLE` (the default): on a busy machine it learns only when a core has
+/// nothing else to do, so the page is opened once it has learned some ticks (its values then move).
 const HORDE: &str = r#"
 [horde]
 precision = "f32"
-# The tests share two loaded cores: under SCHED_IDLE (the default) the Horde would get no CPU.
-scheduling = "normal"
 [[horde.families]]
 name = "nexting"
 cumulants = ["obs/*"]
@@ -33,7 +34,10 @@ features = { kind = "one_dim", all_obs = true, tiles = 4 }
 async fn run_page(args: &[&str], expect: &str, screenshot: &std::path::Path) -> Value {
     preflight();
     let (serve, url) = start_server_at("127.0.0.1:0", args);
-    tokio::time::sleep(RUN_BEFORE_OPENING).await;
+    wait_for_metric(&url, "pavlov_ticks_fired_total", TICKS_BEFORE_OPENING).await;
+    if expect == "horde" {
+        wait_for_metric(&url, "pavlov_horde_ticks_learned_total", 50.0).await;
+    }
     let _ = std::fs::remove_file(screenshot);
     let node = tokio::process::Command::new("node")
         .arg(repo().join("web/tests/learning.e2e.mjs"))

@@ -19,8 +19,6 @@ const HORIZON: u64 = 113;
 const HORDE: &str = r#"
 [horde]
 precision = "f32"
-# The tests share two loaded cores: under SCHED_IDLE (the default) the Horde would get no CPU.
-scheduling = "normal"
 [[horde.families]]
 name = "nexting"
 cumulants = ["obs/*"]
@@ -57,6 +55,35 @@ async fn gather(
     (ticks, kept)
 }
 
+/// How long a test waits, in wall-clock time, for what it needs to have arrived. The Horde runs under
+/// `SCHED_IDLE` (the default): on a busy machine it learns, and so publishes new values, only when a core
+/// has nothing else to do, so a test waits for the values it needs rather than for a fixed time.
+const PATIENCE: Duration = Duration::from_secs(180);
+
+/// Reads messages until `enough` says the kept messages of `kinds` suffice (or [`PATIENCE`] is out: then it
+/// fails, naming `what`); returns them.
+async fn gather_until(
+    ws: &mut Ws,
+    kinds: &[&str],
+    what: &str,
+    enough: impl Fn(&[Value]) -> bool,
+) -> Vec<Value> {
+    let mut kept = Vec::new();
+    let end = Instant::now() + PATIENCE;
+    while !enough(&kept) {
+        assert!(
+            Instant::now() < end,
+            "{what}: only {} messages in {PATIENCE:?}",
+            kept.len()
+        );
+        let v = next_json(ws).await;
+        if kinds.iter().any(|k| v["type"] == *k) {
+            kept.push(v);
+        }
+    }
+    kept
+}
+
 fn stall_value(tick: &Value) -> f64 {
     tick["predictions"][0]["value"].as_f64().unwrap()
 }
@@ -69,16 +96,12 @@ fn cumulant_and_discount(tick: &Value) -> (f64, f64) {
     }
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn learning_messages_carry_td_errors_and_returns_that_the_ticks_confirm() {
-    let lab = Lab::start(|_| {}).await;
-    let (mut ws, hello) = ws_from(loopback(2), lab.addr(), None).await.unwrap();
-    assert_eq!(hello["signals"]["predictions"], json!(["stall"]));
-    let (ticks, learning) = gather(&mut ws, Duration::from_secs(5), &["learning"]).await;
-    assert!(learning.len() >= 10, "{} learning messages", learning.len());
+/// Checks every TD error and every realised return of `learning` that the ticks received allow
+/// (recomputed from them); returns how many of each were checked.
+fn check_learning(ticks: &BTreeMap<u64, Value>, learning: &[Value]) -> (usize, usize) {
     let mut td_checked = 0;
     let mut returns_checked = 0;
-    for m in &learning {
+    for m in learning {
         let p = &m["predictions"][0];
         assert_eq!(p["name"], "stall", "{m}");
         assert_eq!(p["tau"], 25.0);
@@ -137,7 +160,30 @@ async fn learning_messages_carry_td_errors_and_returns_that_the_ticks_confirm() 
         }
         assert!(p["error"]["pairs"].as_u64().is_some(), "{m}");
     }
-    // 5 s at 50 Hz: about 250 δ, and the returns of the ticks more than a horizon old.
+    (td_checked, returns_checked)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn learning_messages_carry_td_errors_and_returns_that_the_ticks_confirm() {
+    let lab = Lab::start(|_| {}).await;
+    let (mut ws, hello) = ws_from(loopback(2), lab.addr(), None).await.unwrap();
+    assert_eq!(hello["signals"]["predictions"], json!(["stall"]));
+    // 5 s at 50 Hz give about 250 δ and the returns of the ticks more than a horizon old; on a busy
+    // machine the ticker may skip ticks (a return needs a horizon of them in a row), so the test reads
+    // on until it has checked as many, rather than for a fixed time.
+    let mut ticks = BTreeMap::new();
+    let mut learning = Vec::new();
+    let end = Instant::now() + PATIENCE;
+    let (td_checked, returns_checked) = loop {
+        let (more_ticks, more) = gather(&mut ws, Duration::from_secs(5), &["learning"]).await;
+        ticks.extend(more_ticks);
+        learning.extend(more);
+        let (td, returns) = check_learning(&ticks, &learning);
+        if (td >= 150 && returns >= 50) || Instant::now() > end {
+            break (td, returns);
+        }
+    };
+    assert!(learning.len() >= 10, "{} learning messages", learning.len());
     assert!(td_checked >= 150, "{td_checked} TD errors checked");
     assert!(returns_checked >= 50, "{returns_checked} returns checked");
     let last = &learning.last().unwrap()["predictions"][0]["error"];
@@ -149,6 +195,7 @@ async fn learning_messages_carry_td_errors_and_returns_that_the_ticks_confirm() 
 
     // A client joining now gets the recent `learning` messages after its history, before the live ticks,
     // oldest first, and then the live ones without a repeat.
+    let mut feed = lab.server.feed.subscribe();
     let (mut late, _) = ws_from(loopback(3), lab.addr(), None).await.unwrap();
     let mut recent = Vec::new();
     let first_tick = loop {
@@ -159,15 +206,32 @@ async fn learning_messages_carry_td_errors_and_returns_that_the_ticks_confirm() 
             _ => {}
         }
     };
-    assert!(recent.len() >= 20, "{recent:?}");
+    // The hub keeps the last 150; every one the first client got is among them, and more since.
+    assert!(
+        recent.len() >= learning.len().min(150),
+        "{} recent after {} live: {recent:?}",
+        recent.len(),
+        learning.len()
+    );
     assert!(
         recent.windows(2).all(|w| w[1] > w[0] && w[1] % 10 == 0),
         "{recent:?}"
     );
-    assert!(
-        *recent.last().unwrap() + 20 >= first_tick,
-        "{recent:?} then tick {first_tick}"
-    );
+    // The newest: the hub makes one on every tenth tick, and no such tick was made between the last of
+    // them and the client's first live tick (on a busy machine the ticker may skip ticks, so this asks
+    // the feed which ticks were made rather than counting on every tenth one).
+    let newest_recent = *recent.last().unwrap();
+    loop {
+        let seq = feed.recv().await.unwrap().seq;
+        if seq >= first_tick {
+            break;
+        }
+        assert!(
+            seq % 10 != 0 || seq <= newest_recent,
+            "tick {seq} was made after the newest recent learning message {newest_recent} and before \
+             the first live tick {first_tick}: {recent:?}"
+        );
+    }
     let next_live = loop {
         let v = next_json(&mut late).await;
         if v["type"] == "learning" {
@@ -285,18 +349,24 @@ async fn a_client_watches_the_horde_at_a_bounded_rate_and_bad_requests_are_refus
         "ack"
     );
 
-    // Every name once, in order, then values at no more than the rate asked for.
+    // Every name once, in order, then values at no more than the rate asked for (timed from before the
+    // request: nothing of it can go out earlier).
+    let started = Instant::now();
     let ack = command(&mut ws, json!({"cmd": "horde_watch", "hz": 10}), 7).await;
     assert_eq!(ack["type"], "ack", "{ack}");
     assert_eq!(ack["result"]["total"], 132);
     assert_eq!(ack["result"]["count"], 132);
     assert_eq!(ack["result"]["names"], true);
     assert_eq!(ack["result"]["encoding"], "bf16le-base64");
-    let started = Instant::now();
-    let (_, got) = gather(
+    // At least 3 s of it, and at least 5 values (new values come as fast as the Horde learns).
+    let got = gather_until(
         &mut ws,
-        Duration::from_secs(3),
         &["horde_names", "horde_values"],
+        "horde_values at 10 Hz",
+        |got| {
+            started.elapsed() >= Duration::from_secs(3)
+                && got.iter().filter(|m| m["type"] == "horde_values").count() >= 5
+        },
     )
     .await;
     let elapsed = started.elapsed().as_secs_f64();
@@ -352,15 +422,15 @@ async fn a_client_watches_the_horde_at_a_bounded_rate_and_bad_requests_are_refus
     )
     .await;
     assert_eq!(ack["result"]["names"], false, "{ack}");
-    let (_, got) = gather(
+    let got = gather_until(
         &mut ws,
-        Duration::from_secs(2),
         &["horde_names", "horde_values"],
+        "a value of the window",
+        |got| got.iter().any(|m| m["from"] == 10),
     )
     .await;
     assert!(got.iter().all(|m| m["type"] == "horde_values"));
     let windowed: Vec<&Value> = got.iter().filter(|m| m["from"] == 10).collect();
-    assert!(!windowed.is_empty());
     // At most one of the old window was still on its way.
     assert!(got.len() - windowed.len() <= 1, "{got:?}");
     for m in windowed {
@@ -408,23 +478,38 @@ async fn a_watcher_that_stops_reading_holds_no_backlog_of_horde_values() {
     )
     .await
     .unwrap();
+    let started = Instant::now();
     ws.send(Message::text(
         json!({"cmd": "horde_watch", "hz": 10, "id": 1}).to_string(),
     ))
     .await
     .unwrap();
-    // Not reading for 4 s: 40 samples asked for, most of them while the socket is full.
-    tokio::time::sleep(Duration::from_secs(4)).await;
-    let stats = lab.dash.stats();
+    // Not reading until the server has had new values it could not hand over (the socket full): it skips
+    // them rather than queueing them. (The Horde makes new values only as fast as it gets the CPU.)
+    let end = Instant::now() + PATIENCE;
+    let stats = loop {
+        let stats = lab.dash.stats();
+        if stats.horde_values_skipped >= 5 {
+            break stats;
+        }
+        assert!(
+            Instant::now() < end,
+            "the server kept queueing Horde values for a client that reads nothing: {stats:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    // What went out is at most the rate asked for (the socket's buffers hold a few).
+    let elapsed = started.elapsed().as_secs_f64();
     assert!(
-        stats.horde_values_skipped >= 10,
-        "the server kept queueing Horde values for a client that reads nothing: {stats:?}"
+        stats.horde_values as f64 <= 10.0 * elapsed + 1.0,
+        "{stats:?} in {elapsed:.1} s"
     );
-    assert!(stats.horde_values <= 40, "{stats:?}");
     // Reading again: the connection is still open and fresh values keep coming, newest first, no stale run.
-    let (_, got) = gather(&mut ws, Duration::from_secs(3), &["horde_values"]).await;
+    let got = gather_until(&mut ws, &["horde_values"], "fresh values", |got| {
+        got.len() >= 5
+    })
+    .await;
     let seqs: Vec<u64> = got.iter().map(|m| m["seq"].as_u64().unwrap()).collect();
-    assert!(seqs.len() >= 5, "{seqs:?}");
     assert!(seqs.windows(2).all(|w| w[1] > w[0]), "{seqs:?}");
     for m in &got {
         assert_eq!(decode(m).len(), 880);

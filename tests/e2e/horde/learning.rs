@@ -13,7 +13,7 @@ use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::telemetry::prometheus_check::{Family, parse};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
-use super::{small_horde, stall_with};
+use super::{LEARNING_PATIENCE, learned, small_horde, stall_with};
 
 const HORDE_FAMILIES: [(&str, &str); 9] = [
     ("pavlov_horde_predictions", "gauge"),
@@ -74,14 +74,9 @@ async fn a_horde_learns_and_metrics_show_it() {
     assert_eq!(view.names.len(), (44 + 2) * 2);
     assert!(view.names.contains(&"probe/bias@10".to_string()));
     let mut status = view.status.clone();
-    // The Horde publishes its figures every 25 ticks learned.
-    tokio::time::timeout(Duration::from_secs(20), async {
-        while status.borrow_and_update().ticks_learned < 50 {
-            status.changed().await.unwrap();
-        }
-    })
-    .await
-    .expect("the Horde learns");
+    // The Horde publishes its figures every 25 ticks learned; under SCHED_IDLE on a busy machine it learns
+    // slowly, so the test waits for ticks learned, not for time.
+    learned(&mut status, 50).await;
 
     let first = scrape(dash.local_addr()).await;
     for (name, kind) in HORDE_FAMILIES {
@@ -89,13 +84,13 @@ async fn a_horde_learns_and_metrics_show_it() {
         assert_eq!(f.kind, kind, "{name}");
     }
     let fired = value(&first, "pavlov_ticks_fired_total");
-    let learned = value(&first, "pavlov_horde_ticks_learned_total");
+    let learned_then = value(&first, "pavlov_horde_ticks_learned_total");
     let skipped = value(&first, "pavlov_horde_skipped_total");
     assert_eq!(value(&first, "pavlov_horde_predictions"), 92.0);
-    assert!(learned >= 50.0, "{learned}");
+    assert!(learned_then >= 50.0, "{learned_then}");
     assert!(
-        learned + skipped <= fired,
-        "{learned} + {skipped} > {fired}"
+        learned_then + skipped <= fired,
+        "{learned_then} + {skipped} > {fired}"
     );
     // A chain breaks at a skipped tick or one learning did not offer (a stale observation).
     assert!(value(&first, "pavlov_horde_chain_breaks_total") <= fired);
@@ -106,26 +101,28 @@ async fn a_horde_learns_and_metrics_show_it() {
     );
     assert!(0.0 < p50 && p50 <= p99 && p99 <= max, "{p50} {p99} {max}");
     assert_eq!(value(&first, "pavlov_horde_checkpoint_errors_total"), 0.0);
-    // The values are published too, and they move: a bias at τ = 10 learns towards Σγᵏ = 10.
-    let values = view.values.borrow().clone();
-    assert_eq!(values.values.len(), 92);
+    // The values are published too, and they move: a bias at τ = 10 learns towards Σγᵏ = 10. (A tick
+    // learned after a skipped one only starts a new chain, so how far it has come after a number of ticks
+    // learned depends on how many were skipped: the test waits for the value.)
+    assert_eq!(view.values.borrow().values.len(), 92);
     let bias = view
         .names
         .iter()
         .position(|n| n == "probe/bias@10")
         .unwrap();
-    assert!(values.values[bias] > 0.5, "{}", values.values[bias]);
-
-    // Learning goes on.
-    tokio::time::timeout(Duration::from_secs(20), async {
-        while (status.borrow_and_update().ticks_learned as f64) < learned + 50.0 {
-            status.changed().await.unwrap();
+    let mut values = view.values.clone();
+    tokio::time::timeout(LEARNING_PATIENCE, async {
+        while values.borrow_and_update().values[bias] <= 0.5 {
+            values.changed().await.unwrap();
         }
     })
     .await
-    .expect("the Horde keeps learning");
+    .unwrap_or_else(|_| panic!("the bias stayed at {}", values.borrow().values[bias]));
+
+    // Learning goes on.
+    learned(&mut status, learned_then as u64 + 50).await;
     let second = scrape(dash.local_addr()).await;
-    assert!(value(&second, "pavlov_horde_ticks_learned_total") >= learned + 50.0);
+    assert!(value(&second, "pavlov_horde_ticks_learned_total") >= learned_then + 50.0);
     dash.shutdown().await;
     server.shutdown().await;
 
