@@ -35,7 +35,6 @@ pub(crate) mod signals;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::sync::atomic::AtomicU64;
 use std::time::Duration;
 
 use foxglove::{Context, WebSocketServer, WebSocketServerHandle};
@@ -260,7 +259,7 @@ impl Foxglove {
             policy,
             upstream,
             counters: counters.clone(),
-            open: Arc::new(AtomicU64::new(0)),
+            seats: Default::default(),
         });
         endpoint
             .tasks

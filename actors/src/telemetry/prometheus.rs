@@ -315,11 +315,12 @@ fn foxglove_metrics(e: &mut Exposition, f: &FoxgloveFigures) {
     e.family(
         "pavlov_foxglove_refused_total",
         "counter",
-        "Foxglove connections refused: token (missing or wrong, 401), busy (too many open, 503), bad_request (not a websocket request, too large or too slow).",
+        "Foxglove connections refused: token (missing or wrong, 401), busy (too many open, 503), address (the address has its share of the seats, 503), bad_request (not a websocket request, too large or too slow).",
     );
     for (reason, value) in [
         ("token", f.refused_token),
         ("busy", f.refused_busy),
+        ("address", f.refused_address),
         ("bad_request", f.refused_bad_request),
     ] {
         e.sample(
@@ -328,6 +329,11 @@ fn foxglove_metrics(e: &mut Exposition, f: &FoxgloveFigures) {
             value as f64,
         );
     }
+    e.counter(
+        "pavlov_foxglove_evicted_total",
+        "Foxglove clients closed because they read nothing for 10 s while data waited for them.",
+        f.evicted_slow,
+    );
     e.family(
         "pavlov_foxglove_missed_total",
         "counter",
