@@ -8,6 +8,7 @@ mod experiment;
 #[cfg(feature = "zenoh")]
 mod fleet;
 mod foxglove;
+mod foxglove_spec;
 mod horde;
 mod house;
 mod runtime;

@@ -6,8 +6,9 @@
 //! - no token configured (only possible on loopback): every client may watch;
 //! - a token configured: a client presents it as the `token` query parameter (`ws://HOST:8765/?token=T`,
 //!   which is what the Foxglove app can send: it connects to the URL it is given) or as a websocket
-//!   subprotocol entry `token.<T>` (next to `foxglove.sdk.v1`, for clients that can set one). A wrong
-//!   token is refused (401); no token is refused (401) unless `watch_without_token` is set.
+//!   subprotocol entry `token.<T>` (next to `foxglove.websocket.v1` or `foxglove.sdk.v1`, for clients that
+//!   can set one). A wrong token is refused (401); no token is refused (401) unless `watch_without_token`
+//!   is set.
 //!
 //! The subprotocol: the published protocol (foxglove/ws-protocol `docs/spec.md`) names
 //! [`SPEC_SUBPROTOCOL`] (`foxglove.websocket.v1`); Foxglove's SDK negotiates only its own names

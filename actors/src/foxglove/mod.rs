@@ -2,7 +2,9 @@
 //!
 //! The endpoint speaks the Foxglove WebSocket protocol through Foxglove's own SDK (the `foxglove` crate's
 //! `WebSocketServer`), so the Foxglove app (app.foxglove.dev or the desktop app, "Open connection" →
-//! "Foxglove WebSocket" → `ws://127.0.0.1:8765`) can plot any signal with its panels. Four JSON channels
+//! "Foxglove WebSocket" → `ws://127.0.0.1:8765`) can plot any signal with its panels. A client offers the
+//! published protocol's subprotocol `foxglove.websocket.v1` or the SDK's `foxglove.sdk.v1` (the gate
+//! translates the first for the SDK). Four JSON channels
 //! with JSON Schemas:
 //! - `/pavlov/ticks`: every [`TickRecord`](pavlov::record::TickRecord), as the recorder writes it, logged
 //!   at the tick's scheduled time;
