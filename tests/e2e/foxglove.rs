@@ -259,6 +259,25 @@ async fn a_foxglove_client_receives_every_tick_in_order_with_the_events_and_the_
     server.shutdown().await;
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn foxgloves_client_library_connects_offering_its_own_subprotocol_foxglove_websocket_v1() {
+    require_client();
+    let (server, fox) = start(stall_config()).await;
+    let published = published_seqs(&server);
+    let (lines, code) = ClientRun::spawn(&fox.url(), &["--ticks", "25", "--spec-subprotocol"])
+        .finish()
+        .await;
+    assert_eq!(code, 0, "{lines:#?}");
+    let open = of_kind(&lines, "open");
+    assert_eq!(open.len(), 1, "{lines:#?}");
+    assert_eq!(open[0]["protocol"], "foxglove.websocket.v1");
+    let ticks = of_kind(&lines, "tick");
+    assert_eq!(ticks.len(), 25);
+    assert_every_record_in_order(&ticks, &published.lock().unwrap());
+    fox.shutdown().await;
+    server.shutdown().await;
+}
+
 async fn scrape_metrics(addr: SocketAddr) -> String {
     let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
     let request = format!("GET /metrics HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n");
@@ -339,15 +358,23 @@ async fn without_the_token_a_foxglove_client_is_refused_and_with_it_can_only_rea
     let failures = of_kind(&lines, "serviceCallFailure");
     assert_eq!(failures.len(), 1, "{lines:#?}");
     assert!(of_kind(&lines, "parameterValues").is_empty());
-    // Nothing reached the server: no event was made, the e-stop never latched.
+    // Nothing reached the server: no command's event was made, the e-stop never latched. (A busy host
+    // may stall the pipeline or the simulated link meanwhile: those events are the host's, not a client's.)
     assert!(ticks.iter().all(|t| t["estop"] == false));
-    assert!(
-        matches!(
-            events.try_recv(),
-            Err(tokio::sync::broadcast::error::TryRecvError::Empty)
-        ),
-        "a Foxglove client changed something"
-    );
+    loop {
+        match events.try_recv() {
+            Ok(event) => assert!(
+                matches!(
+                    event.kind,
+                    pavlov::event::EventKind::PipelineStall { .. }
+                        | pavlov::event::EventKind::Link { .. }
+                ),
+                "a Foxglove client changed something: {event:?}"
+            ),
+            Err(tokio::sync::broadcast::error::TryRecvError::Empty) => break,
+            Err(e) => panic!("the event log: {e}"),
+        }
+    }
 
     // /metrics counts both refusals and the one connection.
     let text = scrape_metrics(dash.local_addr()).await;

@@ -9,6 +9,7 @@ mod experiment;
 #[cfg(feature = "zenoh")]
 mod fleet;
 mod foxglove;
+mod foxglove_spec;
 mod horde;
 mod house;
 mod runtime;

@@ -6,6 +6,7 @@
 // node client.mjs URL [--ticks N] [--events N] [--try-commands] [--timeout-ms MS]
 //   --ticks N        subscribe to every /pavlov/ channel and stop after N /pavlov/ticks messages
 //   --events N       also wait for N /pavlov/events messages
+//   --spec-subprotocol  offer foxglove.websocket.v1 (the library's default) instead of foxglove.sdk.v1
 //   --try-commands   once connected, try everything a Foxglove client could do beyond reading: advertise a
 //                    channel and publish on it, get and set parameters, call a service; print the replies
 //
@@ -14,8 +15,6 @@ import WebSocket from "ws";
 import protocol from "@foxglove/ws-protocol";
 
 const { FoxgloveClient } = protocol;
-// The Foxglove SDK's server speaks the ws-protocol messages under the subprotocol "foxglove.sdk.v1".
-const SUBPROTOCOL = "foxglove.sdk.v1";
 
 const args = process.argv.slice(2);
 const url = args[0];
@@ -27,6 +26,11 @@ const ticksWanted = option("--ticks", 0);
 const eventsWanted = option("--events", 0);
 const timeoutMs = option("--timeout-ms", 30000);
 const tryCommands = args.includes("--try-commands");
+// The subprotocol offered: the SDK's name "foxglove.sdk.v1" unless --spec-subprotocol, which offers the
+// library's own (the published spec's), FoxgloveClient.SUPPORTED_SUBPROTOCOL ("foxglove.websocket.v1").
+const SUBPROTOCOL = args.includes("--spec-subprotocol")
+  ? FoxgloveClient.SUPPORTED_SUBPROTOCOL
+  : "foxglove.sdk.v1";
 
 const out = (object) =>
   process.stdout.write(

@@ -2,7 +2,9 @@
 //!
 //! The endpoint speaks the Foxglove WebSocket protocol through Foxglove's own SDK (the `foxglove` crate's
 //! `WebSocketServer`), so the Foxglove app (app.foxglove.dev or the desktop app, "Open connection" →
-//! "Foxglove WebSocket" → `ws://127.0.0.1:8765`) can plot any signal with its panels. Four JSON channels
+//! "Foxglove WebSocket" → `ws://127.0.0.1:8765`) can plot any signal with its panels. A client offers the
+//! published protocol's subprotocol `foxglove.websocket.v1` or the SDK's `foxglove.sdk.v1` (the gate
+//! translates the first for the SDK). Four JSON channels
 //! with JSON Schemas:
 //! - `/pavlov/ticks`: every [`TickRecord`](pavlov::record::TickRecord), as the recorder writes it, logged
 //!   at the tick's scheduled time;
@@ -35,7 +37,6 @@ pub(crate) mod signals;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::sync::atomic::AtomicU64;
 use std::time::Duration;
 
 use foxglove::{Context, WebSocketServer, WebSocketServerHandle};
@@ -261,7 +262,7 @@ impl Foxglove {
             policy,
             upstream,
             counters: counters.clone(),
-            open: Arc::new(AtomicU64::new(0)),
+            seats: Default::default(),
         });
         endpoint
             .tasks

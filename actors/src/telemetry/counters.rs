@@ -203,8 +203,12 @@ pub(crate) struct FoxgloveCounters {
     pub(crate) refused_token: AtomicU64,
     /// Connections refused because `foxglove::gate::MAX_CONNECTIONS` were open (HTTP 503).
     pub(crate) refused_busy: AtomicU64,
+    /// Connections refused because `foxglove::gate::MAX_PER_ADDRESS` were open from their address (503).
+    pub(crate) refused_address: AtomicU64,
     /// Connections closed because their request was not a websocket request, too large, or too slow.
     pub(crate) refused_bad_request: AtomicU64,
+    /// Clients closed because they read nothing for `foxglove::gate::STALL_LIMIT` while data waited.
+    pub(crate) evicted_slow: AtomicU64,
     /// Tick records the publisher missed because it fell behind the tick feed.
     pub(crate) ticks_missed: AtomicU64,
     /// Events the publisher missed because it fell behind the event log.
@@ -222,8 +226,12 @@ pub struct FoxgloveFigures {
     pub refused_token: u64,
     /// Connections refused because too many were open.
     pub refused_busy: u64,
+    /// Connections refused because their address had its share of the seats.
+    pub refused_address: u64,
     /// Connections closed for a bad, over-size or slow request.
     pub refused_bad_request: u64,
+    /// Clients evicted because they stopped reading.
+    pub evicted_slow: u64,
     /// Tick records the publisher missed.
     pub ticks_missed: u64,
     /// Events the publisher missed.
@@ -239,7 +247,9 @@ impl FoxgloveCounters {
             connections: get(&self.connections),
             refused_token: get(&self.refused_token),
             refused_busy: get(&self.refused_busy),
+            refused_address: get(&self.refused_address),
             refused_bad_request: get(&self.refused_bad_request),
+            evicted_slow: get(&self.evicted_slow),
             ticks_missed: get(&self.ticks_missed),
             events_missed: get(&self.events_missed),
         }

@@ -315,11 +315,13 @@ fn foxglove_metrics(e: &mut Exposition, f: &FoxgloveFigures) {
     e.family(
         "pavlov_foxglove_refused_total",
         "counter",
-        "Foxglove connections refused: token (missing or wrong, 401), busy (too many open, 503), bad_request (not a websocket request, too large or too slow).",
+        "Foxglove connections refused: token (missing or wrong, 401), busy (too many open, 503), address (the address has its share of the seats, 503), bad_request (not a websocket request, too large or too slow), write_stall (connected, then closed for taking none of the bytes waiting for it for 10 s).",
     );
     for (reason, value) in [
         ("token", f.refused_token),
         ("busy", f.refused_busy),
+        ("address", f.refused_address),
+        ("write_stall", f.evicted_slow),
         ("bad_request", f.refused_bad_request),
     ] {
         e.sample(
