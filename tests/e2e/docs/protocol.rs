@@ -241,7 +241,14 @@ fn every_event_kind() -> Vec<EventKind> {
         EventKind::WeightsReset,
         EventKind::WeightsSaved { path: "w".into() },
         EventKind::RecordingStarted { path: "r".into() },
-        EventKind::RecordingStopped { path: "r".into() },
+        EventKind::RecordingStopped {
+            path: "r".into(),
+            reason: Some("No space left on device (os error 28)".into()),
+        },
+        EventKind::CheckpointFailed {
+            path: "c".into(),
+            reason: "No space left on device (os error 28)".into(),
+        },
         EventKind::Link {
             state: LinkState::Up,
             trip: None,
@@ -261,6 +268,7 @@ fn every_event_kind() -> Vec<EventKind> {
             | EventKind::WeightsSaved { .. }
             | EventKind::RecordingStarted { .. }
             | EventKind::RecordingStopped { .. }
+            | EventKind::CheckpointFailed { .. }
             | EventKind::Link { .. }
             | EventKind::PipelineStall { .. } => {}
         }
