@@ -346,9 +346,16 @@ mod tests {
         let pair_effect = [0.0, 80.0, -60.0, 40.0, -20.0];
         let reactive: Vec<f64> = pair_effect.iter().map(|e| 150.0 + e).collect();
         let pavlovian: Vec<f64> = reactive.iter().map(|r| r - 10.0).collect();
-        let lead: Vec<f64> = reactive.iter().zip(&pavlovian).map(|(r, p)| r - p).collect();
+        let lead: Vec<f64> = reactive
+            .iter()
+            .zip(&pavlovian)
+            .map(|(r, p)| r - p)
+            .collect();
         let paired = paired_mean_difference(&lead, RESAMPLES, 1).unwrap();
-        assert_eq!((paired.difference, paired.lo, paired.hi), (10.0, 10.0, 10.0));
+        assert_eq!(
+            (paired.difference, paired.lo, paired.hi),
+            (10.0, 10.0, 10.0)
+        );
         let unpaired = mean_difference(&reactive, &pavlovian, RESAMPLES, 1).unwrap();
         assert!(unpaired.lo < 0.0 && unpaired.hi > 20.0, "{unpaired:?}");
     }
@@ -362,7 +369,10 @@ mod tests {
         let offpolicy = [0.0, 0.0, 3.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
         let r = ratio_of_means(&offpolicy, &reactive, RESAMPLES, 1).unwrap();
         assert!((r.change - (0.4 / 41.4 - 1.0)).abs() < 1e-12, "{r:?}");
-        assert!(r.lo >= -1.0 && r.lo <= r.change && r.change <= r.hi, "{r:?}");
+        assert!(
+            r.lo >= -1.0 && r.lo <= r.change && r.change <= r.hi,
+            "{r:?}"
+        );
         // The old construction on the same data does go below −100 %.
         let d = mean_difference(&offpolicy, &reactive, RESAMPLES, 1).unwrap();
         assert!(d.lo / 41.4 < -1.0, "{d:?}");
@@ -373,7 +383,10 @@ mod tests {
         let a = [1.0, 2.0, 3.0, 4.0];
         let b = [2.0, 4.0, 6.0, 8.0];
         let r = ratio_of_means(&b, &a, RESAMPLES, 3).unwrap();
-        assert!((r.change - 1.0).abs() < 1e-12 && r.lo < 1.0 && r.hi > 1.0, "{r:?}");
+        assert!(
+            (r.change - 1.0).abs() < 1e-12 && r.lo < 1.0 && r.hi > 1.0,
+            "{r:?}"
+        );
         // One run a side: the change, no interval; a zero baseline: nothing.
         let one = ratio_of_means(&[3.0], &[4.0], RESAMPLES, 1).unwrap();
         assert!((one.change + 0.25).abs() < 1e-12 && !one.has_interval());

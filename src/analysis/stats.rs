@@ -335,7 +335,10 @@ mod tests {
 
     #[test]
     fn one_value_prints_no_spread() {
-        assert_eq!(mean_se_text(&describe(&[-47.7]), 1), "-47.7 (n = 1: no spread)");
+        assert_eq!(
+            mean_se_text(&describe(&[-47.7]), 1),
+            "-47.7 (n = 1: no spread)"
+        );
         assert_eq!(mean_se_text(&describe(&[2.0, 4.0]), 2), "3.00 ± 1.00");
         assert_eq!(mean_se_text(&describe(&[]), 2), "–");
     }

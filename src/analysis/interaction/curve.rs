@@ -400,7 +400,10 @@ mod tests {
         assert_eq!(leads, vec![30.0; 4]);
         let c = curve(&runs, 2.0, 5);
         let paired = c[0].decision_lead_paired.unwrap();
-        assert_eq!((paired.difference, paired.lo, paired.hi), (30.0, 30.0, 30.0));
+        assert_eq!(
+            (paired.difference, paired.lo, paired.hi),
+            (30.0, 30.0, 30.0)
+        );
         assert_eq!(paired.n_minuend, 4);
         let clustered = c[0].decision_lead.unwrap();
         assert!((clustered.difference - 30.0).abs() < 1e-9);

@@ -154,7 +154,10 @@ pub fn table(s: &InteractionStudy) -> String {
             })
     };
     let holds = if s.holds_from_window == s.holds_from_window_paired {
-        format!("{} (the same with either interval method)", from(s.holds_from_window))
+        format!(
+            "{} (the same with either interval method)",
+            from(s.holds_from_window)
+        )
     } else {
         format!(
             "{} by the two-stage interval, {} by the paired one (the window depends on the method)",
@@ -211,6 +214,7 @@ pub fn table(s: &InteractionStudy) -> String {
             .join(", "),
         s.wall_s
     );
+    let _ = writeln!(t, "{}", crate::experiment::design_notes::interaction());
     t
 }
 

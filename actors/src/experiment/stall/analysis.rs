@@ -236,7 +236,9 @@ mod tests {
         assert_eq!(oc.reactive_range, Some((100.0, 110.0)));
         assert_eq!(oc.pavlovian_range, Some((50.0, 60.0)));
         let (lo, hi) = oc.relative_change_ci.unwrap();
-        assert!(lo >= -1.0 && lo <= oc.relative_change.unwrap() && oc.relative_change.unwrap() <= hi);
+        assert!(
+            lo >= -1.0 && lo <= oc.relative_change.unwrap() && oc.relative_change.unwrap() <= hi
+        );
         assert_eq!(a.first_predictive_stop_s.n, 2);
         assert_eq!(a.first_predictive_stop_s.mean, 6.0);
         assert_eq!(total(&runs[0], "nope"), None);

@@ -547,6 +547,7 @@ pub fn table(study: &PoliciesStudy) -> String {
             );
         }
     }
+    let _ = writeln!(s, "\n{}", crate::experiment::design_notes::stall());
     s
 }
 

@@ -323,5 +323,6 @@ pub fn table(study: &StallStudy) -> String {
         "{:.0} s simulated in {:.1} s of wall time ({:.0}× real time)",
         study.simulated_s, study.wall_s, study.speedup
     );
+    let _ = writeln!(s, "{}", crate::experiment::design_notes::stall());
     s
 }
