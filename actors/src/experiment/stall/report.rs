@@ -174,6 +174,14 @@ fn num(x: f64) -> String {
     }
 }
 
+fn sd(d: &pavlov::analysis::stats::Describe) -> String {
+    if d.n < 2 {
+        "n = 1: no spread".into()
+    } else {
+        num(d.sd)
+    }
+}
+
 fn pm(d: &pavlov::analysis::stats::Describe) -> String {
     match d.n {
         0 => "–".into(),
@@ -257,9 +265,9 @@ pub fn table(study: &StallStudy) -> String {
             s,
             "  {:<28} {} [{}] / {} [{}]",
             c.label,
-            num(c.reactive.sd),
+            sd(&c.reactive),
             range(c.reactive_range),
-            num(c.pavlovian.sd),
+            sd(&c.pavlovian),
             range(c.pavlovian_range)
         );
     }
