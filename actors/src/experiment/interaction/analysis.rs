@@ -181,7 +181,7 @@ pub(crate) fn shifts(runs: &[InteractionRun], seed: u64) -> Shifts {
     // The excess is Pavlovian − reactive: minus the "lead" of the anticipated indicator.
     let excess: Vec<f64> = pair_leads(&timelines, anticipated)
         .iter()
-        .map(|d| -d)
+        .map(|d| 0.0 - d) // not -d: a zero excess prints +0.0, not −0.0
         .collect();
     Shifts {
         pairs: pairs(&timelines).count(),
