@@ -246,14 +246,6 @@ pub fn table(study: &StallStudy) -> String {
             p
         );
     }
-    if o.runs_per_policy < pavlov::analysis::bootstrap::FEW_PAIRS && o.runs_per_policy >= 2 {
-        let _ = writeln!(
-            s,
-            "note: {} runs per policy are too few for a reliable bootstrap interval (it comes out too narrow); \
-             read the intervals as rough",
-            o.runs_per_policy
-        );
-    }
     let _ = writeln!(
         s,
         "spread across runs, SD [min – max]: reactive / Pavlovian"
@@ -269,6 +261,14 @@ pub fn table(study: &StallStudy) -> String {
             range(c.reactive_range),
             sd(&c.pavlovian),
             range(c.pavlovian_range)
+        );
+    }
+    if o.runs_per_policy < pavlov::analysis::bootstrap::FEW_PAIRS && o.runs_per_policy >= 2 {
+        let _ = writeln!(
+            s,
+            "note: {} runs per policy are too few for a reliable bootstrap interval (it comes out too narrow); \
+             read the intervals as rough",
+            o.runs_per_policy
         );
     }
     let _ = writeln!(
