@@ -89,12 +89,17 @@ export function fmt(value, digits = 0, unit = '') {
   return unit ? `${s} ${unit}` : s;
 }
 
-/** Formats a response lead in ms with its sign (`+` = the response came before the command); `—` when missing. */
-export function fmtLead(ms) {
+/**
+ * Formats when a response began relative to the command that called for it, from its lead in ms (command
+ * onset − response onset): `120 ms after` for a lead of −120 (a lag), `40 ms before` for +40, `at the command`
+ * for 0, `—` when missing. Words, not a sign: in the study tables a positive lead means the Pavlovian
+ * response came earlier than the reactive one, which a signed single-run figure would blur.
+ */
+export function fmtOnset(ms) {
   if (ms === null || ms === undefined || Number.isNaN(ms)) return '—';
   const r = Math.round(ms);
-  const sign = r > 0 ? '+' : r < 0 ? '−' : '';
-  return `${sign}${Math.abs(r).toLocaleString('en-US')} ms`;
+  if (r === 0) return 'at the command';
+  return `${Math.abs(r).toLocaleString('en-US')} ms ${r > 0 ? 'before' : 'after'}`;
 }
 
 /**

@@ -3,7 +3,7 @@
 // receives (PROTOCOL.md).
 
 import {
-  alignedData, fmt, fmtDuration, fmtLead, fmtParam, gateText, recordingView, tokenFromHash,
+  alignedData, fmt, fmtDuration, fmtOnset, fmtParam, gateText, recordingView, tokenFromHash,
 } from './lib.js';
 
 const $ = (id) => document.getElementById(id);
@@ -165,9 +165,9 @@ export function renderStatus(state, s, aligned) {
   if (i) {
     $('i-commands').textContent = `${fmt(i.commands)} (${fmt(i.missed)} missed)`;
     $('i-early').textContent = fmt(i.early);
-    $('i-lead').textContent = fmtLead(i.mean_lead_ms);
-    $('i-current-lead').textContent = fmtLead(i.mean_current_lead_ms);
-    $('i-motion-lead').textContent = fmtLead(i.mean_motion_lead_ms);
+    $('i-lead').textContent = fmtOnset(i.mean_lead_ms);
+    $('i-current-lead').textContent = fmtOnset(i.mean_current_lead_ms);
+    $('i-motion-lead').textContent = fmtOnset(i.mean_motion_lead_ms);
     $('i-false-starts').textContent = fmt(i.false_starts);
   }
   if (!i) aligned.hide();

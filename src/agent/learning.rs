@@ -17,7 +17,9 @@
 //!
 //! With the left-elbow stimulus, a tick whose elbow angles are missing or stale (either arm: the features
 //! tile both) is acted on but not learned from, and the learning chain breaks there, as it does for stale
-//! robot data: E is unknown on such a tick, not "no command", and half the tilings are inactive.
+//! robot data: E is unknown on such a tick, not "no command", and half the tilings are inactive. This is a
+//! design choice, not the paper's (the paper is silent on missing elbows); its measured effect is in the
+//! interaction study's footnote (`actors/src/experiment/design_notes.rs`).
 
 use crate::config::{Config, StimulusSpec};
 use crate::control::StallDetector;

@@ -9,6 +9,15 @@
 //! cluster. Commands of one run share its robot (its own friction, charge, lags) and its operator, so they
 //! are not independent; resampling runs lets the interval carry the run-to-run spread. With one run per
 //! side it reduces to [`mean_difference`] and cannot see that spread.
+//!
+//! [`paired_mean_difference`] is for paired designs (the interaction study: both runs of a pair see the same
+//! operator): the differences are taken within each pair first, and only the pairs are resampled. With few
+//! pairs a percentile interval is too narrow (with k pairs it has at most C(2k − 1, k) distinct means, 10
+//! for k = 3); [`FEW_PAIRS`] is where the tables say so.
+//!
+//! [`ratio_of_means`] is the interval of a relative change `mean(b) / mean(a) − 1`: each sample is resampled
+//! on its own and the *ratio* of the resampled means is taken, so for a non-negative quantity no bound can
+//! fall below −100 % (dividing the difference's interval by the fixed baseline mean could, and did).
 
 use serde::{Deserialize, Serialize};
 
@@ -83,6 +92,110 @@ pub fn mean_difference(
         hi: at(0.975),
         n_minuend: minuend.len(),
         n_subtrahend: subtrahend.len(),
+    })
+}
+
+/// Below this many pairs (or runs a side) a percentile-bootstrap interval is printed with a warning that
+/// it is unreliable: it has too few distinct resamples and is too narrow.
+pub const FEW_PAIRS: usize = 8;
+
+/// The percentile `q` of sorted `xs` (the nearest rank, `(len − 1)·q` rounded).
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    let i = ((sorted.len().max(1) - 1) as f64 * q).round() as usize;
+    sorted.get(i).copied().unwrap_or(f64::NAN)
+}
+
+/// The mean of within-pair differences with its 95 % percentile-bootstrap interval over the pairs. `None`
+/// when there is no difference or one is not finite; with a single pair the interval is NaN (no spread).
+pub fn paired_mean_difference(
+    differences: &[f64],
+    resamples: usize,
+    seed: u64,
+) -> Option<MeanDifference> {
+    if differences.is_empty() || differences.iter().any(|d| !d.is_finite()) {
+        return None;
+    }
+    let difference = mean(differences);
+    let n = differences.len();
+    let (lo, hi) = if n < 2 {
+        (f64::NAN, f64::NAN)
+    } else {
+        let mut rng = Rng::new(seed);
+        let mut means: Vec<f64> = (0..resamples.max(1))
+            .map(|_| resampled_mean(differences, &mut rng))
+            .collect();
+        means.sort_by(f64::total_cmp);
+        (percentile(&means, 0.025), percentile(&means, 0.975))
+    };
+    Some(MeanDifference {
+        difference,
+        lo,
+        hi,
+        n_minuend: n,
+        n_subtrahend: n,
+    })
+}
+
+/// A relative change `mean(other) / mean(baseline) − 1` with its 95 % percentile-bootstrap interval.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RelativeChange {
+    /// `mean(other) / mean(baseline) − 1` (−0.41 is −41 %).
+    pub change: f64,
+    /// Lower end of the 95 % interval (NaN when a sample has fewer than two values: no spread).
+    pub lo: f64,
+    /// Upper end of the 95 % interval (NaN likewise).
+    pub hi: f64,
+    /// Resamples dropped because the resampled baseline mean was 0.
+    pub dropped: usize,
+}
+
+impl RelativeChange {
+    /// Whether an interval was computed (both samples had two values or more).
+    pub fn has_interval(&self) -> bool {
+        self.lo.is_finite() && self.hi.is_finite()
+    }
+}
+
+/// The relative change of the mean of `other` against the mean of `baseline`, with the 95 % percentile
+/// interval of the ratio of independently resampled means. For non-negative data every bound is ≥ −1.
+/// `None` when a sample is empty, holds a non-finite value, or the baseline mean is not positive.
+pub fn ratio_of_means(
+    other: &[f64],
+    baseline: &[f64],
+    resamples: usize,
+    seed: u64,
+) -> Option<RelativeChange> {
+    let finite = |xs: &[f64]| !xs.is_empty() && xs.iter().all(|x| x.is_finite());
+    if !finite(other) || !finite(baseline) || mean(baseline) <= 0.0 {
+        return None;
+    }
+    let change = mean(other) / mean(baseline) - 1.0;
+    if other.len() < 2 || baseline.len() < 2 {
+        return Some(RelativeChange {
+            change,
+            lo: f64::NAN,
+            hi: f64::NAN,
+            dropped: 0,
+        });
+    }
+    let mut rng = Rng::new(seed);
+    let mut dropped = 0;
+    let mut ratios = Vec::with_capacity(resamples.max(1));
+    for _ in 0..resamples.max(1) {
+        let o = resampled_mean(other, &mut rng);
+        let b = resampled_mean(baseline, &mut rng);
+        if b > 0.0 {
+            ratios.push(o / b - 1.0);
+        } else {
+            dropped += 1;
+        }
+    }
+    ratios.sort_by(f64::total_cmp);
+    Some(RelativeChange {
+        change,
+        lo: percentile(&ratios, 0.025),
+        hi: percentile(&ratios, 0.975),
+        dropped,
     })
 }
 
@@ -192,6 +305,92 @@ mod tests {
             "{one:?} {plain:?}"
         );
         assert_eq!(mean_difference_clustered(&[vec![]], &b, 10, 1), None);
+    }
+
+    #[test]
+    fn percentile_bootstrap_of_a_tiny_sample_matches_its_exact_bootstrap_distribution() {
+        // Independent computation: for x = (0, 1, 2, 3) the bootstrap distribution of the mean is exact over
+        // all 4⁴ = 256 equally likely resamples; enumerate them and take the same nearest-rank percentiles.
+        // By hand: the sum s of four draws from {0..3} has counts 1, 4, 10, 20, 31, 40, 44, 40, 31, 20, 10,
+        // 4, 1 for s = 0..12; the cumulative share reaches 0.025 at s = 2 (15/256 = 0.059 ≥ 0.025, while
+        // 5/256 = 0.020 < 0.025) and 0.975 at s = 10 (251/256 = 0.980), so the interval is (0.5, 2.5).
+        let x = [0.0, 1.0, 2.0, 3.0];
+        let mut exact = Vec::new();
+        for a in x {
+            for b in x {
+                for c in x {
+                    for d in x {
+                        exact.push((a + b + c + d) / 4.0);
+                    }
+                }
+            }
+        }
+        exact.sort_by(f64::total_cmp);
+        let (elo, ehi) = (percentile(&exact, 0.025), percentile(&exact, 0.975));
+        assert_eq!((elo, ehi), (0.5, 2.5));
+        // The paired bootstrap of these "differences", fixed seed, 20 000 resamples: the same quantiles.
+        let d = paired_mean_difference(&x, 20_000, 7).unwrap();
+        assert_eq!(d.difference, 1.5);
+        assert_eq!((d.lo, d.hi), (elo, ehi), "{d:?}");
+        // One pair: an estimate, no spread.
+        let one = paired_mean_difference(&[4.0], 100, 1).unwrap();
+        assert_eq!(one.difference, 4.0);
+        assert!(one.lo.is_nan() && one.hi.is_nan());
+        assert_eq!(paired_mean_difference(&[], 100, 1), None);
+    }
+
+    #[test]
+    fn pairing_removes_the_shared_operator_from_the_interval() {
+        // Five pairs whose two runs share a large pair effect (the operator) and differ by exactly 10: the
+        // unpaired interval spans the operators' spread, the paired one is the single value 10.
+        let pair_effect = [0.0, 80.0, -60.0, 40.0, -20.0];
+        let reactive: Vec<f64> = pair_effect.iter().map(|e| 150.0 + e).collect();
+        let pavlovian: Vec<f64> = reactive.iter().map(|r| r - 10.0).collect();
+        let lead: Vec<f64> = reactive
+            .iter()
+            .zip(&pavlovian)
+            .map(|(r, p)| r - p)
+            .collect();
+        let paired = paired_mean_difference(&lead, RESAMPLES, 1).unwrap();
+        assert_eq!(
+            (paired.difference, paired.lo, paired.hi),
+            (10.0, 10.0, 10.0)
+        );
+        let unpaired = mean_difference(&reactive, &pavlovian, RESAMPLES, 1).unwrap();
+        assert!(unpaired.lo < 0.0 && unpaired.hi > 20.0, "{unpaired:?}");
+    }
+
+    #[test]
+    fn ratio_interval_never_falls_below_minus_100_percent_on_offpolicy_shaped_data() {
+        // Shaped like the three-policy table's off-policy rows: a reactive baseline of tens of over-current
+        // observations per run, an off-policy policy with mostly none and an occasional burst. Dividing the
+        // difference's interval by the fixed reactive mean gave −101.5 % and the like for such data.
+        let reactive = [42.0, 35.0, 51.0, 38.0, 47.0, 29.0, 44.0, 40.0, 55.0, 33.0];
+        let offpolicy = [0.0, 0.0, 3.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
+        let r = ratio_of_means(&offpolicy, &reactive, RESAMPLES, 1).unwrap();
+        assert!((r.change - (0.4 / 41.4 - 1.0)).abs() < 1e-12, "{r:?}");
+        assert!(
+            r.lo >= -1.0 && r.lo <= r.change && r.change <= r.hi,
+            "{r:?}"
+        );
+        // The old construction on the same data does go below −100 %.
+        let d = mean_difference(&offpolicy, &reactive, RESAMPLES, 1).unwrap();
+        assert!(d.lo / 41.4 < -1.0, "{d:?}");
+        // Every off-policy run at 0: the change is exactly −100 %, and so is the whole interval.
+        let z = ratio_of_means(&[0.0; 5], &reactive, RESAMPLES, 2).unwrap();
+        assert_eq!((z.change, z.lo, z.hi), (-1.0, -1.0, -1.0));
+        // A known ratio: b = 2a exactly in every value gives +100 % with an interval around it.
+        let a = [1.0, 2.0, 3.0, 4.0];
+        let b = [2.0, 4.0, 6.0, 8.0];
+        let r = ratio_of_means(&b, &a, RESAMPLES, 3).unwrap();
+        assert!(
+            (r.change - 1.0).abs() < 1e-12 && r.lo < 1.0 && r.hi > 1.0,
+            "{r:?}"
+        );
+        // One run a side: the change, no interval; a zero baseline: nothing.
+        let one = ratio_of_means(&[3.0], &[4.0], RESAMPLES, 1).unwrap();
+        assert!((one.change + 0.25).abs() < 1e-12 && !one.has_interval());
+        assert_eq!(ratio_of_means(&[1.0], &[0.0, 0.0], 10, 1), None);
     }
 
     #[test]

@@ -96,6 +96,31 @@ pub fn welch(a: &[f64], b: &[f64]) -> Option<WelchTest> {
     })
 }
 
+/// The paired t-test: a one-sample t-test of the within-pair differences against 0 (t = mean / SE,
+/// df = n − 1), returned in a [`WelchTest`]'s fields; `None` for fewer than two pairs or no spread.
+pub fn paired_t(differences: &[f64]) -> Option<WelchTest> {
+    let d = describe(differences);
+    if d.n < 2 || d.se <= 0.0 || !d.se.is_finite() {
+        return None;
+    }
+    let t = d.mean / d.se;
+    let df = (d.n - 1) as f64;
+    Some(WelchTest {
+        t,
+        df,
+        p: student_t_two_sided_p(t, df),
+    })
+}
+
+/// A mean ± SE as a table prints it, or `x (n = 1: no spread)` for a single value (`–` for none).
+pub fn mean_se_text(d: &Describe, decimals: usize) -> String {
+    match d.n {
+        0 => "–".into(),
+        1 => format!("{:.*} (n = 1: no spread)", decimals, d.mean),
+        _ => format!("{:.*} ± {:.*}", decimals, d.mean, decimals, d.se),
+    }
+}
+
 /// Two-sided p-value of a Student t statistic `t` with `df` degrees of freedom.
 pub fn student_t_two_sided_p(t: f64, df: f64) -> f64 {
     if t.is_nan() || df.is_nan() || df <= 0.0 {
@@ -290,6 +315,32 @@ mod tests {
         // Swapping the samples flips the sign only.
         let r = welch(&b, &a).unwrap();
         assert!(close(r.t, -w.t, 1e-12) && close(r.p, w.p, 1e-12));
+    }
+
+    #[test]
+    fn paired_t_matches_a_hand_computation() {
+        // Differences 1, 2, 3, 4, 5: mean 3, s² = (4 + 1 + 0 + 1 + 4)/4 = 2.5, SE = √(2.5/5) = √0.5, so
+        // t = 3/√0.5 = 4.242 640 687, df = 4. For df = 4 the t CDF is closed-form: with u = t/√(4 + t²),
+        // F(t) = 1/2 + 3u/4 − u³/4; u = √(18/22) = 0.904 534, u³ = 0.740 073, F = 0.993 382, p = 2(1 − F) = 0.013 236.
+        let t = paired_t(&[1.0, 2.0, 3.0, 4.0, 5.0]).unwrap();
+        assert!(close(t.t, 3.0 / 0.5f64.sqrt(), 1e-12), "{t:?}");
+        assert_eq!(t.df, 4.0);
+        let u = t.t / (4.0 + t.t * t.t).sqrt();
+        let closed = 2.0 * (1.0 - (0.5 + 0.75 * u - 0.25 * u * u * u));
+        assert!(close(t.p, closed, 1e-12), "{t:?} vs {closed}");
+        assert!(close(t.p, 0.013_236, 1e-6), "{t:?}");
+        assert!(paired_t(&[2.0]).is_none());
+        assert!(paired_t(&[2.0, 2.0]).is_none());
+    }
+
+    #[test]
+    fn one_value_prints_no_spread() {
+        assert_eq!(
+            mean_se_text(&describe(&[-47.7]), 1),
+            "-47.7 (n = 1: no spread)"
+        );
+        assert_eq!(mean_se_text(&describe(&[2.0, 4.0]), 2), "3.00 ± 1.00");
+        assert_eq!(mean_se_text(&describe(&[]), 2), "–");
     }
 
     #[test]

@@ -4,7 +4,7 @@ import { test } from 'node:test';
 
 import {
   Backoff, GapCounter, SUBPROTOCOL, Timeline, WINDOWS, alignedData, applyParams, applyStorageEvent, columns, connectionTarget, fmt, fmtDuration,
-  fmtLead, fmtParam, gateText, markerLabel, paramLimits, parseParam, redrawIntervalMs, sampleFromTick, samplesFromHistory, sensorsLive,
+  fmtOnset, fmtParam, gateText, markerLabel, paramLimits, parseParam, redrawIntervalMs, sampleFromTick, samplesFromHistory, sensorsLive,
   recordingView, teleopWheels, toCsv, tokenFromHash,
 } from '../lib.js';
 
@@ -91,11 +91,11 @@ test('the form takes its limits from the server\'s bounds', () => {
   assert.equal(paramLimits({ predictions: [{ name: 'stall', max_alpha: 'x' }] }, 'stall').alpha.hi, 1);
 });
 
-test('response leads show their sign: + before the command, − after', () => {
-  assert.equal(fmtLead(120.4), '+120 ms');
-  assert.equal(fmtLead(-1500), '−1,500 ms');
-  assert.equal(fmtLead(0.2), '0 ms');
-  assert.equal(fmtLead(null), '—');
+test('response onsets are said in words: before or after the command, never a bare sign', () => {
+  assert.equal(fmtOnset(120.4), '120 ms before');
+  assert.equal(fmtOnset(-1500), '1,500 ms after');
+  assert.equal(fmtOnset(0.2), 'at the command');
+  assert.equal(fmtOnset(null), '—');
 });
 
 test('aligned averages become uPlot data with gaps for missing points and modes', () => {

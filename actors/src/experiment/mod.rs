@@ -8,6 +8,7 @@
 //! - [`interaction`]: "Reducing Lag By Predicting the Next Command" (Figures 3 and 4);
 //! - [`results`]: where a study writes, never over earlier results; [`shard`]: a study in slices.
 
+pub(crate) mod design_notes;
 pub mod interaction;
 pub(crate) mod plot_style;
 pub mod results;

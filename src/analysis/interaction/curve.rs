@@ -22,12 +22,23 @@
 //! - *false starts per minute* of each policy, with a 95 % interval from the normal approximation to the
 //!   Poisson count (0 to 3/minutes for a count of 0).
 //!
-//! *Anticipation holds* from the first window whose current lead's whole interval lies above 0 and stays so
-//! in every later window ([`holds_from`]).
+//! The runs are paired (both runs of a pair, 2k reactive and 2k + 1 Pavlovian, see the same operator), so
+//! each window also has a *paired* decision lead ([`CurvePoint::decision_lead_paired`]): per pair, the
+//! reactive run's mean decision latency minus the Pavlovian run's, then the mean over pairs with a 95 %
+//! percentile bootstrap over pairs ([`crate::analysis::bootstrap::paired_mean_difference`]).
+//!
+//! **The rule.** *Anticipation holds from* the first window from which the **decision lead**'s 95 % interval
+//! lies wholly above 0 in that window and in every later one ([`holds_from`]; the decision lead, not the
+//! current lead, because it does not depend on the robot). The window depends on the interval method, so it
+//! is computed with both — the two-stage bootstrap ([`holds_from`]) and the paired one
+//! ([`holds_from_paired`]) — and the report prints both when they differ. With few pairs the paired interval
+//! is too narrow (see [`crate::analysis::bootstrap::FEW_PAIRS`]).
 
 use serde::{Deserialize, Serialize};
 
-use crate::analysis::bootstrap::{MeanDifference, RESAMPLES, mean_difference_clustered};
+use crate::analysis::bootstrap::{
+    MeanDifference, RESAMPLES, mean_difference_clustered, paired_mean_difference,
+};
 
 /// One ground-truth command and what each measurement made of it (latencies from its onset, ms).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -104,6 +115,10 @@ pub struct CurvePoint {
     pub commands_pavlovian: usize,
     /// Reactive minus Pavlovian mean decision latency, ms (positive = Pavlovian earlier).
     pub decision_lead: Option<MeanDifference>,
+    /// The decision lead over pairs: per pair (runs 2k, 2k + 1 of `runs`), reactive minus Pavlovian mean
+    /// decision latency in the window, then the mean over the pairs with a percentile bootstrap over pairs.
+    #[serde(default)]
+    pub decision_lead_paired: Option<MeanDifference>,
     /// Reactive minus Pavlovian mean current latency, ms (positive = Pavlovian earlier).
     pub current_lead: Option<MeanDifference>,
     /// Reactive minus Pavlovian mean motion latency, ms.
@@ -197,6 +212,13 @@ pub fn curve(runs: &[RunTimeline], window_min: f64, seed: u64) -> Vec<CurvePoint
                     RESAMPLES,
                     s ^ 3,
                 ),
+                decision_lead_paired: paired_mean_difference(
+                    &pair_leads(runs, |c| {
+                        c.decision_ms.filter(|_| in_window(c.onset_ms, from, to))
+                    }),
+                    RESAMPLES,
+                    s ^ 4,
+                ),
                 current_lead: mean_difference_clustered(
                     &pick(&rc, |c| c.current_ms),
                     &pick(&pc, |c| c.current_ms),
@@ -219,9 +241,43 @@ pub fn curve(runs: &[RunTimeline], window_min: f64, seed: u64) -> Vec<CurvePoint
         .collect()
 }
 
-/// The first window from which the decision lead's interval lies above 0 in that and every later window.
+/// The pairs of `runs` in planned order: runs 2k (reactive) and 2k + 1 (Pavlovian); a chunk that is not
+/// such a pair is skipped.
+pub fn pairs(runs: &[RunTimeline]) -> impl Iterator<Item = (&RunTimeline, &RunTimeline)> {
+    runs.chunks_exact(2).filter_map(|c| match c {
+        [r, p] if !r.pavlovian && p.pavlovian => Some((r, p)),
+        _ => None,
+    })
+}
+
+/// Per pair, the reactive run's mean of `pick` over its commands minus the Pavlovian run's (positive = the
+/// Pavlovian run earlier); a pair where either run has no value is left out.
+pub fn pair_leads(runs: &[RunTimeline], pick: impl Fn(&CommandResult) -> Option<f64>) -> Vec<f64> {
+    let mean = |r: &RunTimeline| {
+        let xs: Vec<f64> = r.commands.iter().filter_map(&pick).collect();
+        (!xs.is_empty()).then(|| xs.iter().sum::<f64>() / xs.len() as f64)
+    };
+    pairs(runs)
+        .filter_map(|(r, p)| Some(mean(r)? - mean(p)?))
+        .collect()
+}
+
+/// The rule (module doc): the first window from which the two-stage decision lead's interval lies above 0
+/// in that and every later window.
 pub fn holds_from(points: &[CurvePoint]) -> Option<usize> {
-    let holds = |p: &CurvePoint| p.decision_lead.is_some_and(|d| d.above_zero());
+    holds_from_by(points, |p| p.decision_lead)
+}
+
+/// The same rule on the paired decision lead's interval.
+pub fn holds_from_paired(points: &[CurvePoint]) -> Option<usize> {
+    holds_from_by(points, |p| p.decision_lead_paired)
+}
+
+fn holds_from_by(
+    points: &[CurvePoint],
+    lead: impl Fn(&CurvePoint) -> Option<MeanDifference>,
+) -> Option<usize> {
+    let holds = |p: &CurvePoint| lead(p).is_some_and(|d| d.above_zero());
     let last_failure = points.iter().rposition(|p| !holds(p));
     match last_failure {
         None if !points.is_empty() => Some(0),
@@ -327,5 +383,40 @@ mod tests {
         assert_eq!(holds_from(&c), None);
         assert!(curve(&[], 2.0, 1).is_empty());
         assert_eq!(holds_from(&[]), None);
+    }
+
+    #[test]
+    fn paired_leads_take_differences_within_pairs_and_the_rule_is_computed_both_ways() {
+        // Four pairs; each pair's operator shifts both of its runs by a large amount (±80 ms), and the
+        // Pavlovian run is exactly 30 ms earlier than its reactive partner. Within pairs the lead is 30 ms
+        // every time; unpaired, the operators' spread swamps it.
+        let offsets = [0.0, 80.0, -80.0, 40.0];
+        let mut runs = Vec::new();
+        for o in offsets {
+            runs.push(run(false, 4.0, move |_| 100.0 + o, |_| 150.0));
+            runs.push(run(true, 4.0, move |_| 70.0 + o, |_| 150.0));
+        }
+        let leads = pair_leads(&runs, |c| c.decision_ms);
+        assert_eq!(leads, vec![30.0; 4]);
+        let c = curve(&runs, 2.0, 5);
+        let paired = c[0].decision_lead_paired.unwrap();
+        assert_eq!(
+            (paired.difference, paired.lo, paired.hi),
+            (30.0, 30.0, 30.0)
+        );
+        assert_eq!(paired.n_minuend, 4);
+        let clustered = c[0].decision_lead.unwrap();
+        assert!((clustered.difference - 30.0).abs() < 1e-9);
+        assert!(clustered.lo < 0.0, "{clustered:?}");
+        assert_eq!(holds_from_paired(&c), Some(0));
+        assert_eq!(holds_from(&c), None);
+        // Runs out of pair order are not paired.
+        let swapped = [runs[1].clone(), runs[0].clone()];
+        assert!(pair_leads(&swapped, |c| c.decision_ms).is_empty());
+        // One pair: a lead with no spread, and no window where it "holds".
+        let one = curve(&runs[..2], 2.0, 5);
+        let p = one[0].decision_lead_paired.unwrap();
+        assert!(p.difference == 30.0 && p.lo.is_nan() && !p.above_zero());
+        assert_eq!(holds_from_paired(&one), None);
     }
 }

@@ -133,10 +133,15 @@ fn after_an_hour_the_pavlovian_control_responds_earlier_with_few_false_starts() 
         pavlovian.false_starts_per_minute
     );
     assert_eq!(pavlovian.missed, 0);
-    let excess = s.shifts.anticipated_fraction.expect("anticipated excess");
-    assert!(excess.above_zero(), "{excess:?}");
-    let decision = s.shifts.decision_ms.expect("decision shift");
-    assert!(decision.below_zero(), "{decision:?}");
+    // One pair: the paired leads are estimates without spread (no interval over one pair).
+    assert_eq!(s.shifts.pairs, 1);
+    let excess = s.shifts.anticipated_excess.expect("anticipated excess");
+    assert!(excess.difference > 0.0 && excess.lo.is_nan(), "{excess:?}");
+    let decision = s.shifts.decision_lead_ms.expect("decision lead");
+    assert!(
+        decision.difference > 0.0 && decision.lo.is_nan(),
+        "{decision:?}"
+    );
     // Not in the first 10 minutes: the decision lead there is nil (5-minute windows 0 and 1).
     for p in &s.curve[..2] {
         let d = p.decision_lead.expect("lead");

@@ -208,6 +208,14 @@ fn the_three_way_study_runs_from_one_command_and_its_off_policy_run_replays() {
     let runs = study["runs"].as_array().unwrap();
     let policies: Vec<&str> = runs.iter().map(|r| r["policy"].as_str().unwrap()).collect();
     assert_eq!(policies, ["reactive", "pavlovian", "offpolicy"]);
+    // runs.csv names the off-policy runs as such (they share the Pavlovian mode).
+    let csv = std::fs::read_to_string(out.join("runs.csv")).unwrap();
+    let labels: Vec<&str> = csv
+        .lines()
+        .skip(1)
+        .filter_map(|l| l.split(',').nth(1))
+        .collect();
+    assert_eq!(labels, ["reactive", "pavlovian", "offpolicy"]);
     assert!(runs.iter().all(|r| r["accuracy"].is_object()));
     let replay = std::process::Command::new(env!("CARGO_BIN_EXE_pavlov"))
         .arg("replay")

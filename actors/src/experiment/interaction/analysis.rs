@@ -1,11 +1,14 @@
-//! The interaction study's statistics over its runs: per-policy response timing, the headline shifts
-//! (Pavlovian minus reactive, with 95 % bootstrap intervals: the physical onsets of current and motion, the
-//! debounced decision onset, the anticipated fraction over the reactive baseline), the aligned averages of
+//! The interaction study's statistics over its runs: per-policy response timing, the headline leads
+//! (reactive minus Pavlovian onset, positive = the Pavlovian response earlier; taken within each pair of runs
+//! that saw the same operator, then over pairs, with 95 % bootstrap intervals over pairs: the physical onsets
+//! of current and motion, the debounced decision onset; and the anticipated fraction's excess over the
+//! reactive baseline), the aligned averages of
 //! battery current and rotation around the observed command onsets (Figure 4), and Welch's tests.
 
-use pavlov::analysis::bootstrap::{MeanDifference, RESAMPLES, mean_difference_clustered};
+use pavlov::analysis::bootstrap::{MeanDifference, RESAMPLES, paired_mean_difference};
+use pavlov::analysis::interaction::curve::{CommandResult, RunTimeline, pair_leads, pairs};
 use pavlov::analysis::interaction::physical::PhysicalLatency;
-use pavlov::analysis::stats::{Describe, WelchTest, describe, welch};
+use pavlov::analysis::stats::{Describe, WelchTest, describe, paired_t, welch};
 use pavlov::control::Mode;
 use serde::Serialize;
 
@@ -140,63 +143,52 @@ pub(crate) fn timing(runs: &[InteractionRun], mode: Mode) -> PolicyTiming {
     }
 }
 
-/// Latencies of both policies compared.
-pub(crate) fn latency_test(runs: &[InteractionRun]) -> Option<WelchTest> {
-    let lat = |m: Mode| -> Vec<f64> {
-        runs.iter()
-            .filter(|r| r.mode == m)
-            .flat_map(|r| r.metrics.latencies_ms())
-            .collect()
-    };
-    welch(&lat(Mode::Reactive), &lat(Mode::Pavlovian))
-}
-
-/// Pavlovian minus reactive, each with a 95 % two-stage bootstrap interval over runs and their commands
-/// (negative latency shifts = earlier). With one run per policy the interval covers the commands only: the
-/// physical shifts then also hold the two robots' own differences (lab variation), which it cannot see.
+/// The headline leads, paired: both runs of a pair (2k reactive, 2k + 1 Pavlovian) see the same operator, so
+/// each is taken within the pair first — the reactive run's mean latency minus the Pavlovian run's (a
+/// **lead**: positive = the Pavlovian response came earlier) — and then averaged over the pairs, with a 95 %
+/// percentile bootstrap over pairs and a paired t-test. With one pair there is no spread and no interval;
+/// with fewer than [`pavlov::analysis::bootstrap::FEW_PAIRS`] pairs the interval is printed with a warning that it is unreliable.
 #[derive(Debug, Clone, Serialize)]
 pub struct Shifts {
-    /// Battery current onset, ms: the headline (the robot's physical response, not the control decision).
-    pub current_ms: Option<MeanDifference>,
-    /// Motion onset (odometry), ms.
-    pub motion_ms: Option<MeanDifference>,
-    /// The debounced decision (gate) onset, ms.
-    pub decision_ms: Option<MeanDifference>,
-    /// Fraction of commands whose decision onset came before the true onset: the Pavlovian excess over the
-    /// reactive baseline (the reactive policy "anticipates" some commands through sensor noise).
-    pub anticipated_fraction: Option<MeanDifference>,
+    /// Pairs with both runs.
+    pub pairs: usize,
+    /// Battery current onset lead, ms: the headline (the robot's physical response, not the control decision).
+    pub current_lead_ms: Option<MeanDifference>,
+    /// Motion onset (odometry) lead, ms.
+    pub motion_lead_ms: Option<MeanDifference>,
+    /// The debounced decision (gate) onset lead, ms.
+    pub decision_lead_ms: Option<MeanDifference>,
+    /// Paired t-test of the decision lead over pairs.
+    pub decision_lead_t: Option<WelchTest>,
+    /// Fraction of commands whose decision onset came before the true onset: the Pavlovian run's excess
+    /// over its reactive partner's (the reactive policy "anticipates" some commands through sensor noise).
+    pub anticipated_excess: Option<MeanDifference>,
 }
 
-/// The shifts over every command of the study's runs; `seed` fixes the bootstrap.
+/// The paired leads over the study's runs (in planned order); `seed` fixes the bootstrap.
 pub(crate) fn shifts(runs: &[InteractionRun], seed: u64) -> Shifts {
-    type Pick = fn(&pavlov::analysis::interaction::curve::CommandResult) -> Option<f64>;
-    let of = |mode: Mode, pick: Pick| -> Vec<Vec<f64>> {
-        runs.iter()
-            .filter(|r| r.mode == mode)
-            .map(|r| r.timeline.commands.iter().filter_map(pick).collect())
-            .collect()
+    let timelines: Vec<RunTimeline> = runs.iter().map(|r| r.timeline.clone()).collect();
+    let lead = |pick: fn(&CommandResult) -> Option<f64>, s: u64| {
+        paired_mean_difference(&pair_leads(&timelines, pick), RESAMPLES, s)
     };
-    let shift = |pick: Pick, s: u64| {
-        mean_difference_clustered(
-            &of(Mode::Pavlovian, pick),
-            &of(Mode::Reactive, pick),
-            RESAMPLES,
-            s,
-        )
+    let anticipated = |c: &CommandResult| {
+        Some(if c.decision_ms.is_some_and(|l| l < 0.0) {
+            1.0
+        } else {
+            0.0
+        })
     };
+    // The excess is Pavlovian − reactive: minus the "lead" of the anticipated indicator.
+    let excess: Vec<f64> = pair_leads(&timelines, anticipated)
+        .iter()
+        .map(|d| 0.0 - d) // not -d: a zero excess prints +0.0, not −0.0
+        .collect();
     Shifts {
-        current_ms: shift(|c| c.current_ms, seed),
-        motion_ms: shift(|c| c.motion_ms, seed ^ 1),
-        decision_ms: shift(|c| c.decision_ms, seed ^ 2),
-        anticipated_fraction: shift(
-            |c| {
-                Some(if c.decision_ms.is_some_and(|l| l < 0.0) {
-                    1.0
-                } else {
-                    0.0
-                })
-            },
-            seed ^ 3,
-        ),
+        pairs: pairs(&timelines).count(),
+        current_lead_ms: lead(|c| c.current_ms, seed),
+        motion_lead_ms: lead(|c| c.motion_ms, seed ^ 1),
+        decision_lead_ms: lead(|c| c.decision_ms, seed ^ 2),
+        decision_lead_t: paired_t(&pair_leads(&timelines, |c| c.decision_ms)),
+        anticipated_excess: paired_mean_difference(&excess, RESAMPLES, seed ^ 3),
     }
 }

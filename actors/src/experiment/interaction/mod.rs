@@ -4,8 +4,9 @@
 //! learning from scratch through the one `super::runner`. Run `i` draws its robot seed and its pair's operator seed
 //! from `super::run_rng`. Per policy: when the response started relative to each ground-truth command
 //! onset ([`pavlov::analysis::interaction`]), and the battery current and rotation averaged over the last
-//! N observed command onsets of each run (`--commands`, the paper: 40; the paper's Figure 4); the shifts of
-//! the physical and decision onsets with bootstrap intervals; and the time course over windows of learning
+//! N observed command onsets of each run (`--commands`, the paper: 40; the paper's Figure 4); the leads of
+//! the physical and decision onsets (positive = Pavlovian earlier), paired within pairs of runs that saw the
+//! same operator, with bootstrap intervals over pairs; and the time course over windows of learning
 //! ([`pavlov::analysis::interaction::curve`]), from which the Figure 3 analogue takes its moment: when
 //! anticipation first holds, or the end of the run.
 //!
@@ -23,14 +24,13 @@ pub mod sharded;
 
 use std::path::PathBuf;
 
-use pavlov::analysis::interaction::curve::{CurvePoint, curve, holds_from};
-use pavlov::analysis::stats::WelchTest;
+use pavlov::analysis::interaction::curve::{CurvePoint, curve, holds_from, holds_from_paired};
 use pavlov::config::Config;
 use pavlov::control::Mode;
 use pavlov::sim::human::HumanParams;
 use serde::{Deserialize, Serialize};
 
-use analysis::{AlignedPoint, PolicyTiming, Shifts, aligned, latency_test, shifts, timing};
+use analysis::{AlignedPoint, PolicyTiming, Shifts, aligned, shifts, timing};
 use run::{InteractionRun, RunPlan};
 
 use super::runner::{RunError, run_all};
@@ -88,14 +88,16 @@ pub struct InteractionStudy {
     pub runs: Vec<InteractionRun>,
     /// Per-policy response timing.
     pub timing: Vec<PolicyTiming>,
-    /// Welch's test of the latencies, Pavlovian vs reactive.
-    pub(crate) latency_welch: Option<WelchTest>,
-    /// Pavlovian minus reactive, with bootstrap intervals.
+    /// The headline leads (reactive − Pavlovian, positive = Pavlovian earlier), paired within pairs.
     pub shifts: Shifts,
     /// The time course over windows of learning.
     pub curve: Vec<CurvePoint>,
-    /// The window from which anticipation holds (the current lead's interval above 0 from there on).
+    /// The window from which anticipation holds: the decision lead's two-stage interval above 0 there and in
+    /// every later window ([`holds_from`]).
     pub holds_from_window: Option<usize>,
+    /// The same rule on the paired decision lead's interval ([`holds_from_paired`]): the rule's sensitivity
+    /// to the interval method.
+    pub holds_from_window_paired: Option<usize>,
     /// Where the Figure 3 analogue is drawn, minutes into the runs: the middle of the first window from
     /// which anticipation holds, or the end of the run.
     pub fig3_at_min: f64,
@@ -190,6 +192,7 @@ pub(crate) fn assemble(
     let timelines: Vec<_> = runs.iter().map(|r| r.timeline.clone()).collect();
     let curve = curve(&timelines, o.window_min, o.seed);
     let holds_from_window = holds_from(&curve);
+    let holds_from_window_paired = holds_from_paired(&curve);
     let fig3_at_min = holds_from_window
         .and_then(|w| curve.get(w))
         .map_or(o.minutes, |p| (p.from_min + p.to_min) / 2.0);
@@ -199,10 +202,10 @@ pub(crate) fn assemble(
                           (both runs of a pair see the same operator)"
             .into(),
         timing: vec![timing(&runs, Mode::Reactive), timing(&runs, Mode::Pavlovian)],
-        latency_welch: latency_test(&runs),
         shifts: shifts(&runs, o.seed),
         curve,
         holds_from_window,
+        holds_from_window_paired,
         fig3_at_min,
         aligned: aligned(&runs),
         runs,

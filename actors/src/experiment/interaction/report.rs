@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use pavlov::analysis::bootstrap::MeanDifference;
+use pavlov::analysis::bootstrap::{FEW_PAIRS, MeanDifference};
 use pavlov::analysis::stats::Describe;
 
 use super::{InteractionStudy, plots};
@@ -18,8 +18,19 @@ fn num(x: f64) -> String {
     }
 }
 
+fn pm(d: &Describe) -> String {
+    match d.n {
+        0 => "–".into(),
+        1 => format!("{} (n = 1: no spread)", num(d.mean)),
+        _ => format!("{} ± {}", num(d.mean), num(d.se)),
+    }
+}
+
 fn diff(d: Option<MeanDifference>, scale: f64, unit: &str) -> String {
     match d {
+        Some(d) if !(d.lo.is_finite() && d.hi.is_finite()) => {
+            format!("{:+.1}{unit} [n = 1: no spread]", d.difference * scale)
+        }
         Some(d) => format!(
             "{:+.1}{unit} [95 % CI {:+.1}, {:+.1}]",
             d.difference * scale,
@@ -37,7 +48,7 @@ pub fn table(s: &InteractionStudy) -> String {
     let _ = writeln!(
         t,
         "Interaction experiment: seed {}, {} run(s) per policy × {} min; response onset relative to the operator's \
-         true command onset (negative = anticipated)",
+         true command onset (latency; negative = anticipated); per-policy means ± SE over commands",
         o.seed, o.runs_per_policy, o.minutes
     );
     let _ = writeln!(
@@ -59,19 +70,9 @@ pub fn table(s: &InteractionStudy) -> String {
             "{:<10} {:>8} {:>20} {:>20} {:>20} {:>11} {:>7} {:>15.2} {:>18.2}",
             p.policy,
             p.commands,
-            format!("{} ± {}", num(p.latency_ms.mean), num(p.latency_ms.se)),
-            format!(
-                "{} ± {} ({})",
-                num(p.current_latency_ms.mean),
-                num(p.current_latency_ms.se),
-                p.current_latency_ms.n
-            ),
-            format!(
-                "{} ± {} ({})",
-                num(p.motion_latency_ms.mean),
-                num(p.motion_latency_ms.se),
-                p.motion_latency_ms.n
-            ),
+            pm(&p.latency_ms),
+            format!("{} ({})", pm(&p.current_latency_ms), p.current_latency_ms.n),
+            format!("{} ({})", pm(&p.motion_latency_ms), p.motion_latency_ms.n),
             p.anticipated,
             p.missed,
             p.false_starts_per_minute + 0.0,
@@ -81,17 +82,26 @@ pub fn table(s: &InteractionStudy) -> String {
     let sh = &s.shifts;
     let _ = writeln!(
         t,
-        "Pavlovian − reactive (negative = earlier), 95 % two-stage bootstrap intervals (runs, then commands):\n  \
-         battery current onset {}\n  motion onset {}\n  decision (debounced gate) onset {}",
-        diff(sh.current_ms, 1.0, " ms"),
-        diff(sh.motion_ms, 1.0, " ms"),
-        diff(sh.decision_ms, 1.0, " ms"),
+        "leads = reactive − Pavlovian onset (positive = the Pavlovian response came earlier), taken within each of \
+         the {} pairs of runs that saw the same operator, then over pairs; 95 % percentile bootstrap over pairs:\n  \
+         battery current onset lead {}\n  motion onset lead {}\n  decision (debounced gate) onset lead {}",
+        sh.pairs,
+        diff(sh.current_lead_ms, 1.0, " ms"),
+        diff(sh.motion_lead_ms, 1.0, " ms"),
+        diff(sh.decision_lead_ms, 1.0, " ms"),
     );
-    if s.options.runs_per_policy < 2 {
+    if sh.pairs < 2 {
         let _ = writeln!(
             t,
-            "  (one run per policy: the physical shifts also hold the two robots' own differences in friction \
-             and charge, which no interval over one pair can show; the decision shift does not depend on the robot)"
+            "  (n = 1 pair: no spread, so no interval; the physical leads also hold the two robots' own differences \
+             in friction and charge; the decision lead does not depend on the robot)"
+        );
+    } else if sh.pairs < FEW_PAIRS {
+        let _ = writeln!(
+            t,
+            "  (only {} pairs: a bootstrap interval over so few clusters is unreliable — too narrow — read it as \
+             rough; run more pairs with --runs)",
+            sh.pairs
         );
     }
     let frac = |p: &str| {
@@ -102,15 +112,16 @@ pub fn table(s: &InteractionStudy) -> String {
     };
     let _ = writeln!(
         t,
-        "  anticipated (decision before the true onset): reactive {:.1} %, Pavlovian {:.1} %, excess {}",
+        "  anticipated (decision before the true onset): reactive {:.1} %, Pavlovian {:.1} %, excess (Pavlovian − \
+         reactive, within pairs) {}",
         frac("reactive"),
         frac("pavlovian"),
-        diff(sh.anticipated_fraction, 100.0, " pp"),
+        diff(sh.anticipated_excess, 100.0, " pp"),
     );
-    if let Some(w) = s.latency_welch {
+    if let Some(w) = sh.decision_lead_t {
         let _ = writeln!(
             t,
-            "  decision latency, Welch t = {:.2}, df = {:.1}, p {}",
+            "  decision lead, paired t over pairs = {:.2}, df = {:.0}, p {}",
             w.t,
             w.df,
             p_phrase(&w)
@@ -118,30 +129,47 @@ pub fn table(s: &InteractionStudy) -> String {
     }
     let _ = writeln!(
         t,
-        "time course ({}-min windows; leads = reactive − Pavlovian onset, ms, positive = Pavlovian earlier; \
-         anticipated excess over the reactive baseline, pp; Pavlovian false starts per minute):",
+        "time course ({}-min windows; leads = reactive − Pavlovian onset, ms, positive = Pavlovian earlier, 95 % \
+         two-stage bootstrap (runs, then commands) and, for the decision lead, paired over pairs; anticipated excess \
+         over the reactive baseline, pp; Pavlovian false starts per minute):",
         s.options.window_min
     );
     for p in &s.curve {
         let _ = writeln!(
             t,
-            "  {:>5.1}–{:<5.1} min: decision lead {:<33} current lead {:<33} excess {:<34} false starts {:.2}",
+            "  {:>5.1}–{:<5.1} min: decision lead {:<33} paired {:<33} current lead {:<33} excess {:<34} false starts {:.2}",
             p.from_min,
             p.to_min,
             diff(p.decision_lead, 1.0, " ms"),
+            diff(p.decision_lead_paired, 1.0, " ms"),
             diff(p.current_lead, 1.0, " ms"),
             diff(p.anticipated_difference, 100.0, " pp"),
             p.false_starts_pavlovian.per_minute
         );
     }
+    let from = |w: Option<usize>| {
+        w.and_then(|w| s.curve.get(w))
+            .map_or("never in this study".to_string(), |p| {
+                format!("from {:.1} min", p.from_min)
+            })
+    };
+    let holds = if s.holds_from_window == s.holds_from_window_paired {
+        format!(
+            "{} (the same with either interval method)",
+            from(s.holds_from_window)
+        )
+    } else {
+        format!(
+            "{} by the two-stage interval, {} by the paired one (the window depends on the method)",
+            from(s.holds_from_window),
+            from(s.holds_from_window_paired)
+        )
+    };
     let _ = writeln!(
         t,
-        "anticipation holds (decision lead's interval above 0 from then on): {}; Figure 3 analogue at {:.1} min \
-         (the middle of that window, or the end of the run)",
-        s.holds_from_window.and_then(|w| s.curve.get(w)).map_or(
-            "never in this run".to_string(),
-            |p| format!("from {:.1} min", p.from_min)
-        ),
+        "anticipation holds {holds}\n  rule: the first window from which the decision lead's 95 % interval lies \
+         wholly above 0 in that and every later window; Figure 3 analogue at {:.1} min (the middle of the two-stage \
+         window, or the end of the run)",
         s.fig3_at_min
     );
     let _ = writeln!(
@@ -186,6 +214,7 @@ pub fn table(s: &InteractionStudy) -> String {
             .join(", "),
         s.wall_s
     );
+    let _ = writeln!(t, "{}", crate::experiment::design_notes::interaction());
     t
 }
 
@@ -251,7 +280,7 @@ pub fn write_all(dir: &Path, s: &InteractionStudy) -> std::io::Result<()> {
 pub(crate) fn curve_csv(s: &InteractionStudy) -> String {
     let mut c = String::from(
         "from_min,to_min,commands_reactive,commands_pavlovian,\
-         decision_lead_ms,decision_lead_lo,decision_lead_hi,current_lead_ms,current_lead_lo,current_lead_hi,motion_lead_ms,motion_lead_lo,motion_lead_hi,\
+         decision_lead_ms,decision_lead_lo,decision_lead_hi,decision_lead_paired_ms,decision_lead_paired_lo,decision_lead_paired_hi,current_lead_ms,current_lead_lo,current_lead_hi,motion_lead_ms,motion_lead_lo,motion_lead_hi,\
          anticipated_reactive,anticipated_pavlovian,anticipated_excess,anticipated_excess_lo,anticipated_excess_hi,\
          false_starts_per_min_reactive,false_starts_per_min_pavlovian,false_starts_pavlovian_lo,false_starts_pavlovian_hi\n",
     );
@@ -263,12 +292,13 @@ pub(crate) fn curve_csv(s: &InteractionStudy) -> String {
     for p in &s.curve {
         let _ = writeln!(
             c,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             p.from_min,
             p.to_min,
             p.commands_reactive,
             p.commands_pavlovian,
             d(p.decision_lead),
+            d(p.decision_lead_paired),
             d(p.current_lead),
             d(p.motion_lead),
             p.anticipated_reactive,

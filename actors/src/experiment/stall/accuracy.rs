@@ -8,6 +8,14 @@
 //! is scored only when π was followed until the next stimulus, or for [`HORIZON_TICKS`] ticks when none
 //! came (the return is then below (1 − 1/τ)^HORIZON ≈ 4e−5 for τ = 25, and counted as 0). The last
 //! `HORIZON_TICKS` ticks of a run, whose return is not yet known, are not scored.
+//!
+//! Both predictions are scored on the *same* ticks against the *same* target: a tick counts only when π's
+//! return is known there and both predictions have a value, so their errors are comparable tick for tick.
+//! What this does not show: in reactive runs π is always followed and both predictions are on-policy in
+//! effect, so their difference is TD(λ) against GTD(λ) on identical targets — two algorithms, not on-
+//! against off-policy learning; in runs gated by a prediction the scored ticks are those on which the gate
+//! stayed off, that is, selected by the gating prediction's own values (its misses), which favours neither
+//! prediction knowingly but is not a random sample of the run.
 
 use serde::{Deserialize, Serialize};
 
@@ -113,11 +121,12 @@ impl PiReturns {
             let Some(g) = self.pi_return(t) else {
                 continue;
             };
+            // The same ticks for both: skip a tick when either prediction has no value.
+            if self.steps[t].values.iter().any(|v| !v.is_finite()) {
+                continue;
+            }
             for (k, s) in sums.iter_mut().enumerate() {
                 let v = self.steps[t].values[k];
-                if !v.is_finite() {
-                    continue;
-                }
                 let e = v - g;
                 s[0] += 1.0;
                 s[1] += e * e;
@@ -211,5 +220,15 @@ mod tests {
         let mean_g = 1.5 / n as f64;
         assert!((a.on_policy.mean_return - mean_g).abs() < 1e-12);
         assert!((a.on_policy.bias - (1.0 - mean_g)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_tick_one_prediction_lacks_is_scored_for_neither() {
+        let mut p = steps(&[(true, false), (true, false), (false, true)], [1.0, 0.5]);
+        p.steps[1].values[1] = f64::NAN;
+        let a = p.finish();
+        assert_eq!(a.on_policy.n, a.off_policy.n);
+        assert_eq!((a.on_policy.n_near, a.off_policy.n_near), (0, 0));
+        assert!((a.on_policy.mean_return - a.off_policy.mean_return).abs() < 1e-15);
     }
 }

@@ -2,7 +2,7 @@
 //! the relative change with a 95 % bootstrap interval and Welch's t-test, and the learning curve
 //! (over-current observations per window, mean over runs).
 
-use pavlov::analysis::bootstrap::{RESAMPLES, mean_difference};
+use pavlov::analysis::bootstrap::{RESAMPLES, ratio_of_means};
 use pavlov::analysis::stats::{Describe, WelchTest, describe, relative_change, welch};
 use pavlov::control::Mode;
 use serde::{Deserialize, Serialize};
@@ -52,7 +52,8 @@ pub struct Comparison {
     pub pavlovian: Describe,
     /// (Pavlovian − reactive) / reactive.
     pub(crate) relative_change: Option<f64>,
-    /// 95 % bootstrap interval of the relative change (the difference's interval over the reactive mean).
+    /// 95 % percentile-bootstrap interval of the relative change: the ratio of the resampled means, minus 1
+    /// (≥ −100 % for a non-negative metric); NaN bounds for one run a side (no spread).
     #[serde(default)]
     pub(crate) relative_change_ci: Option<(f64, f64)>,
     /// Smallest and largest value over the reactive runs.
@@ -117,9 +118,7 @@ pub(crate) fn analyse(runs: &[RunResult], window_s: f64) -> Analysis {
                         })
                 })
             };
-            let relative_change_ci = mean_difference(&b, &a, RESAMPLES, 1)
-                .filter(|_| da.mean != 0.0 && da.mean.is_finite())
-                .map(|d| (d.lo / da.mean, d.hi / da.mean));
+            let relative_change_ci = ratio_of_means(&b, &a, RESAMPLES, 1).map(|r| (r.lo, r.hi));
             Comparison {
                 metric: (*key).to_string(),
                 label: (*label).to_string(),
@@ -237,9 +236,31 @@ mod tests {
         assert_eq!(oc.reactive_range, Some((100.0, 110.0)));
         assert_eq!(oc.pavlovian_range, Some((50.0, 60.0)));
         let (lo, hi) = oc.relative_change_ci.unwrap();
-        assert!(lo <= oc.relative_change.unwrap() && oc.relative_change.unwrap() <= hi);
+        assert!(
+            lo >= -1.0 && lo <= oc.relative_change.unwrap() && oc.relative_change.unwrap() <= hi
+        );
         assert_eq!(a.first_predictive_stop_s.n, 2);
         assert_eq!(a.first_predictive_stop_s.mean, 6.0);
         assert_eq!(total(&runs[0], "nope"), None);
+    }
+
+    #[test]
+    fn runs_csv_names_each_runs_own_policy() {
+        let mut runs = vec![
+            run(0, Mode::Reactive, 100, &[1]),
+            run(1, Mode::Pavlovian, 60, &[1]),
+            run(2, Mode::Pavlovian, 50, &[1]),
+        ];
+        runs[1].policy = "pavlovian".into();
+        runs[2].policy = "offpolicy".into();
+        let csv = crate::experiment::stall::report::runs_csv(&runs);
+        let labels: Vec<&str> = csv
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(1).unwrap())
+            .collect();
+        assert_eq!(labels, ["reactive", "pavlovian", "offpolicy"]);
+        let w = crate::experiment::stall::report::windows_csv(&runs);
+        assert!(w.lines().nth(3).unwrap().starts_with("2,offpolicy,"));
     }
 }

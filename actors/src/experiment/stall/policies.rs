@@ -15,7 +15,7 @@
 use std::fmt::Write as _;
 use std::time::Instant;
 
-use pavlov::analysis::bootstrap::{RESAMPLES, mean_difference};
+use pavlov::analysis::bootstrap::{FEW_PAIRS, RESAMPLES, ratio_of_means};
 use pavlov::analysis::stats::{Describe, WelchTest, describe, relative_change, welch};
 use pavlov::config::Config;
 use pavlov::control::Mode;
@@ -299,9 +299,8 @@ pub(crate) fn analyse(
                         a: policies[i].name().to_string(),
                         b: policies[j].name().to_string(),
                         relative_change: relative_change(da.mean, describe(b).mean),
-                        relative_change_ci: mean_difference(b, a, RESAMPLES, 1)
-                            .filter(|_| da.mean != 0.0 && da.mean.is_finite())
-                            .map(|d| (d.lo / da.mean.abs(), d.hi / da.mean.abs())),
+                        relative_change_ci: ratio_of_means(b, a, RESAMPLES, 1)
+                            .map(|r| (r.lo, r.hi)),
                         welch: welch(a, b),
                     });
                 }
@@ -433,6 +432,15 @@ fn p_value(w: Option<WelchTest>) -> String {
     })
 }
 
+/// A mean ± SE, or the value with "n = 1: no spread".
+fn mean_se(d: Describe) -> String {
+    match d.n {
+        0 => "–".into(),
+        1 => format!("{} (n = 1: no spread)", fmt(d.mean)),
+        _ => format!("{} ± {}", fmt(d.mean), fmt(d.se)),
+    }
+}
+
 /// The Markdown tables: the metrics (mean ± SE, spread SD [min – max], every pair's change with its 95 %
 /// bootstrap interval and Welch's p) and the predictions' accuracy.
 pub fn table(study: &PoliciesStudy) -> String {
@@ -440,7 +448,9 @@ pub fn table(study: &PoliciesStudy) -> String {
     let names: Vec<&str> = study.policies.iter().map(|p| p.name()).collect();
     let _ = writeln!(
         s,
-        "{} policies × {} runs × {} min, seed {}; mean ± SE over runs; spread = SD [min – max]; {:.1} s of wall time\n",
+        "{} policies × {} runs × {} min, seed {}; mean ± SE over runs; spread = SD [min – max]; \
+         change = mean(b) / mean(a) − 1 with the 95 % percentile bootstrap of that ratio (runs resampled within each \
+         policy), then Welch's p; {:.1} s of wall time\n",
         names.len(),
         study.options.runs_per_policy,
         study.options.minutes,
@@ -464,18 +474,21 @@ pub fn table(study: &PoliciesStudy) -> String {
         for p in &row.policies {
             let _ = write!(
                 s,
-                " {} ± {} <br>SD {} [{} – {}] |",
-                fmt(p.describe.mean),
-                fmt(p.describe.se),
+                " {} <br>SD {} [{} – {}] |",
+                mean_se(p.describe),
                 fmt(p.describe.sd),
                 p.range.map_or("–".into(), |r| fmt(r.0)),
                 p.range.map_or("–".into(), |r| fmt(r.1)),
             );
         }
         for c in &row.changes {
-            let ci = c.relative_change_ci.map_or("–".into(), |(lo, hi)| {
-                format!("({:+.1}, {:+.1})", 100.0 * lo, 100.0 * hi)
-            });
+            let ci = match c.relative_change_ci {
+                Some((lo, hi)) if lo.is_finite() && hi.is_finite() => {
+                    format!("({:+.1}, {:+.1})", 100.0 * lo, 100.0 * hi)
+                }
+                Some(_) => "(n = 1: no spread)".into(),
+                None => "–".into(),
+            };
             let _ = write!(
                 s,
                 " {} {ci}, {} |",
@@ -485,17 +498,28 @@ pub fn table(study: &PoliciesStudy) -> String {
         }
         let _ = writeln!(s);
     }
+    if (2..FEW_PAIRS).contains(&study.options.runs_per_policy) {
+        let _ = writeln!(
+            s,
+            "\n{} runs per policy are too few for a reliable bootstrap interval (it comes out too narrow).",
+            study.options.runs_per_policy
+        );
+    }
     let _ = writeln!(
         s,
-        "\nAccuracy against the return π would have earned, on ticks where π was followed until that return was known \
-         (mean ± SE over runs):\n"
+        "\nAccuracy of both predictions on the same ticks against the same target: the return π would have earned, \
+         on ticks where π was followed until that return was known and both predictions had a value (mean ± SE over \
+         runs). What it shows: how far each prediction is from π's return on those ticks. What it does not show: in \
+         reactive runs both predictions are on-policy in effect, so their difference is TD(λ) against GTD(λ) on \
+         identical targets (two algorithms, not on- against off-policy learning); in gated runs the scored ticks are \
+         those the gating prediction left ungated, selected by its own values, not a random sample.\n"
     );
     let _ = writeln!(
         s,
         "| policy | ticks with π's command | ticks scored / with G > 0.5 | RMSE on-policy `stall` | RMSE off-policy `stall_pi` | RMSE where G > 0.5: on / off | bias (v − G): on / off |"
     );
     let _ = writeln!(s, "|---|---|---|---|---|---|---|");
-    let pm = |d: Describe| format!("{} ± {}", fmt(d.mean), fmt(d.se));
+    let pm = mean_se;
     for a in &study.accuracy {
         let _ = writeln!(
             s,
@@ -517,13 +541,13 @@ pub fn table(study: &PoliciesStudy) -> String {
         if d.n > 0 {
             let _ = writeln!(
                 s,
-                "first stop on the prediction alone, {p}: {} ± {} s ({} runs)",
-                fmt(d.mean),
-                fmt(d.se),
+                "first stop on the prediction alone, {p}: {} s ({} runs)",
+                mean_se(*d),
                 d.n
             );
         }
     }
+    let _ = writeln!(s, "\n{}", crate::experiment::design_notes::stall());
     s
 }
 

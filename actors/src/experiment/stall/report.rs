@@ -61,6 +61,16 @@ pub fn write_all(dir: &Path, study: &StallStudy) -> std::io::Result<()> {
     Ok(())
 }
 
+/// The run's policy as every output names it: the study's own label (`offpolicy` in the three-policy study,
+/// whose off-policy runs share the Pavlovian mode), the mode's name when the run has none.
+pub(crate) fn policy_label(r: &RunResult) -> &str {
+    if r.policy.is_empty() {
+        mode_name(r.mode)
+    } else {
+        &r.policy
+    }
+}
+
 fn opt(v: Option<f64>) -> String {
     v.map_or_else(String::new, |x| format!("{x}"))
 }
@@ -74,7 +84,7 @@ pub(crate) fn runs_csv(runs: &[RunResult]) -> String {
     }
     s.push('\n');
     for r in runs {
-        let _ = write!(s, "{},{},{}", r.index, mode_name(r.mode), r.seed);
+        let _ = write!(s, "{},{},{}", r.index, policy_label(r), r.seed);
         for (key, _, _) in TOTALS {
             let _ = write!(s, ",{}", opt(total(r, key)));
         }
@@ -94,7 +104,7 @@ pub(crate) fn windows_csv(runs: &[RunResult]) -> String {
                 s,
                 "{},{},{w},{},{},{},{},{}",
                 r.index,
-                mode_name(r.mode),
+                policy_label(r),
                 w as f64 * WINDOW_S,
                 c.overcurrent_observations,
                 c.stall_events,
@@ -164,8 +174,20 @@ fn num(x: f64) -> String {
     }
 }
 
+fn sd(d: &pavlov::analysis::stats::Describe) -> String {
+    if d.n < 2 {
+        "n = 1: no spread".into()
+    } else {
+        num(d.sd)
+    }
+}
+
 fn pm(d: &pavlov::analysis::stats::Describe) -> String {
-    format!("{} ± {}", num(d.mean), num(d.se))
+    match d.n {
+        0 => "–".into(),
+        1 => format!("{} (n = 1: no spread)", num(d.mean)),
+        _ => format!("{} ± {}", num(d.mean), num(d.se)),
+    }
 }
 
 /// The table printed at the end of a study.
@@ -174,8 +196,9 @@ pub fn table(study: &StallStudy) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Stall experiment: seed {}, {} runs per policy × {} min, interleaved (reactive first); mean ± SE over runs, \
-         change with its 95 % bootstrap interval",
+        "Stall experiment: seed {}, {} runs per policy × {} min, interleaved (reactive first); mean ± SE over runs; \
+         change = Pavlovian mean / reactive mean − 1, its 95 % interval the percentile bootstrap of that ratio \
+         (runs resampled within each policy; 2000 resamples); Welch's t-test of the difference",
         o.seed, o.runs_per_policy, o.minutes
     );
     // The metric column is as wide as its longest label, so every row's numbers line up.
@@ -203,9 +226,13 @@ pub fn table(study: &StallStudy) -> String {
         let change = c
             .relative_change
             .map_or("–".into(), |r| format!("{:+.1}%", r * 100.0));
-        let ci = c.relative_change_ci.map_or("–".into(), |(lo, hi)| {
-            format!("{:+.1}, {:+.1}%", lo * 100.0, hi * 100.0)
-        });
+        let ci = match c.relative_change_ci {
+            Some((lo, hi)) if lo.is_finite() && hi.is_finite() => {
+                format!("{:+.1}, {:+.1}%", lo * 100.0, hi * 100.0)
+            }
+            _ if c.reactive.n < 2 || c.pavlovian.n < 2 => "no spread".into(),
+            _ => "–".into(),
+        };
         let _ = writeln!(
             s,
             "{:<w$} {:>24} {:>24} {:>9} {:>18} {:>8} {:>6} {:>8}",
@@ -230,10 +257,18 @@ pub fn table(study: &StallStudy) -> String {
             s,
             "  {:<28} {} [{}] / {} [{}]",
             c.label,
-            num(c.reactive.sd),
+            sd(&c.reactive),
             range(c.reactive_range),
-            num(c.pavlovian.sd),
+            sd(&c.pavlovian),
             range(c.pavlovian_range)
+        );
+    }
+    if o.runs_per_policy < pavlov::analysis::bootstrap::FEW_PAIRS && o.runs_per_policy >= 2 {
+        let _ = writeln!(
+            s,
+            "note: {} runs per policy are too few for a reliable bootstrap interval (it comes out too narrow); \
+             read the intervals as rough",
+            o.runs_per_policy
         );
     }
     let _ = writeln!(
@@ -277,9 +312,8 @@ pub fn table(study: &StallStudy) -> String {
     let f = &study.analysis.first_predictive_stop_s;
     let _ = writeln!(
         s,
-        "first stop on the prediction alone (gate on, stimulus off): {} ± {} s into the run ({} Pavlovian runs)",
-        num(f.mean),
-        num(f.se),
+        "first stop on the prediction alone (gate on, stimulus off): {} s into the run ({} Pavlovian runs)",
+        pm(f),
         f.n
     );
     let _ = writeln!(
@@ -297,5 +331,6 @@ pub fn table(study: &StallStudy) -> String {
         "{:.0} s simulated in {:.1} s of wall time ({:.0}× real time)",
         study.simulated_s, study.wall_s, study.speedup
     );
+    let _ = writeln!(s, "{}", crate::experiment::design_notes::stall());
     s
 }
