@@ -25,8 +25,7 @@ use strum::VariantNames;
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio_util::sync::CancellationToken;
 
-use crate::pipeline::events::EventLog;
-use crate::pipeline::feed::TickFeed;
+use crate::bus::{EventLog, TickFeed};
 use pavlov::event::EventKind;
 
 // Argument-less commands are empty struct variants (`Estop {}`), so that unknown fields are rejected for

@@ -11,8 +11,8 @@ use std::sync::{Arc, Mutex, PoisonError};
 use pavlov::event::{Event, EventKind};
 use tokio::sync::{broadcast, mpsc};
 
-use crate::storage::recorder::RecorderInput;
-use crate::telemetry::counters::StorageFailures;
+use super::recorder_queue::RecorderInput;
+use super::storage_failures::StorageFailures;
 
 /// Capacity of the live broadcast, in events.
 pub(crate) const LIVE_CAPACITY: usize = 256;

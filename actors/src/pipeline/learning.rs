@@ -22,8 +22,9 @@ use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
-use super::events::EventLog;
 use super::sensor_ingest::Observation;
+use crate::bus::EventLog;
+use crate::bus::StartState;
 use crate::command::{Applied, CommandError, Envelope, Inbox, LearningCommand, Outcome, Reply};
 use crate::horde::{HordeHandle, HordeView};
 use crate::storage::checkpoint_files::layout::create_run_dir;
@@ -31,7 +32,6 @@ use crate::storage::checkpoint_files::saves::{SaveQuota, check_save_name, saved_
 use crate::storage::checkpoint_files::writer::{
     Announce, CheckpointWriter, SaveJob, WriterSettings,
 };
-use crate::storage::recording::StartState;
 use crate::storage::utc;
 
 /// Learning's output for one tick.

@@ -14,14 +14,13 @@
 //! - [`skeleton_ingest`]: OSC skeletons over UDP → the newest pose.
 //! - [`learning`], [`gating`], [`actuation`]: thin shells over the core's stages; actuation assembles
 //!   each tick's record.
-//! - [`feed`]: every tick record out to the dashboard, the recorder and the tests, without blocking.
+//! - the feed ([`crate::bus::feed`], on the bus): every tick record out to the dashboard, the recorder and
+//!   the tests, without blocking.
 //!
 //! Every channel on the tick path is bounded and written with `try_send`: a stage that falls behind loses
 //! its oldest input (and actuation's watchdog stops the wheels), it never makes an earlier stage wait.
 
 pub(crate) mod actuation;
-pub mod events;
-pub(crate) mod feed;
 pub(crate) mod gating;
 pub(crate) mod learning;
 pub(crate) mod sensor_ingest;
@@ -38,14 +37,12 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
+use crate::bus::{EventLog, StartState, TickFeed};
 use crate::command::{self, ControlRequest, Envelope, INBOX_CAPACITY, RecorderCommand, Routes};
 use crate::link::writer::WriteRequest;
-use crate::storage::recording::StartState;
 use crate::telemetry::counters::{ActuationStats, SharedTickStats};
 
 use actuation::{Actuation, ActuationChannels};
-use events::EventLog;
-use feed::TickFeed;
 use gating::GatingChannels;
 use learning::{Learning, LearningChannels};
 use sensor_ingest::{IngestChannels, IngestLink};
