@@ -14,6 +14,7 @@
 //! - [`skeleton_ingest`]: OSC skeletons over UDP → the newest pose.
 //! - [`learning`], [`gating`], [`actuation`]: thin shells over the core's stages; actuation assembles
 //!   each tick's record.
+//! - [`router`]: every command to its owner's inbox without waiting (the e-stop latch it applies itself).
 //! - the feed ([`crate::bus::feed`], on the bus): every tick record out to the dashboard, the recorder and
 //!   the tests, without blocking.
 //!
@@ -23,6 +24,7 @@
 pub(crate) mod actuation;
 pub(crate) mod gating;
 pub(crate) mod learning;
+pub(crate) mod router;
 pub(crate) mod sensor_ingest;
 pub mod skeleton_ingest;
 pub(crate) mod ticker;
@@ -38,13 +40,14 @@ use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
 use crate::bus::{EventLog, StartState, TickFeed};
-use crate::command::{self, ControlRequest, Envelope, INBOX_CAPACITY, RecorderCommand, Routes};
+use crate::command::{ControlRequest, Envelope, INBOX_CAPACITY, RecorderCommand};
 use crate::link::writer::WriteRequest;
 use crate::telemetry::counters::{ActuationStats, SharedTickStats};
 
 use actuation::{Actuation, ActuationChannels};
 use gating::GatingChannels;
 use learning::{Learning, LearningChannels};
+use router::Routes;
 use sensor_ingest::{IngestChannels, IngestLink};
 
 /// Capacity of the stage-to-stage channels, in ticks.
@@ -183,7 +186,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
             },
             cancel.clone(),
         )),
-        tokio::spawn(command::route(
+        tokio::spawn(router::route(
             command_rx,
             Routes {
                 estop: estop_tx,
