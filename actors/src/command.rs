@@ -1,4 +1,5 @@
-//! The one command vocabulary of the running server, and its router.
+//! The one command vocabulary of the running server (the router that hands each command to its owner is
+//! [`crate::pipeline::router`]).
 //!
 //! Every command a client (the websocket, a test, an experiment) can send is a variant of exactly one
 //! owner's enum below, and [`ControlCommand`] is the union of those enums: the wire names (`"cmd"`) come
@@ -22,12 +23,7 @@ use pavlov::oi::mode::DriveMode;
 use pavlov::supervision::TripCause;
 use serde::{Deserialize, Deserializer, Serialize};
 use strum::VariantNames;
-use tokio::sync::{mpsc, oneshot, watch};
-use tokio_util::sync::CancellationToken;
-
-use crate::pipeline::events::EventLog;
-use crate::pipeline::feed::TickFeed;
-use pavlov::event::EventKind;
+use tokio::sync::{mpsc, oneshot};
 
 // Argument-less commands are empty struct variants (`Estop {}`), so that unknown fields are rejected for
 // them too: serde ignores extra fields on unit variants of an internally tagged enum.
@@ -343,75 +339,6 @@ pub(crate) type Inbox<C> = mpsc::Receiver<Envelope<C>>;
 /// Capacity of each owner's inbox.
 pub(crate) const INBOX_CAPACITY: usize = 16;
 
-/// Where the router sends things.
-pub(crate) struct Routes {
-    /// The e-stop latch that actuation and gating watch.
-    pub(crate) estop: watch::Sender<bool>,
-    /// Where e-stop changes are announced, and the feed that tells the newest tick.
-    pub(crate) events: Option<(EventLog, TickFeed)>,
-    /// Gating's inbox.
-    pub(crate) gating: mpsc::Sender<Envelope<GatingCommand>>,
-    /// Learning's inbox.
-    pub(crate) learning: mpsc::Sender<Envelope<LearningCommand>>,
-    /// Link supervision's inbox.
-    pub(crate) link: mpsc::Sender<Envelope<LinkCommand>>,
-    /// The recorder's inbox, when this server records.
-    pub(crate) recorder: Option<mpsc::Sender<Envelope<RecorderCommand>>>,
-}
-
-/// Routes requests until the inbox closes or `cancel` fires.
-pub(crate) async fn route(
-    mut inbox: mpsc::Receiver<ControlRequest>,
-    routes: Routes,
-    cancel: CancellationToken,
-) {
-    loop {
-        let next = tokio::select! {
-            _ = cancel.cancelled() => None,
-            r = inbox.recv() => r,
-        };
-        let Some(ControlRequest { command, reply }) = next else {
-            break;
-        };
-        tracing::debug!(?command, "routing a command");
-        match command {
-            ControlCommand::Latch(c) => {
-                let on = matches!(c, LatchCommand::Estop {});
-                routes.estop.send_replace(on);
-                if on {
-                    tracing::warn!("e-stop latched");
-                }
-                if let Some((events, feed)) = &routes.events {
-                    events.emit(feed.last_seq(), EventKind::EStop { latched: on });
-                }
-                let _ = reply.send(Ok(Applied::Estop { estop: on }));
-            }
-            ControlCommand::Gating(c) => forward(&routes.gating, c, reply, "gating"),
-            ControlCommand::Learning(c) => forward(&routes.learning, c, reply, "learning"),
-            ControlCommand::Link(c) => forward(&routes.link, c, reply, "robot link"),
-            ControlCommand::Recorder(c) => match &routes.recorder {
-                Some(to) => forward(to, c, reply, "recorder"),
-                None => {
-                    let _ = reply.send(Err(CommandError::Rejected(
-                        "recording is not available in this server".into(),
-                    )));
-                }
-            },
-        }
-    }
-}
-
-/// Hands `command` to its owner without waiting; a full or closed inbox is answered at once.
-fn forward<C>(to: &mpsc::Sender<Envelope<C>>, command: C, reply: Reply, owner: &'static str) {
-    match to.try_send(Envelope { command, reply }) {
-        Ok(()) => {}
-        Err(mpsc::error::TrySendError::Full(e)) => e.answer(Err(CommandError::Busy(owner))),
-        Err(mpsc::error::TrySendError::Closed(e)) => e.answer(Err(CommandError::Unavailable(
-            format!("the {owner} is not running"),
-        ))),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -445,48 +372,5 @@ mod tests {
         assert!(names.contains(&"estop") && names.contains(&"start_recording"));
         let c: ControlCommand = LinkCommand::Rearm {}.into();
         assert_eq!(serde_json::to_string(&c).unwrap(), r#"{"cmd":"rearm"}"#);
-    }
-
-    #[tokio::test]
-    async fn the_router_answers_busy_at_once_instead_of_waiting_for_a_full_inbox() {
-        let (estop, _estop_rx) = watch::channel(false);
-        let (gating, _gating_rx) = mpsc::channel(1);
-        let (learning, _l) = mpsc::channel(1);
-        let (link, _k) = mpsc::channel(1);
-        let (tx, rx) = mpsc::channel(8);
-        let cancel = CancellationToken::new();
-        let router = tokio::spawn(route(
-            rx,
-            Routes {
-                estop,
-                events: None,
-                gating,
-                learning,
-                link,
-                recorder: None,
-            },
-            cancel.clone(),
-        ));
-        let mode = || GatingCommand::SetMode { mode: Mode::Manual };
-        let (first, _first_reply) = ControlRequest::new(mode());
-        tx.send(first).await.unwrap();
-        let (second, second_reply) = ControlRequest::new(mode());
-        tx.send(second).await.unwrap();
-        assert_eq!(
-            second_reply.await.unwrap(),
-            Err(CommandError::Busy("gating"))
-        );
-        // The e-stop behind a stuck owner still latches.
-        let (stop, stop_reply) = ControlRequest::new(LatchCommand::Estop {});
-        tx.send(stop).await.unwrap();
-        assert_eq!(
-            stop_reply.await.unwrap(),
-            Ok(Applied::Estop { estop: true })
-        );
-        let (rec, rec_reply) = ControlRequest::new(RecorderCommand::StopRecording {});
-        tx.send(rec).await.unwrap();
-        assert_eq!(rec_reply.await.unwrap().unwrap_err().code(), "rejected");
-        cancel.cancel();
-        router.await.unwrap();
     }
 }

@@ -4,7 +4,8 @@
 //! core in the `pavlov` crate. One folder per concern (see `ARCHITECTURE.md`):
 //!
 //! - [`server`]: starts a server run (link, pipeline, recorder, skeleton) and stops it in a safe order;
-//! - [`command`]: the command vocabulary and its router;
+//! - [`bus`]: the event log, the tick feed and the recorder's queue, beneath every actor that uses them;
+//! - [`command`]: the command vocabulary;
 //! - [`pipeline`]: the tick graph (ticker, sensor and skeleton ingest, learning, gating, actuation, feed);
 //! - [`horde`]: `[horde]`'s predictions, learned on a thread of their own, off the control path;
 //! - [`link`]: the serial link, its writer and its supervision;
@@ -17,6 +18,7 @@
 //! - [`mod@bench`]: the real-time benchmark and its load and abuse clients.
 
 pub mod bench;
+pub mod bus;
 pub mod command;
 pub mod dashboard;
 pub mod experiment;

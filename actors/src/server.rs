@@ -26,14 +26,13 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
+use crate::bus::{EventLog, TickFeed};
 use crate::command::ControlRequest;
 use crate::horde::{HordeError, HordeHandle, HordeView};
 use crate::link::opener::LinkOpener;
 use crate::link::serial::{SerialOpener, open_serial};
 use crate::link::supervisor::Supervisor;
 use crate::link::{LinkError, OpenLink, writer};
-use crate::pipeline::events::EventLog;
-use crate::pipeline::feed::TickFeed;
 use crate::pipeline::learning::Learning;
 use crate::pipeline::sensor_ingest::IngestLink;
 use crate::pipeline::skeleton_ingest::{self, SkeletonIngest};

@@ -23,7 +23,6 @@
 use serde::Serialize;
 
 use super::LearnError;
-use super::spec::{FeatureSpec, Threshold};
 
 /// Most tiles per input dimension (a 2-D pair tiling has this many squared).
 pub const MAX_TILES_PER_DIMENSION: usize = 1000;
@@ -219,94 +218,6 @@ pub fn check_initial_value(
     }
 }
 
-/// A fixed threshold θ finite (a number of steps K always gives a finite θ).
-pub fn check_threshold(name: &str, threshold: Threshold) -> Result<(), LearnError> {
-    match threshold {
-        Threshold::Fixed(value) if !value.is_finite() => Err(out_of_bounds(
-            name,
-            "threshold",
-            value,
-            "is not finite".into(),
-        )),
-        _ => Ok(()),
-    }
-}
-
-/// The sizes of `features` over `obs_dims` observation dimensions, checked against the size bounds
-/// without allocating anything: tiles in `1..=MAX_TILES_PER_DIMENSION`, at least one tiling, and at most
-/// [`MAX_FEATURES`] features.
-pub fn feature_bounds(
-    name: &str,
-    features: &FeatureSpec,
-    obs_dims: usize,
-) -> Result<ParamBounds, LearnError> {
-    let (tiles, tilings, per_tiling) = match features {
-        FeatureSpec::OneDim {
-            all_obs,
-            inputs,
-            tiles,
-            tilings,
-        } => {
-            if !(1..=MAX_TILINGS_PER_DIMENSION).contains(tilings) {
-                return Err(LearnError::OutOfBounds {
-                    name: name.to_string(),
-                    field: "features.tilings".into(),
-                    value: tilings.to_string(),
-                    bound: format!("is outside 1..={MAX_TILINGS_PER_DIMENSION} per dimension"),
-                });
-            }
-            let dims = if *all_obs { obs_dims } else { 0 };
-            (
-                *tiles,
-                dims.saturating_add(inputs.len()).saturating_mul(*tilings),
-                Some(*tiles),
-            )
-        }
-        FeatureSpec::Pairs { pairs, tiles } => {
-            if let Some((k, p)) = pairs
-                .iter()
-                .enumerate()
-                .find(|(_, p)| !(0.0..1.0).contains(&p.offset))
-            {
-                return Err(out_of_bounds(
-                    name,
-                    &format!("features.pairs[{k}].offset"),
-                    p.offset,
-                    "is outside [0, 1) of a tile width".into(),
-                ));
-            }
-            (*tiles, pairs.len(), tiles.checked_mul(*tiles))
-        }
-    };
-    if !(1..=MAX_TILES_PER_DIMENSION).contains(&tiles) {
-        return Err(LearnError::OutOfBounds {
-            name: name.to_string(),
-            field: "features.tiles".into(),
-            value: tiles.to_string(),
-            bound: format!("is outside 1..={MAX_TILES_PER_DIMENSION} tiles per dimension"),
-        });
-    }
-    if tilings == 0 {
-        return Err(LearnError::NoTilings);
-    }
-    let total = per_tiling.and_then(|b| b.checked_mul(tilings));
-    match total {
-        Some(n) if n <= MAX_FEATURES => Ok(ParamBounds::new(tilings, n)),
-        _ => Err(LearnError::OutOfBounds {
-            name: name.to_string(),
-            field: "features".into(),
-            value: format!(
-                "{tilings} tilings of {} tiles",
-                per_tiling.map_or_else(|| "too many".to_string(), |b| b.to_string())
-            ),
-            bound: format!(
-                "exceed {MAX_FEATURES} features (the weights and traces are dense f64 vectors, \
-                 walked on every tick)"
-            ),
-        }),
-    }
-}
-
 /// The count of predictions and their features together, before any is allocated.
 pub fn check_set_size(feature_counts: &[usize]) -> Result<(), LearnError> {
     if feature_counts.len() > MAX_PREDICTIONS {
@@ -330,7 +241,6 @@ pub fn check_set_size(feature_counts: &[usize]) -> Result<(), LearnError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::learn::PairSpec;
 
     #[test]
     fn the_step_size_bound_is_one_over_the_active_features() {
@@ -365,74 +275,8 @@ mod tests {
         assert_eq!(field(check_tau("p", 1.0)), "tau");
         assert_eq!(field(check_tau("p", f64::INFINITY)), "tau");
         assert_eq!(field(check_initial_weight("p", f64::NAN)), "initial_weight");
-        assert_eq!(
-            field(check_threshold("p", Threshold::Fixed(f64::INFINITY))),
-            "threshold"
-        );
         check_lambda("p", 0.0).unwrap();
         check_lambda("p", 1.0).unwrap();
-        check_threshold("p", Threshold::Steps(u32::MAX)).unwrap();
-    }
-
-    #[test]
-    fn feature_sizes_are_bounded_before_allocation() {
-        let one_dim = |tiles| FeatureSpec::OneDim {
-            all_obs: true,
-            inputs: vec!["left_elbow".into()],
-            tiles,
-            tilings: 1,
-        };
-        assert_eq!(
-            feature_bounds("stall", &one_dim(10), 44).unwrap(),
-            ParamBounds::new(45, 450)
-        );
-        for tiles in [0, 1001, 100_000_000, usize::MAX] {
-            match feature_bounds("stall", &one_dim(tiles), 44) {
-                Err(LearnError::OutOfBounds { field, bound, .. }) => {
-                    assert_eq!(field, "features.tiles");
-                    assert!(bound.contains("1..=1000"), "{bound}");
-                }
-                other => panic!("{tiles}: {other:?}"),
-            }
-        }
-        let pair = PairSpec {
-            x: "a".into(),
-            y: "b".into(),
-            offset: 0.0,
-        };
-        let pairs = |n, tiles| FeatureSpec::Pairs {
-            pairs: vec![pair.clone(); n],
-            tiles,
-        };
-        assert_eq!(
-            feature_bounds("command", &pairs(5, 10), 44).unwrap(),
-            ParamBounds::new(5, 500)
-        );
-        assert!(feature_bounds("command", &pairs(1, 1000), 44).is_ok());
-        match feature_bounds("command", &pairs(2, 1000), 44) {
-            Err(e @ LearnError::OutOfBounds { .. }) => {
-                let text = e.to_string();
-                assert!(
-                    text.contains("features = 2 tilings") && text.contains("1000000"),
-                    "{text}"
-                )
-            }
-            other => panic!("{other:?}"),
-        }
-        let mut shifted = pairs(3, 10);
-        if let FeatureSpec::Pairs { pairs, .. } = &mut shifted {
-            pairs[2].offset = 1.0;
-        }
-        match feature_bounds("command", &shifted, 44) {
-            Err(LearnError::OutOfBounds { field, .. }) => {
-                assert_eq!(field, "features.pairs[2].offset")
-            }
-            other => panic!("{other:?}"),
-        }
-        assert_eq!(
-            feature_bounds("p", &pairs(0, 10), 44),
-            Err(LearnError::NoTilings)
-        );
     }
 
     #[test]

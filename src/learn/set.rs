@@ -36,10 +36,11 @@
 //! the skipped transition cannot be learned from) or on [`PredictionSet::break_chain`].
 
 use super::LearnError;
-use super::bounds::{ParamBounds, check_lambda, check_set_size, check_threshold};
+use super::bounds::{ParamBounds, check_lambda, check_set_size};
 use super::group::Column;
 use super::gtd::{Gtd, GtdChain};
 use super::inputs::{FeatureInputs, SignalNames, resolve};
+use super::spec::check_threshold;
 use super::spec::{Cumulant, LearnerKind, PredictionSpec, Threshold};
 use super::tiles::TileCoder;
 

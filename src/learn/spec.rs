@@ -28,7 +28,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::bounds::{ParamBounds, check_initial_value, check_tau, check_threshold, feature_bounds};
+use super::bounds::{
+    MAX_FEATURES, MAX_TILES_PER_DIMENSION, MAX_TILINGS_PER_DIMENSION, ParamBounds,
+    check_initial_value, check_tau, out_of_bounds,
+};
 use super::td::TdParams;
 use super::{LearnError, Sigma};
 
@@ -282,6 +285,94 @@ impl PredictionSpec {
     }
 }
 
+/// A fixed threshold θ finite (a bound of [`super::bounds`], kept beside the type it checks) (a number of steps K always gives a finite θ).
+pub fn check_threshold(name: &str, threshold: Threshold) -> Result<(), LearnError> {
+    match threshold {
+        Threshold::Fixed(value) if !value.is_finite() => Err(out_of_bounds(
+            name,
+            "threshold",
+            value,
+            "is not finite".into(),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// The sizes of `features` over `obs_dims` observation dimensions, checked against the size bounds
+/// without allocating anything: tiles in `1..=MAX_TILES_PER_DIMENSION`, at least one tiling, and at most
+/// [`MAX_FEATURES`] features.
+pub fn feature_bounds(
+    name: &str,
+    features: &FeatureSpec,
+    obs_dims: usize,
+) -> Result<ParamBounds, LearnError> {
+    let (tiles, tilings, per_tiling) = match features {
+        FeatureSpec::OneDim {
+            all_obs,
+            inputs,
+            tiles,
+            tilings,
+        } => {
+            if !(1..=MAX_TILINGS_PER_DIMENSION).contains(tilings) {
+                return Err(LearnError::OutOfBounds {
+                    name: name.to_string(),
+                    field: "features.tilings".into(),
+                    value: tilings.to_string(),
+                    bound: format!("is outside 1..={MAX_TILINGS_PER_DIMENSION} per dimension"),
+                });
+            }
+            let dims = if *all_obs { obs_dims } else { 0 };
+            (
+                *tiles,
+                dims.saturating_add(inputs.len()).saturating_mul(*tilings),
+                Some(*tiles),
+            )
+        }
+        FeatureSpec::Pairs { pairs, tiles } => {
+            if let Some((k, p)) = pairs
+                .iter()
+                .enumerate()
+                .find(|(_, p)| !(0.0..1.0).contains(&p.offset))
+            {
+                return Err(out_of_bounds(
+                    name,
+                    &format!("features.pairs[{k}].offset"),
+                    p.offset,
+                    "is outside [0, 1) of a tile width".into(),
+                ));
+            }
+            (*tiles, pairs.len(), tiles.checked_mul(*tiles))
+        }
+    };
+    if !(1..=MAX_TILES_PER_DIMENSION).contains(&tiles) {
+        return Err(LearnError::OutOfBounds {
+            name: name.to_string(),
+            field: "features.tiles".into(),
+            value: tiles.to_string(),
+            bound: format!("is outside 1..={MAX_TILES_PER_DIMENSION} tiles per dimension"),
+        });
+    }
+    if tilings == 0 {
+        return Err(LearnError::NoTilings);
+    }
+    let total = per_tiling.and_then(|b| b.checked_mul(tilings));
+    match total {
+        Some(n) if n <= MAX_FEATURES => Ok(ParamBounds::new(tilings, n)),
+        _ => Err(LearnError::OutOfBounds {
+            name: name.to_string(),
+            field: "features".into(),
+            value: format!(
+                "{tilings} tilings of {} tiles",
+                per_tiling.map_or_else(|| "too many".to_string(), |b| b.to_string())
+            ),
+            bound: format!(
+                "exceed {MAX_FEATURES} features (the weights and traces are dense f64 vectors, \
+                 walked on every tick)"
+            ),
+        }),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -469,5 +560,75 @@ mod tests {
         }
         huge.initial_weight = -1e300;
         huge.bounds(44).unwrap();
+    }
+
+    #[test]
+    fn a_threshold_must_be_finite() {
+        match check_threshold("p", Threshold::Fixed(f64::INFINITY)) {
+            Err(LearnError::OutOfBounds { field, .. }) => assert_eq!(field, "threshold"),
+            other => panic!("{other:?}"),
+        }
+        check_threshold("p", Threshold::Steps(u32::MAX)).unwrap();
+    }
+
+    #[test]
+    fn feature_sizes_are_bounded_before_allocation() {
+        let one_dim = |tiles| FeatureSpec::OneDim {
+            all_obs: true,
+            inputs: vec!["left_elbow".into()],
+            tiles,
+            tilings: 1,
+        };
+        assert_eq!(
+            feature_bounds("stall", &one_dim(10), 44).unwrap(),
+            ParamBounds::new(45, 450)
+        );
+        for tiles in [0, 1001, 100_000_000, usize::MAX] {
+            match feature_bounds("stall", &one_dim(tiles), 44) {
+                Err(LearnError::OutOfBounds { field, bound, .. }) => {
+                    assert_eq!(field, "features.tiles");
+                    assert!(bound.contains("1..=1000"), "{bound}");
+                }
+                other => panic!("{tiles}: {other:?}"),
+            }
+        }
+        let pair = PairSpec {
+            x: "a".into(),
+            y: "b".into(),
+            offset: 0.0,
+        };
+        let pairs = |n, tiles| FeatureSpec::Pairs {
+            pairs: vec![pair.clone(); n],
+            tiles,
+        };
+        assert_eq!(
+            feature_bounds("command", &pairs(5, 10), 44).unwrap(),
+            ParamBounds::new(5, 500)
+        );
+        assert!(feature_bounds("command", &pairs(1, 1000), 44).is_ok());
+        match feature_bounds("command", &pairs(2, 1000), 44) {
+            Err(e @ LearnError::OutOfBounds { .. }) => {
+                let text = e.to_string();
+                assert!(
+                    text.contains("features = 2 tilings") && text.contains("1000000"),
+                    "{text}"
+                )
+            }
+            other => panic!("{other:?}"),
+        }
+        let mut shifted = pairs(3, 10);
+        if let FeatureSpec::Pairs { pairs, .. } = &mut shifted {
+            pairs[2].offset = 1.0;
+        }
+        match feature_bounds("command", &shifted, 44) {
+            Err(LearnError::OutOfBounds { field, .. }) => {
+                assert_eq!(field, "features.pairs[2].offset")
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(
+            feature_bounds("p", &pairs(0, 10), 44),
+            Err(LearnError::NoTilings)
+        );
     }
 }

@@ -7,6 +7,10 @@
 //! `actors/` package, where `CARGO_MANIFEST_DIR` points) and must stay inside the repository. Markdown
 //! links to relative targets, and documents named in backquotes (`` `x.md` ``), must exist in the tree.
 //! Paths into the folders that sat beside the repository while it was written are refused by name.
+//!
+//! It also keeps the layering: no new import circle among the top-level modules of either crate (those
+//! still standing are named, and can only go), and the buses (`actors/src/bus/`) beneath everything that
+//! uses them.
 
 use std::path::{Component, Path, PathBuf};
 
@@ -200,4 +204,221 @@ fn the_checker_sees_what_it_must_refuse() {
             .unwrap()
             .starts_with(root)
     );
+}
+
+// ---- The module graph: which top-level module of a crate imports which ----
+
+/// The top-level modules of the crate whose sources are in `src` (folders and files, `lib.rs` and
+/// `main.rs` aside), each with the top-level modules it names through `crate::` outside comments and
+/// tests (a test may reach anywhere; `tests.rs` files and a trailing `#[cfg(test)] mod` are left out).
+fn module_graph(
+    src: &Path,
+) -> std::collections::BTreeMap<String, std::collections::BTreeSet<String>> {
+    let mut modules = std::collections::BTreeSet::new();
+    for entry in std::fs::read_dir(src)
+        .expect("the crate's sources")
+        .flatten()
+    {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let module = if entry.path().is_dir() {
+            name
+        } else if let Some(stem) = name.strip_suffix(".rs") {
+            stem.to_string()
+        } else {
+            continue;
+        };
+        if module != "lib" && module != "main" {
+            modules.insert(module);
+        }
+    }
+    let mut graph: std::collections::BTreeMap<_, std::collections::BTreeSet<String>> = modules
+        .iter()
+        .map(|m| (m.clone(), Default::default()))
+        .collect();
+    let mut files = Vec::new();
+    text_files(src, &mut files);
+    for file in files
+        .iter()
+        .filter(|f| f.extension().is_some_and(|e| e == "rs"))
+    {
+        let rel = file.strip_prefix(src).unwrap_or(file);
+        let first = rel
+            .components()
+            .next()
+            .map(|c| c.as_os_str().to_string_lossy().into_owned());
+        let Some(first) = first else { continue };
+        let owner = first.strip_suffix(".rs").unwrap_or(&first).to_string();
+        let in_tests = rel.components().any(|c| {
+            let c = c.as_os_str().to_string_lossy();
+            c == "tests" || c == "tests.rs"
+        });
+        if !modules.contains(&owner) || in_tests {
+            continue;
+        }
+        let text = std::fs::read_to_string(file).unwrap_or_default();
+        let code = text.split("#[cfg(test)]\nmod ").next().unwrap_or("");
+        for line in code.lines() {
+            let line = line.split("//").next().unwrap_or("");
+            for named in crate_paths(line) {
+                if named != owner && modules.contains(&named) {
+                    graph.entry(owner.clone()).or_default().insert(named);
+                }
+            }
+        }
+    }
+    graph
+}
+
+/// The first segment of every `crate::` path on `line`, a group's (`crate::{a::X, b}`) included.
+fn crate_paths(line: &str) -> Vec<String> {
+    let ident = |s: &str| -> String {
+        s.trim_start()
+            .chars()
+            .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+            .collect()
+    };
+    let mut out = Vec::new();
+    for part in line.split("crate::").skip(1) {
+        if let Some(group) = part.strip_prefix('{') {
+            let mut depth = 0;
+            let mut start = true;
+            for (i, c) in group.char_indices() {
+                match c {
+                    '{' => depth += 1,
+                    '}' if depth == 0 => break,
+                    '}' => depth -= 1,
+                    ',' if depth == 0 => start = true,
+                    c if start && !c.is_whitespace() => {
+                        out.push(ident(&group[i..]));
+                        start = false;
+                    }
+                    _ => {}
+                }
+            }
+        } else {
+            out.push(ident(part));
+        }
+    }
+    out.retain(|m| !m.is_empty());
+    out
+}
+
+/// The circles of `graph`: each set of two or more modules that reach one another.
+fn circles(
+    graph: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>,
+) -> Vec<Vec<String>> {
+    let reach = |from: &String| {
+        let mut seen = std::collections::BTreeSet::new();
+        let mut todo = vec![from.clone()];
+        while let Some(m) = todo.pop() {
+            for next in graph.get(&m).into_iter().flatten() {
+                if seen.insert(next.clone()) {
+                    todo.push(next.clone());
+                }
+            }
+        }
+        seen
+    };
+    let reaches: std::collections::BTreeMap<_, _> = graph.keys().map(|m| (m, reach(m))).collect();
+    let mut found: Vec<Vec<String>> = Vec::new();
+    for m in graph.keys() {
+        let circle: Vec<String> = graph
+            .keys()
+            .filter(|n| reaches[m].contains(*n) && reaches[n].contains(m))
+            .cloned()
+            .collect();
+        if circle.len() > 1 && !found.contains(&circle) {
+            found.push(circle);
+        }
+    }
+    found
+}
+
+/// The circles among top-level modules still standing, named so that they can only shrink: the shell's
+/// telemetry holds both the counters the link and the Horde write (`counters.rs`, `histogram.rs`) and the
+/// `Health` handle that reads the simulator's and the Horde's status; the core's learned-state checkpoint
+/// (`learn/checkpoint.rs`) names the configuration that names the learners. A change that breaks one of
+/// them takes it off this list; a change that adds one fails here.
+const STANDING_CIRCLES: [(&str, &[&str]); 2] = [
+    ("actors/src", &["horde", "link", "simulated", "telemetry"]),
+    ("src", &["config", "learn"]),
+];
+
+#[test]
+fn no_new_circle_among_the_top_level_modules_of_either_crate() {
+    let root = root();
+    let mut problems = Vec::new();
+    for (src, standing) in STANDING_CIRCLES {
+        let graph = module_graph(&root.join(src));
+        assert!(graph.len() > 5, "{src}: only {} modules found", graph.len());
+        let standing: Vec<String> = standing.iter().map(|m| m.to_string()).collect();
+        let found = circles(&graph);
+        if found != [standing.clone()] {
+            let edges: Vec<String> = found
+                .iter()
+                .flatten()
+                .flat_map(|m| {
+                    graph[m]
+                        .iter()
+                        .filter(|n| found.iter().any(|c| c.contains(m) && c.contains(n)))
+                        .map(move |n| format!("{m} -> {n}"))
+                })
+                .collect();
+            problems.push(format!(
+                "{src}: circles {found:?} (expected only {standing:?}); their imports: {}",
+                edges.join(", ")
+            ));
+        }
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
+
+#[test]
+fn the_buses_are_beneath_everything_that_uses_them() {
+    let graph = module_graph(&root().join("actors/src"));
+    assert!(
+        graph["bus"].is_empty(),
+        "bus/ imports {:?}: it must import no module of the shell",
+        graph["bus"]
+    );
+    for user in ["pipeline", "link", "storage", "telemetry"] {
+        assert!(graph[user].contains("bus"), "{user} does not use the bus");
+    }
+    for lower in [
+        "bus",
+        "command",
+        "link",
+        "storage",
+        "telemetry",
+        "horde",
+        "simulated",
+    ] {
+        assert!(
+            !graph[lower].contains("pipeline"),
+            "{lower} imports pipeline/, which stands above it"
+        );
+    }
+    assert!(
+        !graph["command"].contains("bus"),
+        "command.rs is the vocabulary only"
+    );
+}
+
+#[test]
+fn the_graph_reader_sees_groups_and_circles() {
+    assert_eq!(
+        crate_paths("use crate::{bus::{EventLog, TickFeed}, command::Reply}; crate::link::x()"),
+        vec!["bus", "command", "link"]
+    );
+    let graph = [("a", "b"), ("b", "c"), ("c", "a"), ("c", "d")]
+        .iter()
+        .fold(
+            std::collections::BTreeMap::<String, std::collections::BTreeSet<String>>::new(),
+            |mut g, (x, y)| {
+                g.entry(x.to_string()).or_default().insert(y.to_string());
+                g.entry(y.to_string()).or_default();
+                g
+            },
+        );
+    assert_eq!(circles(&graph), vec![vec!["a", "b", "c"]]);
 }

@@ -29,10 +29,10 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use tokio::io::AsyncReadExt;
 
+use super::app_state::{AppState, WsQuery, check_token, refuse, refuse_foreign};
 use super::auth::Access;
 use super::download_copy::{PATIENCE, prepare};
 use super::guard::Peer;
-use super::http::{AppState, WsQuery, check_token, refuse, refuse_foreign};
 use super::source::Source;
 
 /// Bytes read from the copy at a time.

@@ -29,6 +29,7 @@
 //! All of it runs on a separate single-worker runtime, so it never occupies the control actors' workers.
 
 pub(crate) mod admission;
+pub(crate) mod app_state;
 pub(crate) mod auth;
 pub(crate) mod download;
 pub(crate) mod download_copy;
@@ -121,7 +122,7 @@ fn run_id() -> String {
 /// websocket work can neither occupy the control actors' runtime workers nor take more than one core.
 pub struct Dashboard {
     addr: SocketAddr,
-    state: Arc<http::AppState>,
+    state: Arc<app_state::AppState>,
     cancel: CancellationToken,
     http: Option<JoinHandle<()>>,
     hub: Option<JoinHandle<()>>,
@@ -233,7 +234,7 @@ impl Dashboard {
             cfg.max_pending,
             cfg.max_pending_per_address,
         )));
-        let state = Arc::new(http::AppState {
+        let state = Arc::new(app_state::AppState {
             policy: AccessPolicy::new(cfg, addr),
             hub: hub_handle,
             commands: server.commands.clone(),

@@ -78,7 +78,7 @@ pub(crate) enum HordeCommand {
     Checkpoint { dir: PathBuf, keep: usize },
     /// Announce checkpoint failures on this event log from now on (the log exists only once the
     /// pipeline is wired, after the Horde has started).
-    Events(crate::pipeline::events::EventLog),
+    Events(crate::bus::events::EventLog),
     /// Stop: write a last checkpoint if asked, then say so.
     Finish {
         checkpoint: Option<Target>,
@@ -263,7 +263,7 @@ impl HordeHandle {
 
     /// Announces the Horde's failed checkpoint writes on `events` (`checkpoint_failed`, counted in
     /// `/metrics` as every checkpoint failure).
-    pub(crate) fn attach_events(&self, events: crate::pipeline::events::EventLog) {
+    pub(crate) fn attach_events(&self, events: crate::bus::events::EventLog) {
         self.command(HordeCommand::Events(events));
     }
 

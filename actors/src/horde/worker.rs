@@ -67,7 +67,7 @@ struct Progress<W> {
     errors: u64,
     last_file: Option<String>,
     /// Where a failed checkpoint write is announced (once the pipeline has attached it).
-    events: Option<crate::pipeline::events::EventLog>,
+    events: Option<crate::bus::events::EventLog>,
 }
 
 impl<W: Weight> Worker<W> {
@@ -415,7 +415,7 @@ mod tests {
         let not_a_dir =
             std::env::temp_dir().join(format!("pavlov-horde-notdir-{}", std::process::id()));
         std::fs::write(&not_a_dir, b"a file where the folder should be").unwrap();
-        let events = crate::pipeline::events::EventLog::new();
+        let events = crate::bus::events::EventLog::new();
         let mut seen = events.subscribe();
         command_tx.send(HordeCommand::Events(events)).unwrap();
         let thread = std::thread::spawn(move || worker.run());

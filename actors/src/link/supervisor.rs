@@ -18,8 +18,8 @@ use tokio::time::Instant;
 use super::opener::LinkOpener;
 use super::writer::WriterControl;
 use super::{LinkError, LinkReader, LinkWriter};
+use crate::bus::EventLog;
 use crate::command::{Applied, CommandError, Envelope, LinkCommand};
-use crate::pipeline::events::EventLog;
 use pavlov::event::EventKind;
 use pavlov::oi::handshake;
 

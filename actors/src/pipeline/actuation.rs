@@ -23,10 +23,9 @@ use tokio_util::sync::CancellationToken;
 
 use pavlov::event::EventKind;
 
-use super::events::EventLog;
-use super::feed::TickFeed;
 use super::gating::Decision;
 use super::ticker::Tick;
+use crate::bus::{EventLog, TickFeed};
 use crate::link::writer::WriteRequest;
 use crate::telemetry::counters::ActuationStats;
 

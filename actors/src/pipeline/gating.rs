@@ -11,8 +11,8 @@ use tokio_util::sync::CancellationToken;
 
 use pavlov::event::EventKind;
 
-use super::events::EventLog;
 use super::learning::Learned;
+use crate::bus::EventLog;
 use crate::command::{Applied, CommandError, Envelope, GatingCommand, Inbox, Outcome};
 
 /// The fastest wheel speed a teleop command may ask for, mm/s: the Drive Direct range of both models.

@@ -22,17 +22,12 @@ use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
-use super::events::EventLog;
 use super::sensor_ingest::Observation;
+use crate::bus::EventLog;
+use crate::bus::StartState;
 use crate::command::{Applied, CommandError, Envelope, Inbox, LearningCommand, Outcome, Reply};
 use crate::horde::{HordeHandle, HordeView};
-use crate::storage::checkpoint_files::layout::create_run_dir;
-use crate::storage::checkpoint_files::saves::{SaveQuota, check_save_name, saved_dir};
-use crate::storage::checkpoint_files::writer::{
-    Announce, CheckpointWriter, SaveJob, WriterSettings,
-};
-use crate::storage::recording::StartState;
-use crate::storage::utc;
+use crate::storage::checkpoint_files::{Announce, CheckpointFiles, SaveJob};
 
 /// Learning's output for one tick.
 #[derive(Debug, Clone)]
@@ -55,9 +50,8 @@ pub(crate) struct Learning {
     period_ms: u64,
     /// The configuration checkpoints are made for.
     config: Config,
-    /// Writes checkpoints and saves: started with autosave, or at the first save.
-    writer: Option<CheckpointWriter>,
-    autosave: Option<Autosave>,
+    /// Where checkpoints and saves go, and when (the policy is storage's).
+    files: CheckpointFiles,
     /// Ticks learned before this run (from a resumed checkpoint): checkpoints count lifelong ticks.
     tick_offset: u64,
     /// Checkpoints and saves refused because a weight, trace or parameter was not finite.
@@ -74,24 +68,6 @@ pub(crate) struct Learning {
     horde: Option<HordeHandle>,
 }
 
-/// Periodic and final checkpoints of the learned state, into this run's folder.
-struct Autosave {
-    every_ticks: u64,
-    last_seq: u64,
-    run_dir: std::path::PathBuf,
-}
-
-/// Where the writer puts `config`'s checkpoints and saves.
-fn writer_settings(config: &Config, run_dir: Option<std::path::PathBuf>) -> WriterSettings {
-    let c = &config.checkpoint;
-    WriterSettings {
-        run_dir,
-        keep: c.keep,
-        saved_dir: saved_dir(std::path::Path::new(&c.dir)),
-        quota: SaveQuota::of(c),
-    }
-}
-
 impl Learning {
     /// Learning for `config`.
     pub(crate) fn new(config: &Config) -> Result<Self, LearnError> {
@@ -105,8 +81,7 @@ impl Learning {
             request_until: 0,
             period_ms: config.tick.period_ms.max(1),
             config: config.clone(),
-            writer: None,
-            autosave: None,
+            files: CheckpointFiles::new(&config.checkpoint, config.tick.period_ms),
             tick_offset: 0,
             refused_non_finite: 0,
             max_obs_age_ticks: config.safety.max_obs_age_ticks,
@@ -140,27 +115,13 @@ impl Learning {
     /// Checkpoints into a new run folder, `[checkpoint] dir/runs/<run id>/`, every `every_s` seconds of
     /// ticks and when the loop ends.
     pub(crate) fn with_autosave(mut self) -> std::io::Result<Self> {
-        let c = &self.config.checkpoint;
-        let run_dir = create_run_dir(std::path::Path::new(&c.dir))?;
-        let every_ticks = (c.every_s * 1000).div_ceil(self.period_ms);
-        if let Some(old) = self.writer.take() {
-            old.finish(None);
-        }
-        self.writer = Some(CheckpointWriter::spawn(writer_settings(
-            &self.config,
-            Some(run_dir.clone()),
-        ))?);
-        self.autosave = Some(Autosave {
-            every_ticks,
-            last_seq: 0,
-            run_dir,
-        });
+        self.files.start_autosave()?;
         Ok(self)
     }
 
     /// This run's folder of automatic checkpoints (with autosave).
     pub(crate) fn run_dir(&self) -> Option<&std::path::Path> {
-        self.autosave.as_ref().map(|a| a.run_dir.as_path())
+        self.files.run_dir()
     }
 
     /// Continues from `checkpoint` (already checked against the configuration).
@@ -188,19 +149,14 @@ impl Learning {
 
     /// Hands a periodic checkpoint to the writer when one is due.
     fn autosave_if_due(&mut self, seq: u64) {
-        let Some(a) = &mut self.autosave else { return };
-        if a.every_ticks == 0 || seq < a.last_seq + a.every_ticks {
+        let Some(run_dir) = self.files.due(seq) else {
             return;
-        }
-        a.last_seq = seq;
-        let run_dir = a.run_dir.clone();
-        if let Ok(c) = self.checkpoint(seq)
-            && let Some(w) = &self.writer
-        {
-            w.submit(c, self.announcer());
+        };
+        if let Ok(c) = self.checkpoint(seq) {
+            self.files.submit(c, self.announcer());
         }
         if let Some(h) = &self.horde {
-            h.checkpoint(&run_dir, self.config.checkpoint.keep);
+            h.checkpoint(&run_dir, self.files.keep());
         }
     }
 
@@ -209,18 +165,13 @@ impl Learning {
     fn save_weights(&mut self, name: Option<String>, seq: u64, reply: Reply) {
         let rejected = |e: String| Err(CommandError::Rejected(e));
         // A client names a file, never a place: it is written into `[checkpoint] dir/saved/`.
-        let (name, unique) = match name {
-            Some(name) => (name, false),
-            None => {
-                let stamp = utc::stamp(std::time::SystemTime::now());
-                let tick = self.tick_offset + seq;
-                (format!("weights-{stamp}-tick{tick}.json"), true)
+        let (name, unique) = match CheckpointFiles::save_name(name, self.tick_offset + seq) {
+            Ok(named) => named,
+            Err(e) => {
+                let _ = reply.send(rejected(e));
+                return;
             }
         };
-        if let Err(e) = check_save_name(&name) {
-            let _ = reply.send(rejected(e.to_string()));
-            return;
-        }
         let checkpoint = match self.checkpoint(seq) {
             Ok(c) => c,
             Err(e) => {
@@ -228,26 +179,14 @@ impl Learning {
                 return;
             }
         };
-        if self.writer.is_none() {
-            match CheckpointWriter::spawn(writer_settings(&self.config, None)) {
-                Ok(w) => self.writer = Some(w),
-                Err(e) => {
-                    let _ = reply.send(Err(CommandError::Unavailable(format!(
-                        "cannot start the checkpoint writer: {e}"
-                    ))));
-                    return;
-                }
-            }
-        }
-        if let Some(w) = &self.writer {
-            w.submit_save(SaveJob {
-                name,
-                unique,
-                checkpoint,
-                reply,
-                announce: self.announcer(),
-            });
-        }
+        let announce = self.announcer();
+        self.files.save(SaveJob {
+            name,
+            unique,
+            checkpoint,
+            reply,
+            announce,
+        });
     }
 
     /// Where the checkpoint writer announces what it did (a save, a failure), after the last tick handled.
@@ -311,13 +250,12 @@ impl Learning {
                 "ticks not learned from: an elbow angle missing or stale"
             );
         }
-        let autosave = self.autosave.take();
-        let last = match &autosave {
+        let target = self.files.end_autosave();
+        let last = match &target {
             Some(_) => self.checkpoint(seq).ok().map(|c| (c, self.announcer())),
             None => None,
         };
         if let Some(horde) = self.horde.take() {
-            let target = autosave.map(|a| (a.run_dir, self.config.checkpoint.keep));
             // The last Horde checkpoint is copied at once (nothing is learned any more) and written.
             let finished = tokio::task::spawn_blocking(move || {
                 horde.finish(target.as_ref().map(|(dir, keep)| (dir.as_path(), *keep)));
@@ -333,10 +271,11 @@ impl Learning {
                 "checkpoints not written in this run because a weight, trace or parameter was not finite"
             );
         }
-        let Some(writer) = self.writer.take() else {
+        if !self.files.writing() {
             return;
-        };
-        if tokio::task::spawn_blocking(move || writer.finish(last))
+        }
+        let files = self.files;
+        if tokio::task::spawn_blocking(move || files.finish(last))
             .await
             .is_err()
         {

@@ -14,16 +14,17 @@
 //! - [`skeleton_ingest`]: OSC skeletons over UDP → the newest pose.
 //! - `learning`, `gating`, `actuation`: thin shells over the core's stages; actuation assembles
 //!   each tick's record.
-//! - `feed`: every tick record out to the dashboard, the recorder and the tests, without blocking.
+//! - `router`: every command to its owner's inbox without waiting (the e-stop latch it applies itself).
+//! - the feed ([`crate::bus::feed`], on the bus): every tick record out to the dashboard, the recorder and
+//!   the tests, without blocking.
 //!
 //! Every channel on the tick path is bounded and written with `try_send`: a stage that falls behind loses
 //! its oldest input (and actuation's watchdog stops the wheels), it never makes an earlier stage wait.
 
 pub(crate) mod actuation;
-pub mod events;
-pub(crate) mod feed;
 pub(crate) mod gating;
 pub(crate) mod learning;
+pub(crate) mod router;
 pub(crate) mod sensor_ingest;
 pub mod skeleton_ingest;
 pub(crate) mod ticker;
@@ -38,16 +39,15 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
-use crate::command::{self, ControlRequest, Envelope, INBOX_CAPACITY, RecorderCommand, Routes};
+use crate::bus::{EventLog, StartState, TickFeed};
+use crate::command::{ControlRequest, Envelope, INBOX_CAPACITY, RecorderCommand};
 use crate::link::writer::WriteRequest;
-use crate::storage::recording::StartState;
 use crate::telemetry::counters::{ActuationStats, SharedTickStats};
 
 use actuation::{Actuation, ActuationChannels};
-use events::EventLog;
-use feed::TickFeed;
 use gating::GatingChannels;
 use learning::{Learning, LearningChannels};
+use router::Routes;
 use sensor_ingest::{IngestChannels, IngestLink};
 
 /// Capacity of the stage-to-stage channels, in ticks.
@@ -186,7 +186,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
             },
             cancel.clone(),
         )),
-        tokio::spawn(command::route(
+        tokio::spawn(router::route(
             command_rx,
             Routes {
                 estop: estop_tx,

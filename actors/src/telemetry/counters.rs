@@ -5,8 +5,6 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
-use tokio::sync::mpsc;
-
 use super::histogram::LatencyHistogram;
 
 /// Tick health shared with the metrics reporter.
@@ -56,84 +54,6 @@ pub(crate) struct ActuationStats {
     pub(crate) stale_observations: u64,
     /// Commands the writer queue could not take.
     pub(crate) writer_full: u64,
-}
-
-/// The recorder queue's figures, readable without keeping the queue open.
-#[derive(Clone)]
-pub(crate) struct RecorderGauge {
-    queue: Option<mpsc::WeakSender<crate::storage::recorder::RecorderInput>>,
-    dropped: Arc<AtomicU64>,
-}
-
-impl RecorderGauge {
-    /// A gauge on a recorder queue (`None`: no recorder) and its drop counter.
-    pub(crate) fn new(
-        queue: Option<mpsc::WeakSender<crate::storage::recorder::RecorderInput>>,
-        dropped: Arc<AtomicU64>,
-    ) -> Self {
-        RecorderGauge { queue, dropped }
-    }
-
-    /// Whether the feed has a recorder attached.
-    pub(crate) fn attached(&self) -> bool {
-        self.queue.is_some()
-    }
-
-    /// Records queued and not yet taken by the recorder (0 once the feed is gone).
-    pub(crate) fn backlog(&self) -> usize {
-        self.queue
-            .as_ref()
-            .and_then(|weak| weak.upgrade())
-            .map_or(0, |tx| tx.max_capacity().saturating_sub(tx.capacity()))
-    }
-
-    /// Records the recorder could not take because its queue was full.
-    pub(crate) fn dropped(&self) -> u64 {
-        self.dropped.load(Ordering::Relaxed)
-    }
-}
-
-/// Failures to write to storage, counted as their events are made (`recording_stopped` with a reason,
-/// `checkpoint_failed`; see [`pavlov::event::EventKind::is_storage_failure`]) by the event log, which every
-/// writer announces through. Every server has one.
-#[derive(Debug, Default)]
-pub(crate) struct StorageFailures {
-    /// Recordings stopped because a write (open, write, flush or finish) failed.
-    recordings: AtomicU64,
-    /// Checkpoints and saves that could not be written.
-    checkpoints: AtomicU64,
-}
-
-/// A copy of [`StorageFailures`] at one moment.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
-pub(crate) struct StorageFigures {
-    /// Recordings stopped by a write error.
-    pub(crate) recordings: u64,
-    /// Checkpoints and saves that could not be written.
-    pub(crate) checkpoints: u64,
-}
-
-impl StorageFailures {
-    /// Counts `kind` if it reports a storage failure.
-    pub(crate) fn count(&self, kind: &pavlov::event::EventKind) {
-        use pavlov::event::EventKind;
-        if !kind.is_storage_failure() {
-            return;
-        }
-        let counter = match kind {
-            EventKind::CheckpointFailed { .. } => &self.checkpoints,
-            _ => &self.recordings,
-        };
-        counter.fetch_add(1, Ordering::Relaxed);
-    }
-
-    /// The figures now.
-    pub(crate) fn figures(&self) -> StorageFigures {
-        StorageFigures {
-            recordings: self.recordings.load(Ordering::Relaxed),
-            checkpoints: self.checkpoints.load(Ordering::Relaxed),
-        }
-    }
 }
 
 /// Counters of the endpoint, for tests, benchmarks and logs.
@@ -398,39 +318,5 @@ mod zenoh_figures_tests {
         assert_eq!(between.queries, 4);
         assert_eq!(between.plus(earlier), later);
         assert_eq!(earlier.since(later).ticks_published, 0);
-    }
-}
-
-#[cfg(test)]
-mod storage_failures_tests {
-    use super::*;
-    use pavlov::event::EventKind;
-
-    #[test]
-    fn only_failures_are_counted_each_in_its_own_counter() {
-        let c = StorageFailures::default();
-        let stopped = |reason: Option<&str>| EventKind::RecordingStopped {
-            path: "r".into(),
-            reason: reason.map(str::to_string),
-        };
-        c.count(&stopped(None));
-        c.count(&EventKind::WeightsReset);
-        assert_eq!(c.figures(), StorageFigures::default());
-        c.count(&stopped(Some("File too large (os error 27)")));
-        c.count(&EventKind::CheckpointFailed {
-            path: "w".into(),
-            reason: "No space left on device (os error 28)".into(),
-        });
-        c.count(&EventKind::CheckpointFailed {
-            path: "w".into(),
-            reason: "No space left on device (os error 28)".into(),
-        });
-        assert_eq!(
-            c.figures(),
-            StorageFigures {
-                recordings: 1,
-                checkpoints: 2
-            }
-        );
     }
 }

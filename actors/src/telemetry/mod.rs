@@ -26,9 +26,10 @@ use pavlov::record::LinkStatus;
 use serde::Serialize;
 use tokio::sync::watch;
 
+use crate::bus::recorder_queue::RecorderGauge;
+use crate::bus::storage_failures::StorageFailures;
 use counters::{
-    ActuationStats, FoxgloveCounters, RecorderGauge, SharedTickStats, SharedWriterStats,
-    StorageFailures, ZenohCounters,
+    ActuationStats, FoxgloveCounters, SharedTickStats, SharedWriterStats, ZenohCounters,
 };
 use histogram::{LatencyHistogram, LatencyQuantiles};
 

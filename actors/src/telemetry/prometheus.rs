@@ -9,12 +9,11 @@ use pavlov::config::TickTimer;
 use pavlov::record::LinkStatus;
 use pavlov::supervision::{LinkState, TripCause};
 
-use super::counters::{
-    ActuationStats, DashboardStats, FoxgloveFigures, StorageFigures, ZenohFigures,
-};
+use super::counters::{ActuationStats, DashboardStats, FoxgloveFigures, ZenohFigures};
 use super::exposition::Exposition;
 pub(crate) use super::exposition::HistogramSample;
 use super::{Health, RecorderFigures};
+use crate::bus::storage_failures::StorageFigures;
 use crate::horde::status::HordeStatus;
 
 /// The Content-Type of the exposition.

@@ -22,8 +22,9 @@ use serde::{Deserialize, Serialize};
 
 use super::super::bounds::{
     ParamBounds, check_alpha_positive, check_initial_value, check_initial_weight, check_lambda,
-    check_tau, feature_bounds,
+    check_tau,
 };
+use super::super::spec::feature_bounds;
 use super::super::{FeatureSpec, LearnError, Sigma};
 
 /// `[[horde.families]]`: see the module documentation.

@@ -14,7 +14,7 @@
 
 use pavlov::event::EventKind;
 
-use crate::pipeline::events::EventLog;
+use crate::bus::EventLog;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

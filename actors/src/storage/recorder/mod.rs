@@ -24,16 +24,14 @@
 mod writer;
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Duration;
 
-use pavlov::event::Event;
-use pavlov::record::TickRecord;
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::mpsc;
 
+pub use crate::bus::recorder_queue::RecorderInput;
+pub(crate) use crate::bus::recorder_queue::SnapshotSource;
 use crate::command::{Envelope, RecorderCommand};
-use crate::pipeline::events::EventLog;
-use crate::storage::recording::{RecordingHeader, StartState};
+use crate::storage::recording::RecordingHeader;
 use writer::{Existing, Writer};
 
 /// The longest time a written record may wait in the open chunk before it is on disk.
@@ -41,27 +39,6 @@ pub(crate) const FLUSH_EVERY: Duration = Duration::from_secs(1);
 
 /// The default queue length: 10 s of ticks at 50 Hz.
 pub const DEFAULT_CAPACITY: usize = 500;
-
-/// How a recording asks the learning actor for the learner's state between two ticks.
-pub(crate) type SnapshotSource = mpsc::Sender<oneshot::Sender<StartState>>;
-
-/// What goes through the recorder's queue.
-#[derive(Debug)]
-pub enum RecorderInput {
-    /// A tick's record.
-    Tick(Arc<TickRecord>),
-    /// A change made at run time.
-    Event(Arc<Event>),
-    /// The running server: where to ask for the learner's state, and where to announce recordings.
-    Attach {
-        /// The learning actor's snapshot requests.
-        snapshots: SnapshotSource,
-        /// The event log (for `recording_started` / `recording_stopped`).
-        events: EventLog,
-        /// The learner's state before the first tick, where a recording asked for at spawn begins.
-        initial: Box<StartState>,
-    },
-}
 
 /// What the server needs to feed a recorder.
 #[derive(Debug, Clone)]

@@ -23,8 +23,8 @@ use pavlov::record::TickRecord;
 use tokio::sync::{mpsc, oneshot};
 
 use super::{FLUSH_EVERY, RecorderInput, RecorderReport, SnapshotSource};
+use crate::bus::EventLog;
 use crate::command::{Applied, CommandError, Envelope, Inbox, Outcome, RecorderCommand};
-use crate::pipeline::events::EventLog;
 use crate::storage::names::{NAME_RULES, check_plain_name};
 use crate::storage::recording::mcap_write::McapSink;
 use crate::storage::recording::{MCAP_FILE, RecordingHeader, StartState, TICKS_FILE};

@@ -18,7 +18,6 @@
 
 use std::path::{Path, PathBuf};
 
-use pavlov::agent::StageSnapshot;
 use pavlov::config::Config;
 use pavlov::event::Event;
 use pavlov::record::TickRecord;
@@ -62,17 +61,9 @@ pub(crate) const FORMAT: &str = "pavlov-recording/3";
 /// The JSON Lines format before provenance, still read.
 pub(crate) const FORMAT_2: &str = "pavlov-recording/2";
 
-/// Where the run stood when a recording began.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct StartState {
-    /// The last tick the learner had handled (`None`: the recording begins with the run); the recording
-    /// holds the ticks after it.
-    pub after: Option<u64>,
-    /// Events with a smaller id happened before the recording (the learner's state includes them).
-    pub events_before: u64,
-    /// The learner's complete state: weights, traces, parameters in force, previous step, stall level.
-    pub learner: StageSnapshot,
-}
+/// Where the run stood when a recording began (it travels through the recorder's queue, so it lives on
+/// the bus).
+pub use crate::bus::recorder_queue::StartState;
 
 /// The file the recorder writes inside a recording's directory.
 pub const MCAP_FILE: &str = "recording.mcap";

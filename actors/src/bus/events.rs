@@ -3,16 +3,54 @@
 //! tests) and to the recorder, without ever blocking the actor that made it. It also keeps the last
 //! `RECENT_CAPACITY` events (teleop aside), so that a subscriber that starts late (the dashboard hub starts
 //! after a recording begun with `--record`) still learns what happened before it.
+//!
+//! The recorder's queue item ([`RecorderInput`]) is defined here too: the log sends into that queue, and
+//! the queue's attachment carries the log (the rest of the queue is in [`super::recorder_queue`]).
 
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 
+use pavlov::agent::StageSnapshot;
 use pavlov::event::{Event, EventKind};
-use tokio::sync::{broadcast, mpsc};
+use pavlov::record::TickRecord;
+use serde::{Deserialize, Serialize};
+use tokio::sync::{broadcast, mpsc, oneshot};
 
-use crate::storage::recorder::RecorderInput;
-use crate::telemetry::counters::StorageFailures;
+use super::storage_failures::StorageFailures;
+
+/// How a recording asks the learning actor for the learner's state between two ticks.
+pub(crate) type SnapshotSource = mpsc::Sender<oneshot::Sender<StartState>>;
+
+/// What goes through the recorder's queue.
+#[derive(Debug)]
+pub enum RecorderInput {
+    /// A tick's record.
+    Tick(Arc<TickRecord>),
+    /// A change made at run time.
+    Event(Arc<Event>),
+    /// The running server: where to ask for the learner's state, and where to announce recordings.
+    Attach {
+        /// The learning actor's snapshot requests.
+        snapshots: SnapshotSource,
+        /// The event log (for `recording_started` / `recording_stopped`).
+        events: EventLog,
+        /// The learner's state before the first tick, where a recording asked for at spawn begins.
+        initial: Box<StartState>,
+    },
+}
+
+/// Where the run stood when a recording began.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StartState {
+    /// The last tick the learner had handled (`None`: the recording begins with the run); the recording
+    /// holds the ticks after it.
+    pub after: Option<u64>,
+    /// Events with a smaller id happened before the recording (the learner's state includes them).
+    pub events_before: u64,
+    /// The learner's complete state: weights, traces, parameters in force, previous step, stall level.
+    pub learner: StageSnapshot,
+}
 
 /// Capacity of the live broadcast, in events.
 pub(crate) const LIVE_CAPACITY: usize = 256;

@@ -10,8 +10,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use pavlov::record::{LinkStatus, TickRecord};
 
-use crate::storage::recorder::RecorderInput;
-use crate::telemetry::counters::RecorderGauge;
+use super::recorder_queue::{RecorderGauge, RecorderInput};
 use tokio::sync::{broadcast, mpsc, watch};
 
 /// Capacity of the live broadcast, in records (20 s at 50 Hz).
