@@ -14,6 +14,7 @@ pub mod results;
 pub(crate) mod runner;
 pub mod shard;
 pub mod stall;
+pub(crate) mod tables;
 
 use pavlov::control::Mode;
 use pavlov::rng::Rng;
