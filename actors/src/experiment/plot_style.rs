@@ -214,12 +214,13 @@ fn draw_whole<DB: DrawingBackend, F: Figure>(
 /// recorded in the PNG) into `dir`.
 pub(crate) fn save<F: Figure>(dir: &Path, stem: &str, fig: &F) -> Io {
     register_font();
-    let svg = dir.join(format!("{stem}.svg"));
+    let mut svg = String::new();
     draw_whole(
-        SVGBackend::new(&svg, pixels(fig.size_in(), SVG_DPI)).into_drawing_area(),
+        SVGBackend::with_string(&mut svg, pixels(fig.size_in(), SVG_DPI)).into_drawing_area(),
         &Style::at_dpi(SVG_DPI),
         fig,
     )?;
+    std::fs::write(dir.join(format!("{stem}.svg")), for_every_renderer(&svg))?;
     let png = dir.join(format!("{stem}.png"));
     draw_whole(
         BitMapBackend::new(&png, pixels(fig.size_in(), PNG_DPI)).into_drawing_area(),
@@ -229,6 +230,69 @@ pub(crate) fn save<F: Figure>(dir: &Path, stem: &str, fig: &F) -> Io {
     let bytes = std::fs::read(&png)?;
     std::fs::write(&png, with_phys(&bytes, PNG_DPI))?;
     Ok(())
+}
+
+/// plotters' SVG made to render the same in browsers, rsvg and ImageMagick's own SVG reader, which fills a
+/// `fill="none"` polyline black when an `opacity` attribute follows and ignores a text's `dy`: every
+/// `opacity="1"` (the default) is dropped, and each text's `dy` (in em or ex of its font size) is folded into
+/// its `y` (in its own coordinates, so a rotated label moves as before).
+pub(crate) fn for_every_renderer(svg: &str) -> String {
+    let svg = svg.replace(" opacity=\"1\"", "");
+    let mut out = String::with_capacity(svg.len());
+    let mut rest = svg.as_str();
+    while let Some(at) = rest.find("<text ") {
+        let (before, tag_on) = rest.split_at(at);
+        out.push_str(before);
+        let end = tag_on.find('>').map_or(tag_on.len(), |e| e + 1);
+        let (tag, after) = tag_on.split_at(end);
+        out.push_str(&fold_dy(tag));
+        rest = after;
+    }
+    out.push_str(rest);
+    out
+}
+
+/// One `<text ...>` start tag with its `dy` folded into `y`.
+fn fold_dy(tag: &str) -> String {
+    let attr = |name: &str| -> Option<(usize, usize, &str)> {
+        let key = format!(" {name}=\"");
+        let start = tag.find(&key)?;
+        let v0 = start + key.len();
+        let len = tag[v0..].find('"')?;
+        Some((start, v0 + len + 1, &tag[v0..v0 + len]))
+    };
+    let (Some(y), Some(dy), Some(size)) = (attr("y"), attr("dy"), attr("font-size")) else {
+        return tag.to_string();
+    };
+    let (Ok(y_px), Ok(size_px)) = (y.2.parse::<f64>(), size.2.parse::<f64>()) else {
+        return tag.to_string();
+    };
+    // An ex is taken as half an em (what rsvg and plotters' own layout assume).
+    let shift = if let Some(em) = dy.2.strip_suffix("em") {
+        em.parse::<f64>().map(|e| e * size_px)
+    } else if let Some(ex) = dy.2.strip_suffix("ex") {
+        ex.parse::<f64>().map(|e| e * size_px * 0.5)
+    } else {
+        dy.2.parse::<f64>()
+    };
+    let Ok(shift) = shift else {
+        return tag.to_string();
+    };
+    let new_y = format!(" y=\"{}\"", ((y_px + shift) * 100.0).round() / 100.0);
+    // Replace the later attribute first so the earlier one's offsets stay valid.
+    let mut t = tag.to_string();
+    let (first, second) = if y.0 < dy.0 { (y, dy) } else { (dy, y) };
+    let replace = |t: &mut String, a: (usize, usize, &str)| {
+        let with = if a.0 == y.0 {
+            new_y.clone()
+        } else {
+            String::new()
+        };
+        t.replace_range(a.0..a.1, &with);
+    };
+    replace(&mut t, second);
+    replace(&mut t, first);
+    t
 }
 
 /// The PNG `bytes` with a `pHYs` chunk saying `dpi` pixels per inch inserted after the header (unchanged
@@ -551,6 +615,16 @@ mod tests {
         assert_eq!(tint(RGBColor(0, 100, 255), 1.0), RGBColor(0, 100, 255));
         let t = tint(REACTIVE, 0.2);
         assert!(t.0 > 230 && t.1 > 200 && t.2 > 200, "{t:?}");
+    }
+
+    #[test]
+    fn the_svg_has_no_opacity_and_no_relative_text_offsets() {
+        let svg = r##"<svg><polyline fill="none" opacity="1" stroke="#000"/><text x="8" y="10" dy="0.76em" text-anchor="start" font-size="10" opacity="1" fill="#000">a</text><text x="1" y="20" dy="-0.5ex" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##;
+        let out = for_every_renderer(svg);
+        assert_eq!(
+            out,
+            r##"<svg><polyline fill="none" stroke="#000"/><text x="8" y="17.6" text-anchor="start" font-size="10" fill="#000">a</text><text x="1" y="17.5" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##
+        );
     }
 
     #[test]

@@ -24,6 +24,9 @@ use super::InteractionStudy;
 use super::analysis::AlignedPoint;
 use super::run::{self as interaction, InteractionRun};
 
+/// A policy's band (x, low, high) in its colour, with its dash for the mean line.
+type PolicyBand = (RGBColor, Dash, Vec<(f64, f64, f64)>);
+
 /// A series: legend label, colour, dash, points.
 type Series = (String, RGBColor, Dash, Vec<(f64, f64)>);
 
@@ -288,7 +291,7 @@ impl Figure for Fig4<'_> {
                 })
                 .collect();
             let body = ps::panel_header(area, st, title, &legend)?;
-            let bands: Vec<(RGBColor, Dash, Vec<(f64, f64, f64)>)> = modes
+            let bands: Vec<PolicyBand> = modes
                 .iter()
                 .map(|(m, pick)| {
                     let (c, d) = policy_style(*m);
