@@ -233,11 +233,11 @@ pub(crate) fn save<F: Figure>(dir: &Path, stem: &str, fig: &F) -> Io {
 }
 
 /// plotters' SVG made to render the same in browsers, rsvg and ImageMagick's own SVG reader, which fills a
-/// `fill="none"` polyline black when an `opacity` attribute follows and ignores a text's `dy`: every
-/// `opacity="1"` (the default) is dropped, and each text's `dy` (in em or ex of its font size) is folded into
+/// `fill="none"` polyline black when an `opacity` attribute follows, closes polylines, and ignores a text's
+/// `dy`: every `opacity="1"` (the default) is dropped, polylines are written as paths, and each text's `dy` (in em or ex of its font size) is folded into
 /// its `y` (in its own coordinates, so a rotated label moves as before).
 pub(crate) fn for_every_renderer(svg: &str) -> String {
-    let svg = svg.replace(" opacity=\"1\"", "");
+    let svg = polylines_as_paths(&svg.replace(" opacity=\"1\"", ""));
     let mut out = String::with_capacity(svg.len());
     let mut rest = svg.as_str();
     while let Some(at) = rest.find("<text ") {
@@ -246,6 +246,39 @@ pub(crate) fn for_every_renderer(svg: &str) -> String {
         let end = tag_on.find('>').map_or(tag_on.len(), |e| e + 1);
         let (tag, after) = tag_on.split_at(end);
         out.push_str(&fold_dy(tag));
+        rest = after;
+    }
+    out.push_str(rest);
+    out
+}
+
+/// Every `<polyline ... points="x,y x,y"` as `<path ... d="Mx,y Lx,y"`: ImageMagick's reader closes a
+/// polyline back to its first point.
+fn polylines_as_paths(svg: &str) -> String {
+    let mut out = String::with_capacity(svg.len());
+    let mut rest = svg;
+    while let Some(at) = rest.find("<polyline ") {
+        let (before, tag_on) = rest.split_at(at);
+        out.push_str(before);
+        let end = tag_on.find('>').map_or(tag_on.len(), |e| e + 1);
+        let (tag, after) = tag_on.split_at(end);
+        let converted = tag.find(" points=\"").and_then(|p| {
+            let v0 = p + " points=\"".len();
+            let len = tag[v0..].find('"')?;
+            let pts: Vec<&str> = tag[v0..v0 + len].split_whitespace().collect();
+            let d = pts
+                .iter()
+                .enumerate()
+                .map(|(i, p)| format!("{}{p}", if i == 0 { 'M' } else { 'L' }))
+                .collect::<Vec<_>>()
+                .join(" ");
+            Some(format!(
+                "<path {} d=\"{d}\"{}",
+                &tag["<polyline ".len()..p],
+                &tag[v0 + len + 1..]
+            ))
+        });
+        out.push_str(converted.as_deref().unwrap_or(tag));
         rest = after;
     }
     out.push_str(rest);
@@ -619,11 +652,11 @@ mod tests {
 
     #[test]
     fn the_svg_has_no_opacity_and_no_relative_text_offsets() {
-        let svg = r##"<svg><polyline fill="none" opacity="1" stroke="#000"/><text x="8" y="10" dy="0.76em" text-anchor="start" font-size="10" opacity="1" fill="#000">a</text><text x="1" y="20" dy="-0.5ex" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##;
+        let svg = r##"<svg><polyline fill="none" opacity="1" stroke="#000" points="1,2 3,4 "/><text x="8" y="10" dy="0.76em" text-anchor="start" font-size="10" opacity="1" fill="#000">a</text><text x="1" y="20" dy="-0.5ex" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##;
         let out = for_every_renderer(svg);
         assert_eq!(
             out,
-            r##"<svg><polyline fill="none" stroke="#000"/><text x="8" y="17.6" text-anchor="start" font-size="10" fill="#000">a</text><text x="1" y="17.5" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##
+            r##"<svg><path fill="none" stroke="#000" d="M1,2 L3,4"/><text x="8" y="17.6" text-anchor="start" font-size="10" fill="#000">a</text><text x="1" y="17.5" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##
         );
     }
 

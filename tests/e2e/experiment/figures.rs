@@ -86,6 +86,8 @@ pub(super) fn check_figure(dir: &Path, stem: &str) {
         &o[..o.len().min(5)]
     );
     assert!(!svg.contains(" dy=\""), "{stem}.svg offsets text with dy");
+    // Lines as paths (ImageMagick closes a polyline back to its start).
+    assert!(!svg.contains("<polyline"), "{stem}.svg has polylines");
     // Text in the bundled font first; 8 pt ticks are 10.7 CSS px, nothing smaller than 7 pt (9.3 px).
     assert!(
         svg.contains("font-family=\"DejaVu Sans, sans-serif\""),
