@@ -15,6 +15,7 @@ pub mod results;
 pub(crate) mod runner;
 pub mod shard;
 pub mod stall;
+pub(crate) mod tables;
 
 use pavlov::control::Mode;
 use pavlov::rng::Rng;

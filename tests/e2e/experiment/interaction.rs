@@ -83,6 +83,10 @@ fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
             "{f}"
         );
     }
+    for stem in ["fig3_timing", "fig4_aligned", "fig_curve"] {
+        super::figures::check_figure(&out, stem);
+    }
+    super::figures::check_tables(&out);
     assert!(table(&a).contains("pavlovian"));
     // Two 30-s windows of the time course, each with the commands of both policies.
     assert_eq!(a.curve.len(), 2);

@@ -1,5 +1,6 @@
 //! The paper's two experiments through the real runtime under virtual time.
 
+mod figures;
 mod interaction;
 mod merge_bounds;
 mod results_folders;

@@ -159,6 +159,11 @@ fn four_shards_merged_equal_the_unsharded_study() {
         "fig1_push.svg",
         "fig2_bars.svg",
         "fig_learning_curve.svg",
+        "fig1_push.png",
+        "fig2_bars.png",
+        "fig_learning_curve.png",
+        "table.md",
+        "table.csv",
     ];
     let merged = merged_equals_whole("shards", &shard_dirs, &whole, &files);
     assert!(
@@ -231,6 +236,11 @@ fn three_interaction_shards_merged_equal_the_unsharded_study() {
         "fig3_timing.svg",
         "fig4_aligned.svg",
         "fig_curve.svg",
+        "fig3_timing.png",
+        "fig4_aligned.png",
+        "fig_curve.png",
+        "table.md",
+        "table.csv",
     ];
     let merged = merged_equals_whole("ishards", &shard_dirs, &whole, &files);
     let summary = summary_without_wall_clock(&whole);

@@ -114,6 +114,11 @@ fn a_short_study_is_deterministic_recorded_and_shows_the_effect() {
         let meta = std::fs::metadata(out.join(f)).expect(f);
         assert!(meta.len() > 50, "{f} is empty");
     }
+    // Each figure as SVG and as a 300-dpi PNG of the same size, no translucency; the table beside them.
+    for stem in ["fig1_push", "fig2_bars", "fig_learning_curve"] {
+        super::figures::check_figure(&out, stem);
+    }
+    super::figures::check_tables(&out);
     let runs_csv = std::fs::read_to_string(out.join("runs.csv")).unwrap();
     assert_eq!(runs_csv.lines().count(), 5);
     let table = report::table(&a);

@@ -222,7 +222,8 @@ fn d(x: &Describe) -> String {
     format!("{},{}", x.mean, x.se)
 }
 
-/// Writes `summary.json`, `commands.csv`, `aligned.csv` and the figures.
+/// Writes `summary.json`, `commands.csv`, `aligned.csv`, the per-policy table as `table.md` and `table.csv`,
+/// and the figures (SVG and 300-dpi PNG).
 pub fn write_all(dir: &Path, s: &InteractionStudy) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
     let json = serde_json::to_string_pretty(s).map_err(std::io::Error::other)?;
@@ -270,9 +271,10 @@ pub fn write_all(dir: &Path, s: &InteractionStudy) -> std::io::Result<()> {
     }
     std::fs::write(dir.join("aligned.csv"), a)?;
     std::fs::write(dir.join("curve.csv"), curve_csv(s))?;
-    plots::fig3(&dir.join("fig3_timing.svg"), s)?;
-    plots::fig4(&dir.join("fig4_aligned.svg"), s)?;
-    plots::fig_curve(&dir.join("fig_curve.svg"), s)?;
+    plots::fig3(dir, s)?;
+    plots::fig4(dir, s)?;
+    plots::fig_curve(dir, s)?;
+    crate::experiment::tables::write_interaction(dir, s)?;
     Ok(())
 }
 

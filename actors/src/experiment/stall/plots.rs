@@ -1,4 +1,5 @@
-//! SVG figures drawn with plotters, analogues of the paper's Figures 1 and 2 plus the learning curve.
+//! Figures drawn with plotters (SVG and 300-dpi PNG, in the style of `plot_style`), analogues of the paper's
+//! Figures 1 and 2 plus the learning curve.
 //!
 //! - Figure 1: a 10 s excerpt after 2.5 min of learning that ends with the robot pushing against a wall,
 //!   for each policy: the prediction and its threshold, the over-current flag, the wheel command.
@@ -9,28 +10,31 @@ use std::path::Path;
 
 use pavlov::control::Mode;
 use pavlov::record::TickRecord;
+use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::experiment::plot_style::{draw_legend, tick_label, with_legend_room};
+use crate::experiment::plot_style::{
+    self as ps, DARK, Dash, Figure, Io, ONE_COLUMN_IN, PAVLOVIAN, REACTIVE, Style, TWO_COLUMNS_IN,
+    UNIT, err,
+};
 
 use super::WINDOW_S;
 use super::analysis::Analysis;
-use crate::experiment::mode_name;
-
-type Io = std::io::Result<()>;
-
-fn err<E: std::fmt::Display>(e: E) -> std::io::Error {
-    std::io::Error::other(e.to_string())
-}
-
-const REACTIVE: RGBColor = RGBColor(200, 80, 40);
-const PAVLOVIAN: RGBColor = RGBColor(40, 100, 200);
 
 fn color(mode: Mode) -> RGBColor {
     if mode == Mode::Pavlovian {
         PAVLOVIAN
     } else {
         REACTIVE
+    }
+}
+
+/// The policy's dash: the reactive policy dashed, the Pavlovian one solid.
+fn dash(mode: Mode) -> Dash {
+    if mode == Mode::Pavlovian {
+        Dash::Solid
+    } else {
+        Dash::Dashed
     }
 }
 
@@ -63,262 +67,313 @@ pub(crate) fn push_window(records: &[TickRecord], len: usize) -> &[TickRecord] {
     records.get(..len.min(records.len())).unwrap_or(&[])
 }
 
-/// Figure 1: signals of a push against a wall, one column per policy.
-pub(crate) fn fig1_push(path: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
-    let root = SVGBackend::new(path, (1000, 700)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
-    let root = root
-        .titled(
-            "Fig. 1 analogue: 10 s ending in a push against a wall, after 2.5 min of learning",
-            ("sans-serif", 18),
-        )
-        .map_err(err)?;
-    let cols = root.split_evenly((1, excerpts.len().max(1)));
-    for ((mode, recs), col) in excerpts.iter().zip(cols.iter()) {
-        let rows = col.split_evenly((3, 1));
-        let t0 = recs.first().map_or(0.0, |r| r.t_ms / 1000.0);
-        let t1 = recs.last().map_or(10.0, |r| r.t_ms / 1000.0).max(t0 + 0.02);
-        let t = |r: &TickRecord| r.t_ms / 1000.0 - t0;
-        let span = 0.0..(t1 - t0);
-        let c = color(*mode);
-        let values = recs
-            .iter()
-            .filter_map(|r| r.predictions.first().map(|p| p.value))
-            .filter(|v| v.is_finite());
-        let (v_lo, v_hi) = values.fold((-0.1f64, 1.1f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
-        let (v_lo, v_hi) = (v_lo - 0.05, v_hi + 0.05);
-        if let Some(area) = rows.first() {
-            let v_hi = with_legend_room(v_lo, v_hi, 2, area.dim_in_pixel().1);
-            let mut ch = ChartBuilder::on(area)
-                .caption(
-                    format!("{}: prediction and threshold", mode_name(*mode)),
-                    ("sans-serif", 14),
-                )
-                .margin(6)
-                .x_label_area_size(24)
-                .y_label_area_size(40)
-                .build_cartesian_2d(span.clone(), v_lo..v_hi)
-                .map_err(err)?;
-            ch.configure_mesh()
-                .y_label_formatter(&tick_label)
-                .x_label_formatter(&tick_label)
-                .draw()
-                .map_err(err)?;
-            ch.draw_series(LineSeries::new(
-                recs.iter()
-                    .map(|r| (t(r), r.predictions.first().map_or(0.0, |p| p.value))),
-                c.stroke_width(2),
-            ))
-            .map_err(err)?
-            .label("prediction")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
-            ch.draw_series(LineSeries::new(
-                recs.iter()
-                    .map(|r| (t(r), r.predictions.first().map_or(0.0, |p| p.threshold))),
-                BLACK.stroke_width(1),
-            ))
-            .map_err(err)?
-            .label("threshold")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK));
-            draw_legend(&mut ch).map_err(err)?;
-        }
-        if let Some(area) = rows.get(1) {
-            let mut ch = ChartBuilder::on(area)
-                .caption("over-current flag (either wheel)", ("sans-serif", 14))
-                .margin(6)
-                .x_label_area_size(24)
-                .y_label_area_size(40)
-                .build_cartesian_2d(span.clone(), -0.1f64..1.1f64)
-                .map_err(err)?;
-            ch.configure_mesh()
-                .y_label_formatter(&tick_label)
-                .x_label_formatter(&tick_label)
-                .draw()
-                .map_err(err)?;
-            ch.draw_series(LineSeries::new(
-                recs.iter().map(|r| {
-                    let oc = r.sensors.overcurrent_left || r.sensors.overcurrent_right;
-                    (t(r), if oc { 1.0 } else { 0.0 })
-                }),
-                c.stroke_width(1),
-            ))
-            .map_err(err)?;
-        }
-        if let Some(area) = rows.get(2) {
-            let w_top = with_legend_room(-300.0, 300.0, 2, area.dim_in_pixel().1);
-            let mut ch = ChartBuilder::on(area)
-                .caption("wheel commands, mm/s", ("sans-serif", 14))
-                .margin(6)
-                .x_label_area_size(30)
-                .y_label_area_size(40)
-                .build_cartesian_2d(span.clone(), -300f64..w_top)
-                .map_err(err)?;
-            ch.configure_mesh()
-                .x_desc("time, s")
-                .y_label_formatter(&tick_label)
-                .x_label_formatter(&tick_label)
-                .draw()
-                .map_err(err)?;
-            ch.draw_series(LineSeries::new(
-                recs.iter().map(|r| (t(r), f64::from(r.command.left_mm_s))),
-                c.stroke_width(2),
-            ))
-            .map_err(err)?
-            .label("left")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
-            let grey = RGBColor(90, 90, 90);
-            ch.draw_series(LineSeries::new(
-                recs.iter().map(|r| (t(r), f64::from(r.command.right_mm_s))),
-                grey.stroke_width(1),
-            ))
-            .map_err(err)?
-            .label("right")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], grey));
-            draw_legend(&mut ch).map_err(err)?;
-        }
-    }
-    root.present().map_err(err)
+struct Fig1<'a> {
+    excerpts: &'a [(Mode, &'a [TickRecord])],
 }
 
-fn bar_panel(
-    area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
-    title: &str,
+impl Figure for Fig1<'_> {
+    fn size_in(&self) -> (f64, f64) {
+        (TWO_COLUMNS_IN, 5.0)
+    }
+
+    fn caption(&self) -> String {
+        "One run per policy: the 10 s that end where a drive of the default policy pushes against a wall, \
+         after 2.5 min of learning. Threshold: the gate's threshold on the prediction."
+            .into()
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>, st: &Style) -> Io {
+        let cols = root.split_evenly((1, self.excerpts.len().max(1)));
+        for ((mode, recs), col) in self.excerpts.iter().zip(cols.iter()) {
+            let rows = col.split_evenly((3, 1));
+            let t0 = recs.first().map_or(0.0, |r| r.t_ms / 1000.0);
+            let t1 = recs.last().map_or(10.0, |r| r.t_ms / 1000.0).max(t0 + 0.02);
+            let t = |r: &TickRecord| r.t_ms / 1000.0 - t0;
+            let span = 0.0..(t1 - t0);
+            let c = color(*mode);
+            let name = ps::policy_label(*mode);
+            if let Some(area) = rows.first() {
+                let body = ps::panel_header(
+                    area,
+                    st,
+                    &format!("{name}: prediction and threshold"),
+                    &[
+                        ("prediction".into(), c, Dash::Solid),
+                        ("threshold".into(), DARK, Dash::Dashed),
+                    ],
+                )?;
+                let mut ch = ps::chart(&body, st, span.clone(), UNIT)?;
+                ps::mesh(&mut ch, st, "", "prediction")?;
+                let pred: Vec<(f64, f64)> = recs
+                    .iter()
+                    .filter_map(|r| {
+                        r.predictions
+                            .first()
+                            .map(|p| (t(r), p.value.clamp(0.0, 1.0)))
+                    })
+                    .collect();
+                let theta: Vec<(f64, f64)> = recs
+                    .iter()
+                    .filter_map(|r| r.predictions.first().map(|p| (t(r), p.threshold)))
+                    .collect();
+                ps::line(&mut ch, st, &theta, DARK, Dash::Dashed, 1.0)?;
+                ps::line(&mut ch, st, &pred, c, Dash::Solid, 1.25)?;
+            }
+            if let Some(area) = rows.get(1) {
+                let body = ps::panel_header(area, st, "over-current flag (either wheel)", &[])?;
+                let mut ch = ps::chart(&body, st, span.clone(), UNIT)?;
+                ps::mesh(&mut ch, st, "", "over-current (0/1)")?;
+                let oc: Vec<(f64, f64)> = recs
+                    .iter()
+                    .map(|r| {
+                        let oc = r.sensors.overcurrent_left || r.sensors.overcurrent_right;
+                        (t(r), if oc { 1.0 } else { 0.0 })
+                    })
+                    .collect();
+                ps::line(&mut ch, st, &oc, c, Dash::Solid, 1.0)?;
+            }
+            if let Some(area) = rows.get(2) {
+                let body = ps::panel_header(
+                    area,
+                    st,
+                    "wheel commands",
+                    &[
+                        ("left".into(), c, Dash::Solid),
+                        ("right".into(), DARK, Dash::Dotted),
+                    ],
+                )?;
+                let mut ch = ps::chart(&body, st, span.clone(), -330.0..330.0)?;
+                ps::mesh(&mut ch, st, "time (s)", "command (mm/s)")?;
+                let left: Vec<(f64, f64)> = recs
+                    .iter()
+                    .map(|r| (t(r), f64::from(r.command.left_mm_s)))
+                    .collect();
+                let right: Vec<(f64, f64)> = recs
+                    .iter()
+                    .map(|r| (t(r), f64::from(r.command.right_mm_s)))
+                    .collect();
+                ps::line(&mut ch, st, &left, c, Dash::Solid, 1.25)?;
+                ps::line(&mut ch, st, &right, DARK, Dash::Dotted, 1.25)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Figure 1: signals of a push against a wall, one column per policy, as `fig1_push.{svg,png}` in `dir`.
+pub(crate) fn fig1_push(dir: &Path, excerpts: &[(Mode, &[TickRecord])]) -> Io {
+    ps::save(dir, "fig1_push", &Fig1 { excerpts })
+}
+
+/// "n = 10 runs per policy", or both counts when they differ.
+fn runs_phrase(reactive: usize, pavlovian: usize) -> String {
+    if reactive == pavlovian {
+        format!("n = {reactive} runs per policy")
+    } else {
+        format!("n = {reactive} reactive and {pavlovian} Pavlovian runs")
+    }
+}
+
+fn bar_panel<DB: DrawingBackend>(
+    body: &DrawingArea<DB, Shift>,
+    st: &Style,
+    y_desc: &str,
     bars: [(f64, f64); 2],
 ) -> Io {
     let top = bars
         .iter()
         .map(|(m, se)| m + se)
+        .filter(|v| v.is_finite())
         .fold(0.0f64, f64::max)
         .max(1e-9)
-        * 1.2;
-    let mut ch = ChartBuilder::on(area)
-        .caption(title, ("sans-serif", 16))
-        .margin(10)
-        .x_label_area_size(30)
-        .y_label_area_size(60)
+        * 1.1;
+    let mut ch = ChartBuilder::on(body)
+        .margin_top(st.px(3.0))
+        .margin_left(st.px(3.0))
+        .margin_right(st.px(6.0))
+        .x_label_area_size(st.px(4.0))
+        .y_label_area_size(st.px(8.0 * 4.4))
         .build_cartesian_2d(-0.5f64..1.5f64, 0f64..top)
         .map_err(err)?;
     ch.configure_mesh()
-        .y_label_formatter(&tick_label)
         .disable_x_mesh()
-        .x_labels(3)
-        .x_label_formatter(&|x| match x.round() as i64 {
-            0 => "reactive".into(),
-            1 => "Pavlovian".into(),
-            _ => String::new(),
-        })
+        .max_light_lines(0)
+        .bold_line_style(st.line(ps::GRID, 0.5))
+        .axis_style(st.line(BLACK, 0.75))
+        .set_all_tick_mark_size(st.px(2.5))
+        .label_style(st.text(8.0))
+        .axis_desc_style(st.text(8.0))
+        .y_labels(5)
+        .y_desc(y_desc)
+        .y_label_formatter(&ps::tick_label)
+        .x_labels(0)
         .draw()
         .map_err(err)?;
     for (i, ((mean, se), c)) in bars.iter().zip([REACTIVE, PAVLOVIAN]).enumerate() {
         let x = i as f64;
-        ch.draw_series(std::iter::once(Rectangle::new(
-            [(x - 0.3, 0.0), (x + 0.3, *mean)],
-            c.mix(0.8).filled(),
-        )))
-        .map_err(err)?;
-        let (lo, hi) = (mean - se, mean + se);
+        if !mean.is_finite() {
+            continue;
+        }
         ch.draw_series([
-            PathElement::new(vec![(x, lo), (x, hi)], BLACK.stroke_width(2)),
-            PathElement::new(vec![(x - 0.08, lo), (x + 0.08, lo)], BLACK.stroke_width(2)),
-            PathElement::new(vec![(x - 0.08, hi), (x + 0.08, hi)], BLACK.stroke_width(2)),
+            Rectangle::new(
+                [(x - 0.3, 0.0), (x + 0.3, *mean)],
+                ps::tint(c, 0.45).filled(),
+            ),
+            Rectangle::new([(x - 0.3, 0.0), (x + 0.3, *mean)], st.line(c, 0.75)),
         ])
         .map_err(err)?;
+        ps::error_bar(&mut ch, st, x, (mean - se, mean + se), 0.08, BLACK)?;
     }
     Ok(())
 }
 
-/// Figure 2: over-current observations and efficiency, mean ± SE per policy.
-pub(crate) fn fig2_bars(path: &Path, a: &Analysis) -> Io {
-    let root = SVGBackend::new(path, (900, 420)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
-    let panels = root.split_evenly((1, 2));
-    let find = |key: &str| a.comparisons.iter().find(|c| c.metric == key);
-    for (area, key) in panels
-        .iter()
-        .zip(["overcurrent_observations", "efficiency_m_per_kj"])
-    {
-        if let Some(c) = find(key) {
-            let change = c
-                .relative_change
-                .map_or(String::new(), |r| format!(" ({:+.0}%)", r * 100.0));
-            bar_panel(
-                area,
-                &format!("{} per run, {}{change}", c.label, c.unit),
-                [
-                    (c.reactive.mean, c.reactive.se),
-                    (c.pavlovian.mean, c.pavlovian.se),
-                ],
-            )?;
-        }
-    }
-    root.present().map_err(err)
+struct Fig2<'a> {
+    a: &'a Analysis,
 }
 
-/// The learning curve: over-current observations per window, mean ± SE per policy.
-pub(crate) fn learning_curve(path: &Path, a: &Analysis) -> Io {
-    let root = SVGBackend::new(path, (900, 450)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
-    let n = a.learning_curve.len().max(1) as f64;
-    let top = a
-        .learning_curve
-        .iter()
-        .flat_map(|p| {
-            [
-                p.reactive.mean + p.reactive.se,
-                p.pavlovian.mean + p.pavlovian.se,
-            ]
-        })
-        .filter(|v| v.is_finite())
-        .fold(1.0f64, f64::max)
-        * 1.05;
-    let top = with_legend_room(0.0, top, 2, root.dim_in_pixel().1);
-    let mut ch = ChartBuilder::on(&root)
-        .caption(
-            format!("Over-current observations per {WINDOW_S} s window (mean ± SE over runs)"),
-            ("sans-serif", 16),
+impl Figure for Fig2<'_> {
+    fn size_in(&self) -> (f64, f64) {
+        (ONE_COLUMN_IN, 2.4)
+    }
+
+    fn caption(&self) -> String {
+        let n = self
+            .a
+            .comparisons
+            .first()
+            .map_or((0, 0), |c| (c.reactive.n, c.pavlovian.n));
+        format!(
+            "Bars: mean over {}; error bars: ±1 standard error.",
+            runs_phrase(n.0, n.1)
         )
-        .margin(10)
-        .x_label_area_size(36)
-        .y_label_area_size(50)
-        .build_cartesian_2d(0f64..n * WINDOW_S / 60.0, 0f64..top)
-        .map_err(err)?;
-    ch.configure_mesh()
-        .x_desc("time, min (window centres)")
-        .y_label_formatter(&tick_label)
-        .x_label_formatter(&tick_label)
-        .y_desc("over-current observations")
-        .draw()
-        .map_err(err)?;
-    for mode in [Mode::Reactive, Mode::Pavlovian] {
-        let c = color(mode);
-        let pts: Vec<(f64, f64, f64)> = a
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>, st: &Style) -> Io {
+        let legend: Vec<ps::Entry> = [Mode::Reactive, Mode::Pavlovian]
+            .into_iter()
+            .map(|m| (ps::policy_label(m).to_string(), color(m), Dash::Solid))
+            .collect();
+        let root = ps::panel_header(root, st, "", &legend)?;
+        let panels = root.split_evenly((1, 2));
+        let find = |key: &str| self.a.comparisons.iter().find(|c| c.metric == key);
+        for ((area, key), (short, quantity)) in panels
+            .iter()
+            .zip(["overcurrent_observations", "efficiency_m_per_kj"])
+            .zip([
+                ("Over-current", "observations"),
+                ("Efficiency", "efficiency"),
+            ])
+        {
+            if let Some(c) = find(key) {
+                let change = c.relative_change.map_or(String::new(), |r| {
+                    ps::signed(&format!(" ({:+.0} %)", r * 100.0))
+                });
+                let body = ps::panel_header(area, st, &format!("{short}{change}"), &[])?;
+                bar_panel(
+                    &body,
+                    st,
+                    &format!("{quantity} ({})", c.unit),
+                    [
+                        (c.reactive.mean, c.reactive.se),
+                        (c.pavlovian.mean, c.pavlovian.se),
+                    ],
+                )?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Figure 2: over-current observations and efficiency, mean ± SE per policy, as `fig2_bars.{svg,png}`.
+pub(crate) fn fig2_bars(dir: &Path, a: &Analysis) -> Io {
+    ps::save(dir, "fig2_bars", &Fig2 { a })
+}
+
+struct LearningCurve<'a> {
+    a: &'a Analysis,
+}
+
+impl Figure for LearningCurve<'_> {
+    fn size_in(&self) -> (f64, f64) {
+        (ONE_COLUMN_IN, 2.5)
+    }
+
+    fn caption(&self) -> String {
+        let n = self
+            .a
+            .learning_curve
+            .first()
+            .map_or((0, 0), |p| (p.reactive.n, p.pavlovian.n));
+        format!(
+            "Lines: mean over {} per {WINDOW_S} s window; error bars: ±1 standard error.",
+            runs_phrase(n.0, n.1)
+        )
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>, st: &Style) -> Io {
+        let a = self.a;
+        let n = a.learning_curve.len().max(1) as f64;
+        let top = a
             .learning_curve
             .iter()
-            .map(|p| {
-                let d = if mode == Mode::Pavlovian {
-                    p.pavlovian
-                } else {
-                    p.reactive
-                };
-                ((p.start_s + WINDOW_S / 2.0) / 60.0, d.mean, d.se)
+            .flat_map(|p| {
+                [
+                    p.reactive.mean + p.reactive.se,
+                    p.pavlovian.mean + p.pavlovian.se,
+                ]
             })
-            .filter(|(_, m, _)| m.is_finite())
+            .filter(|v| v.is_finite())
+            .fold(1.0f64, f64::max)
+            * 1.08;
+        let legend: Vec<ps::Entry> = [Mode::Reactive, Mode::Pavlovian]
+            .into_iter()
+            .map(|m| (ps::policy_label(m).to_string(), color(m), dash(m)))
             .collect();
-        ch.draw_series(LineSeries::new(
-            pts.iter().map(|(x, m, _)| (*x, *m)),
-            c.stroke_width(2),
-        ))
-        .map_err(err)?
-        .label(mode_name(mode))
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
-        ch.draw_series(
-            pts.iter()
-                .map(|(x, m, se)| PathElement::new(vec![(*x, m - se), (*x, m + se)], c)),
-        )
-        .map_err(err)?;
+        let body = ps::panel_header(
+            root,
+            st,
+            "Over-current observations while learning",
+            &legend,
+        )?;
+        let x_max = n * WINDOW_S / 60.0;
+        let mut ch = ps::chart(&body, st, 0f64..x_max, 0f64..top)?;
+        ps::mesh(
+            &mut ch,
+            st,
+            "time (min, window centres)",
+            &format!("observations per {WINDOW_S} s"),
+        )?;
+        // The two policies' error bars sit a little apart so that neither hides the other.
+        let dodge = x_max * 0.006;
+        for (mode, shift) in [(Mode::Reactive, -dodge), (Mode::Pavlovian, dodge)] {
+            let c = color(mode);
+            let pts: Vec<(f64, f64, f64)> = a
+                .learning_curve
+                .iter()
+                .map(|p| {
+                    let d = if mode == Mode::Pavlovian {
+                        p.pavlovian
+                    } else {
+                        p.reactive
+                    };
+                    ((p.start_s + WINDOW_S / 2.0) / 60.0 + shift, d.mean, d.se)
+                })
+                .filter(|(_, m, _)| m.is_finite())
+                .collect();
+            for (x, m, se) in &pts {
+                ps::error_bar(&mut ch, st, *x, (m - se, m + se), x_max * 0.008, c)?;
+            }
+            let line: Vec<(f64, f64)> = pts.iter().map(|(x, m, _)| (*x, *m)).collect();
+            ps::line(&mut ch, st, &line, c, dash(mode), 1.25)?;
+        }
+        Ok(())
     }
-    draw_legend(&mut ch).map_err(err)?;
-    root.present().map_err(err)
+}
+
+/// The learning curve: over-current observations per window, mean ± SE per policy, as
+/// `fig_learning_curve.{svg,png}`.
+pub(crate) fn learning_curve(dir: &Path, a: &Analysis) -> Io {
+    ps::save(dir, "fig_learning_curve", &LearningCurve { a })
 }
 
 #[cfg(test)]

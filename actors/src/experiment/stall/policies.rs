@@ -551,7 +551,7 @@ pub fn table(study: &PoliciesStudy) -> String {
     s
 }
 
-/// Runs the study, writes `policies.{json,md}` and `runs.csv` into `opts.out`, and returns the
+/// Runs the study, writes `policies.{json,md}`, `table.{md,csv}` and `runs.csv` into `opts.out`, and returns the
 /// tables.
 pub fn run_and_report(
     base: &Config,
@@ -567,6 +567,7 @@ pub fn run_and_report(
     )?;
     let mut t = table(&study);
     std::fs::write(opts.out.join("policies.md"), &t)?;
+    crate::experiment::tables::write_policies(&opts.out, &study, &t)?;
     std::fs::write(
         opts.out.join("runs.csv"),
         super::report::runs_csv(&study.runs),

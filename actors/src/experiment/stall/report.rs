@@ -36,7 +36,8 @@ pub struct StallStudy {
     pub provenance: Option<Provenance>,
 }
 
-/// Writes `summary.json`, the CSV tables and the SVG figures into `dir`.
+/// Writes `summary.json`, the CSV tables, the printed table as `table.md` and `table.csv`, and the figures
+/// (SVG and 300-dpi PNG) into `dir`.
 pub fn write_all(dir: &Path, study: &StallStudy) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
     let json = serde_json::to_string_pretty(study).map_err(std::io::Error::other)?;
@@ -55,9 +56,10 @@ pub fn write_all(dir: &Path, study: &StallStudy) -> std::io::Result<()> {
         })
         .collect();
     std::fs::write(dir.join("fig1_signals.csv"), signals_csv(&excerpts))?;
-    plots::fig1_push(&dir.join("fig1_push.svg"), &excerpts)?;
-    plots::fig2_bars(&dir.join("fig2_bars.svg"), &study.analysis)?;
-    plots::learning_curve(&dir.join("fig_learning_curve.svg"), &study.analysis)?;
+    plots::fig1_push(dir, &excerpts)?;
+    plots::fig2_bars(dir, &study.analysis)?;
+    plots::learning_curve(dir, &study.analysis)?;
+    crate::experiment::tables::write_stall(dir, study)?;
     Ok(())
 }
 
