@@ -13,7 +13,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use pavlov::agent::learning::ParamsInForce;
 use pavlov::control::Mode;
-use pavlov::event::{Event, EventKind};
+use pavlov::event::{Event, GatingChange, LearningChange, RecordingChange};
 use pavlov::record::{SafetyStop, TickRecord};
 use pavlov::supervision::LinkState;
 use serde::Serialize;
@@ -220,31 +220,41 @@ impl History {
     /// Keeps `event` (unless it is frequent) and updates what is in force.
     pub(crate) fn on_event(&self, event: &Arc<Event>) {
         let mut ring = self.ring();
-        match &event.kind {
-            EventKind::ParamsSet {
+        // What is in force follows the event's effects (see `EventKind::effects`), never its kind.
+        let effects = event.kind.effects();
+        match effects.learning {
+            Some(LearningChange::Params {
                 prediction,
                 alpha,
                 lambda,
                 threshold,
-            } => {
+            }) => {
                 if let Some(p) = ring
                     .in_force
                     .params
                     .iter_mut()
-                    .find(|p| &p.prediction == prediction)
+                    .find(|p| p.prediction == prediction)
                 {
-                    (p.alpha, p.lambda, p.threshold) = (*alpha, *lambda, *threshold);
+                    (p.alpha, p.lambda, p.threshold) = (alpha, lambda, threshold);
                 }
             }
-            EventKind::ModeSet { mode } => ring.in_force.mode = *mode,
-            EventKind::RecordingStarted { path } => ring.in_force.recording = Some(path.clone()),
+            Some(LearningChange::Reset) | None => {}
+        }
+        match effects.gating {
+            Some(GatingChange::Mode(mode)) => ring.in_force.mode = mode,
+            Some(GatingChange::Teleop(_)) | None => {}
+        }
+        match effects.recording {
+            Some(RecordingChange::Started(path)) => {
+                ring.in_force.recording = Some(path.to_string())
+            }
             // Stopped as asked, or by a failure to write it: either way it is no longer being written.
-            EventKind::RecordingStopped { path, .. }
-                if ring.in_force.recording.as_ref() == Some(path) =>
+            Some(RecordingChange::Stopped(path))
+                if ring.in_force.recording.as_deref() == Some(path) =>
             {
                 ring.in_force.recording = None;
             }
-            _ => {}
+            Some(RecordingChange::Stopped(_)) | None => {}
         }
         if event.kind.is_frequent() || ring.capacity_ticks == 0 {
             return;
@@ -332,6 +342,7 @@ impl Snapshot {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use pavlov::event::EventKind;
     use pavlov::record::PredictionValue;
 
     pub(crate) fn record(seq: u64) -> TickRecord {

@@ -12,7 +12,7 @@
 
 use std::borrow::Cow;
 
-use pavlov::event::{Event, EventKind};
+use pavlov::event::Event;
 use serde::Serialize;
 use serde::ser::{SerializeSeq, Serializer};
 
@@ -71,20 +71,15 @@ fn without(text: &str, path: &str) -> String {
 
 /// `event` as a watcher may see it: without file paths.
 pub(crate) fn for_watcher(event: &Event) -> Cow<'_, Event> {
-    let hidden = || REDACTED.to_string();
-    let kind = match &event.kind {
-        EventKind::WeightsSaved { .. } => EventKind::WeightsSaved { path: hidden() },
-        EventKind::RecordingStarted { .. } => EventKind::RecordingStarted { path: hidden() },
-        EventKind::RecordingStopped { path, reason } => EventKind::RecordingStopped {
-            path: hidden(),
-            reason: reason.as_deref().map(|r| without(r, path)),
-        },
-        EventKind::CheckpointFailed { path, reason } => EventKind::CheckpointFailed {
-            path: hidden(),
-            reason: without(reason, path),
-        },
-        _ => return Cow::Borrowed(event),
+    // Which text is private is the kind's to say (`EventKind::private_text_mut`, an exhaustive match).
+    let mut kind = event.kind.clone();
+    let Some((path, message)) = kind.private_text_mut() else {
+        return Cow::Borrowed(event);
     };
+    let path = std::mem::replace(path, REDACTED.to_string());
+    if let Some(message) = message {
+        *message = without(message, &path);
+    }
     Cow::Owned(Event {
         kind,
         ..event.clone()
@@ -258,6 +253,7 @@ mod tests {
     use super::super::history::{History, Params};
     use super::*;
     use pavlov::control::Mode;
+    use pavlov::event::EventKind;
     use pavlov::record::{PredictionValue, TickRecord};
     use serde_json::{Value, json};
     use std::sync::Arc;

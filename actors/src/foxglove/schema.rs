@@ -9,6 +9,7 @@
 //! against the schema, so a field added to [`TickRecord`](pavlov::record::TickRecord) without a line here
 //! fails a test instead of silently disappearing from Foxglove's field lists.
 
+use pavlov::event::EventKind;
 use serde_json::{Map, Value, json};
 
 /// A field of one JSON type.
@@ -192,34 +193,32 @@ pub(crate) fn signals(obs_names: &[String], predictions: &[String]) -> Value {
     )
 }
 
+/// The JSON type of a field's value in an example, for a field of an event kind not typed by hand in
+/// [`event`].
+fn inferred(value: &Value) -> Value {
+    match value {
+        Value::Bool(_) => boolean(),
+        Value::Number(n) if n.is_f64() => number(),
+        Value::Number(_) => integer(),
+        Value::Object(fields) => object(fields.iter().map(|(k, v)| (k.as_str(), inferred(v)))),
+        Value::Array(items) => array(items.first().map_or_else(string, inferred)),
+        Value::String(_) | Value::Null => string(),
+    }
+}
+
 /// `pavlov.Event`: a [`pavlov::event::Event`], flat, with the fields of every kind (each event carries
-/// only its own kind's).
+/// only its own kind's). The kinds are [`EventKind::NAMES`]; the fields typed here are those whose type is
+/// richer than their JSON (the enums of states and causes); any other field of a kind's
+/// [`EventKind::example`] is declared with the type of its value there, so a new kind needs no line here.
 pub(crate) fn event() -> Value {
-    titled(
+    let mut schema = titled(
         "pavlov.Event",
         "A change made at run time (mode, e-stop, teleop, request, learning parameters, weights, \
          recording, link), numbered, with the last tick before it took effect.",
         object([
             ("id", integer()),
             ("after", integer()),
-            (
-                "kind",
-                one_of(&[
-                    "mode_set",
-                    "teleop",
-                    "e_stop",
-                    "rearm",
-                    "human_request",
-                    "params_set",
-                    "weights_reset",
-                    "weights_saved",
-                    "recording_started",
-                    "recording_stopped",
-                    "checkpoint_failed",
-                    "link",
-                    "pipeline_stall",
-                ]),
-            ),
+            ("kind", one_of(EventKind::NAMES)),
             // mode_set: a control mode; rearm: the OI mode sent (safe, full).
             ("mode", string()),
             ("action", action()),
@@ -238,7 +237,17 @@ pub(crate) fn event() -> Value {
             ("reconnects", integer()),
             ("ticks", integer()),
         ]),
-    )
+    );
+    if let Some(declared) = schema["properties"].as_object_mut() {
+        for example in EventKind::examples() {
+            if let Ok(Value::Object(fields)) = serde_json::to_value(&example) {
+                for (name, value) in fields {
+                    declared.entry(name).or_insert_with(|| inferred(&value));
+                }
+            }
+        }
+    }
+    schema
 }
 
 /// `pavlov.Config`: the configuration in force (its fields vary with the experiment, so they are not
@@ -262,7 +271,6 @@ pub(crate) mod tests {
     use pavlov::control::{Action, Mode};
     use pavlov::event::{Event, EventKind};
     use pavlov::oi::SensorValues;
-    use pavlov::oi::mode::DriveMode;
     use pavlov::record::{ElbowAngles, PredictionValue, SafetyStop, TickInputs, TickRecord};
     use pavlov::supervision::{LinkState, TripCause};
 
@@ -372,62 +380,10 @@ pub(crate) mod tests {
         }
     }
 
-    /// One event of every kind. The match below has no wildcard, so a new kind does not compile until it
-    /// is listed here (and so checked against the schema).
+    /// One event of every kind, every field present (the core's examples: the list is derived from the
+    /// enum, so a new kind is checked here without a line here).
     fn all_event_kinds() -> Vec<EventKind> {
-        let listed = |k: &EventKind| match k {
-            EventKind::ModeSet { .. }
-            | EventKind::Teleop { .. }
-            | EventKind::EStop { .. }
-            | EventKind::Rearm { .. }
-            | EventKind::HumanRequest { .. }
-            | EventKind::ParamsSet { .. }
-            | EventKind::WeightsReset
-            | EventKind::WeightsSaved { .. }
-            | EventKind::RecordingStarted { .. }
-            | EventKind::RecordingStopped { .. }
-            | EventKind::CheckpointFailed { .. }
-            | EventKind::Link { .. }
-            | EventKind::PipelineStall { .. } => k.name(),
-        };
-        let kinds = vec![
-            EventKind::ModeSet { mode: Mode::Manual },
-            EventKind::Teleop {
-                action: Action::STOP,
-            },
-            EventKind::EStop { latched: true },
-            EventKind::Rearm {
-                cause: TripCause::Cliff,
-                mode: DriveMode::Full,
-            },
-            EventKind::HumanRequest { until_tick: 90 },
-            EventKind::ParamsSet {
-                prediction: "stall".into(),
-                alpha: 0.1,
-                lambda: 0.5,
-                threshold: 0.6,
-            },
-            EventKind::WeightsReset,
-            EventKind::WeightsSaved { path: "w".into() },
-            EventKind::RecordingStarted { path: "r".into() },
-            EventKind::RecordingStopped {
-                path: "r".into(),
-                reason: Some("No space left on device (os error 28)".into()),
-            },
-            EventKind::CheckpointFailed {
-                path: "w".into(),
-                reason: "No space left on device (os error 28)".into(),
-            },
-            EventKind::Link {
-                state: LinkState::Reconnecting,
-                trip: Some(TripCause::Charger),
-                reconnects: 3,
-            },
-            EventKind::PipelineStall { ticks: 4 },
-        ];
-        let names: std::collections::BTreeSet<_> = kinds.iter().map(listed).collect();
-        assert_eq!(names.len(), 13, "one event of every kind");
-        kinds
+        EventKind::examples().collect()
     }
 
     #[test]

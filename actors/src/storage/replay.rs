@@ -21,7 +21,7 @@ use std::collections::VecDeque;
 use pavlov::agent::gating::TELEOP_HOLD_TICKS;
 use pavlov::agent::{GatingStage, LearnInput, LearningStage, safety};
 use pavlov::control::{Action, Mode};
-use pavlov::event::{Event, EventKind};
+use pavlov::event::{Event, EventKind, GatingChange, LearningChange};
 use pavlov::skeleton::ElbowFeatures;
 use serde::Serialize;
 
@@ -282,38 +282,35 @@ fn due<'a>(q: &mut VecDeque<&'a Event>, seq: u64) -> Vec<&'a Event> {
     out
 }
 
+/// Applies what `kind` changes in learning (see [`EventKind::effects`]; nothing for other kinds).
 fn apply_to_learning(learning: &mut LearningStage, kind: &EventKind) -> Result<(), ReplayError> {
-    match kind {
-        EventKind::ParamsSet {
+    match kind.effects().learning {
+        Some(LearningChange::Params {
             prediction,
             alpha,
             lambda,
             threshold,
-        } => learning
-            .set_params(
-                Some(prediction),
-                Some(*alpha),
-                Some(*lambda),
-                Some(*threshold),
-            )
+        }) => learning
+            .set_params(Some(prediction), Some(alpha), Some(lambda), Some(threshold))
             .map(|_| ())
             .map_err(|e| ReplayError::Config(format!("a recorded params_set: {e}"))),
-        EventKind::WeightsReset => {
+        Some(LearningChange::Reset) => {
             learning.reset();
             Ok(())
         }
-        _ => Ok(()),
+        None => Ok(()),
     }
 }
 
+/// Applies what `event` changes in gating (see [`EventKind::effects`]; nothing for other kinds).
 fn apply_to_gating(gating: &mut GatingStage, event: &Event) {
-    match &event.kind {
-        EventKind::ModeSet { mode } => gating.set_mode(*mode),
-        EventKind::Teleop { action } => {
+    match event.kind.effects().gating {
+        Some(GatingChange::Mode(mode)) => gating.set_mode(mode),
+        Some(GatingChange::Teleop(action)) => {
             // Refused teleop is not recorded, so this one was accepted then and is now.
-            let _ = gating.teleop(*action, event.after.unwrap_or(0));
+            let _ = gating.teleop(action, event.after.unwrap_or(0));
         }
-        _ => {}
+        None => {}
     }
 }
 

@@ -8,6 +8,9 @@
 //! - `events`, `config`, `learner`: JSON with a JSON Schema.
 //! - Metadata `pavlov.recording`: format, program, label, UTC start, seed, where the run stood.
 
+use std::sync::LazyLock;
+
+use pavlov::event::EventKind;
 use prost::Message as _;
 use prost_types::field_descriptor_proto::{Label, Type};
 use prost_types::{
@@ -31,8 +34,18 @@ pub const METADATA_NAME: &str = "pavlov.recording";
 /// The format written into the metadata (`format` key): the one format version of both encodings.
 pub(crate) const MCAP_FORMAT: &str = super::FORMAT;
 
-/// The JSON Schema of an `events` message.
-pub(crate) const EVENT_SCHEMA: &str = r#"{"title":"pavlov.Event","description":"A change made at run time (pavlov::event::Event): it applies from the tick after `after`; the other fields depend on `kind`.","type":"object","properties":{"id":{"type":"integer","description":"Position in the order events were made"},"after":{"type":["integer","null"],"description":"The last tick its owner had handled when it took effect (null: before the first)"},"kind":{"type":"string","enum":["mode_set","teleop","e_stop","rearm","human_request","params_set","weights_reset","weights_saved","recording_started","recording_stopped","checkpoint_failed","link","pipeline_stall"]}},"required":["id","after","kind"]}"#;
+/// The JSON Schema of an `events` message; its list of kinds is [`EventKind::NAMES`], derived from the
+/// enum (the text around it is as it always was, byte for byte).
+pub(crate) static EVENT_SCHEMA: LazyLock<String> = LazyLock::new(|| {
+    let kinds: Vec<String> = EventKind::NAMES
+        .iter()
+        .map(|k| format!("\"{k}\""))
+        .collect();
+    format!(
+        r#"{{"title":"pavlov.Event","description":"A change made at run time (pavlov::event::Event): it applies from the tick after `after`; the other fields depend on `kind`.","type":"object","properties":{{"id":{{"type":"integer","description":"Position in the order events were made"}},"after":{{"type":["integer","null"],"description":"The last tick its owner had handled when it took effect (null: before the first)"}},"kind":{{"type":"string","enum":[{}]}}}},"required":["id","after","kind"]}}"#,
+        kinds.join(",")
+    )
+});
 
 /// The JSON Schema of the `config` message.
 pub(crate) const CONFIG_SCHEMA: &str = r#"{"title":"pavlov.Config","description":"The configuration in force, every key as in config/README.md; [sim] seed is the run's seed.","type":"object","properties":{"robot":{"type":"object"},"tick":{"type":"object"},"safety":{"type":"object"},"link":{"type":"object"},"control":{"type":"object"},"predictions":{"type":"array","items":{"type":"object"}},"sim":{"type":"object"},"dashboard":{"type":"object"},"checkpoint":{"type":"object"},"skeleton":{"type":"object"}},"required":["robot","tick","control","predictions","sim"]}"#;
@@ -298,14 +311,11 @@ pub(crate) fn tick_descriptor_set() -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use pavlov::control::{Action, Mode};
-    use pavlov::event::EventKind;
-    use pavlov::oi::mode::DriveMode;
-    use pavlov::supervision::{LinkState, TripCause};
+    use pavlov::event::Event;
 
     #[test]
     fn the_json_schemas_are_json_objects() {
-        for s in [EVENT_SCHEMA, CONFIG_SCHEMA, LEARNER_SCHEMA] {
+        for s in [&EVENT_SCHEMA, CONFIG_SCHEMA, LEARNER_SCHEMA] {
             let v: serde_json::Value = serde_json::from_str(s).unwrap();
             assert_eq!(v["type"], "object");
         }
@@ -313,55 +323,22 @@ mod tests {
 
     #[test]
     fn the_event_schema_names_every_kind() {
-        let v: serde_json::Value = serde_json::from_str(EVENT_SCHEMA).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&EVENT_SCHEMA).unwrap();
         let listed: Vec<&str> = v["properties"]["kind"]["enum"]
             .as_array()
             .unwrap()
             .iter()
             .map(|k| k.as_str().unwrap())
             .collect();
-        let kinds = [
-            EventKind::ModeSet { mode: Mode::Manual },
-            EventKind::Teleop {
-                action: Action::STOP,
-            },
-            EventKind::EStop { latched: true },
-            EventKind::Rearm {
-                cause: TripCause::Cliff,
-                mode: DriveMode::Safe,
-            },
-            EventKind::HumanRequest { until_tick: 1 },
-            EventKind::ParamsSet {
-                prediction: "p".into(),
-                alpha: 0.1,
-                lambda: 0.1,
-                threshold: 0.1,
-            },
-            EventKind::WeightsReset,
-            EventKind::WeightsSaved { path: "p".into() },
-            EventKind::RecordingStarted { path: "p".into() },
-            EventKind::RecordingStopped {
-                path: "p".into(),
-                reason: None,
-            },
-            EventKind::CheckpointFailed {
-                path: "p".into(),
-                reason: "r".into(),
-            },
-            EventKind::Link {
-                state: LinkState::Up,
-                trip: None,
-                reconnects: 0,
-            },
-            EventKind::PipelineStall { ticks: 1 },
-        ];
-        assert_eq!(listed.len(), kinds.len());
-        for k in &kinds {
-            assert!(
-                listed.contains(&k.name()),
-                "{} is not in the schema",
-                k.name()
-            );
+        assert_eq!(listed, EventKind::NAMES);
+        for k in EventKind::examples() {
+            let json = serde_json::to_value(Event {
+                id: 1,
+                after: None,
+                kind: k,
+            })
+            .unwrap();
+            assert!(listed.contains(&json["kind"].as_str().unwrap()));
         }
     }
 
