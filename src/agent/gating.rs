@@ -54,14 +54,6 @@ pub enum GateError {
     EStopLatched,
 }
 
-fn mode_name(m: Mode) -> &'static str {
-    match m {
-        Mode::Reactive => "reactive",
-        Mode::Pavlovian => "pavlovian",
-        Mode::Manual => "manual",
-    }
-}
-
 impl GatingStage {
     /// A gate in `mode` between `default_policy` (π) and the responses: `response` (ϱ) for the stimulus
     /// alone, each rule's own when it fires (`Config::rule_table`: the paper's single rule by default).
@@ -97,7 +89,7 @@ impl GatingStage {
     /// Accepts a teleop command on tick `seq` (manual mode only).
     pub fn teleop(&mut self, action: Action, seq: u64) -> Result<(), GateError> {
         if self.mode != Mode::Manual {
-            return Err(GateError::NotManual(mode_name(self.mode)));
+            return Err(GateError::NotManual(self.mode.name()));
         }
         if self.estop {
             return Err(GateError::EStopLatched);

@@ -22,6 +22,20 @@ pub enum Mode {
     Manual,
 }
 
+impl Mode {
+    /// Every mode, in the order declared.
+    pub const ALL: [Mode; 3] = [Mode::Reactive, Mode::Pavlovian, Mode::Manual];
+
+    /// The mode's name, as serialised and shown (`reactive`, `pavlovian`, `manual`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Reactive => "reactive",
+            Mode::Pavlovian => "pavlovian",
+            Mode::Manual => "manual",
+        }
+    }
+}
+
 /// The mixing function: true when the fixed response should act on this tick.
 ///
 /// `prediction` is `None` when it cannot be trusted (invalid or missing inputs); Pavlovian control then

@@ -73,7 +73,7 @@ fn trip_cause() -> Value {
 }
 
 fn mode() -> Value {
-    one_of(&["reactive", "pavlovian", "manual"])
+    one_of(&pavlov::control::Mode::ALL.map(pavlov::control::Mode::name))
 }
 
 /// `pavlov.TickRecord`: a [`pavlov::record::TickRecord`] as the recorder writes it.
