@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 
 use pavlov::config::{Config, HordeConfig};
 
+use super::load_average;
 use crate::horde::status::HordeStatus;
 use crate::server::{RobotTarget, Server, ServerError};
 use crate::storage::horde_file;
@@ -216,12 +217,6 @@ fn windows(
         }
     }
     (out, skipped_outside, outside)
-}
-
-/// The 1-minute load average (Linux).
-fn load_average() -> Option<f64> {
-    let text = std::fs::read_to_string("/proc/loadavg").ok()?;
-    text.split_whitespace().next()?.parse().ok()
 }
 
 impl fmt::Display for HordeComparison {

@@ -116,3 +116,9 @@ pub(crate) async fn measure(server: &Server, duration: Duration) -> BenchReport 
         records: records.load(std::sync::atomic::Ordering::Relaxed),
     }
 }
+
+/// The 1-minute load average (Linux), which the benchmarks print beside their figures.
+pub(crate) fn load_average() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/loadavg").ok()?;
+    text.split_whitespace().next()?.parse().ok()
+}

@@ -12,6 +12,7 @@ use std::time::Duration;
 
 use pavlov::config::{Config, TickTimer};
 
+use super::load_average;
 use crate::server::{RobotTarget, Server, ServerError};
 use crate::telemetry::histogram::{LatencyHistogram, LatencyQuantiles};
 
@@ -120,12 +121,6 @@ async fn run_one(
     };
     server.shutdown().await;
     Ok(run)
-}
-
-/// The 1-minute load average (Linux).
-fn load_average() -> Option<f64> {
-    let text = std::fs::read_to_string("/proc/loadavg").ok()?;
-    text.split_whitespace().next()?.parse().ok()
 }
 
 /// `a / b` to one decimal; when `b` is 0 (under the histogram's 1 µs resolution), a bound: `> a×`.
