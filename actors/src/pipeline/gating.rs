@@ -15,9 +15,6 @@ use super::learning::Learned;
 use crate::bus::EventLog;
 use crate::command::{Applied, CommandError, Envelope, GatingCommand, Inbox, Outcome};
 
-/// The fastest wheel speed a teleop command may ask for, mm/s: the Drive Direct range of both models.
-pub(crate) const TELEOP_LIMIT_MM_S: i16 = 500;
-
 /// What gating decided on one tick, with everything learning produced for it.
 #[derive(Debug, Clone)]
 pub(crate) struct Decision {
@@ -27,12 +24,15 @@ pub(crate) struct Decision {
     pub(crate) gate: GateOutput,
 }
 
-/// Applies `cmd` after tick `after` (`None`: before the first) and announces what changed.
+/// Applies `cmd` after tick `after` (`None`: before the first) and announces what changed. A teleop
+/// command may ask for wheel speeds up to `max_speed_mm_s` (the model's
+/// [`ModelSpec::max_wheel_speed_mm_s`](pavlov::oi::spec::ModelSpec::max_wheel_speed_mm_s)).
 fn apply(
     stage: &mut GatingStage,
     cmd: GatingCommand,
     after: Option<u64>,
     events: &EventLog,
+    max_speed_mm_s: i16,
 ) -> Outcome {
     let seq = after.unwrap_or(0);
     match cmd {
@@ -45,10 +45,10 @@ fn apply(
             left_mm_s,
             right_mm_s,
         } => {
-            let limit = -TELEOP_LIMIT_MM_S..=TELEOP_LIMIT_MM_S;
+            let limit = -max_speed_mm_s..=max_speed_mm_s;
             if !limit.contains(&left_mm_s) || !limit.contains(&right_mm_s) {
                 return Err(CommandError::Rejected(format!(
-                    "teleop wheel speeds must be within ±{TELEOP_LIMIT_MM_S} mm/s, got left {left_mm_s}, right {right_mm_s}"
+                    "teleop wheel speeds must be within ±{max_speed_mm_s} mm/s, got left {left_mm_s}, right {right_mm_s}"
                 )));
             }
             let action = Action {
@@ -81,6 +81,7 @@ pub(crate) struct GatingChannels {
 /// Runs until its input closes or `cancel` fires.
 pub(crate) async fn run(
     mut stage: GatingStage,
+    model: pavlov::oi::model::Model,
     channels: GatingChannels,
     cancel: CancellationToken,
 ) {
@@ -104,7 +105,13 @@ pub(crate) async fn run(
                 stage.set_estop(*estop.borrow_and_update());
             }
             Some(Envelope { command, reply }) = commands.recv() => {
-                let _ = reply.send(apply(&mut stage, command, after, &events));
+                let _ = reply.send(apply(
+                    &mut stage,
+                    command,
+                    after,
+                    &events,
+                    model.spec().max_wheel_speed_mm_s,
+                ));
             }
             p = learned.recv() => {
                 let Some(p) = p else { break };

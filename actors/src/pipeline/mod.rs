@@ -163,6 +163,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
         )),
         tokio::spawn(gating::run(
             gating,
+            config.robot.model,
             GatingChannels {
                 learned: learned_rx,
                 commands: gating_cmd_rx,
