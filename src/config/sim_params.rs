@@ -4,7 +4,6 @@
 //! without `[sim.params]` simulates exactly what it did before the table existed (the test
 //! `defaults_simulate_the_same_bytes_as_before` pins the byte stream of a default run).
 
-
 use serde::{Deserialize, Serialize};
 
 use super::{ConfigError, invalid};
@@ -97,7 +96,12 @@ impl SimParamsOverrides {
             ("payload_kg", self.payload_kg, 0.0, 20.0),
             ("friction_scale", self.friction_scale, 0.1, 10.0),
             ("stall_current_a", self.stall_current_a, 1.05, 20.0),
-            ("internal_resistance_ohm", self.internal_resistance_ohm, 0.0, 5.0),
+            (
+                "internal_resistance_ohm",
+                self.internal_resistance_ohm,
+                0.0,
+                5.0,
+            ),
             ("current_noise_ma", self.current_noise_ma, 0.0, 1000.0),
             ("current_sense_tau_s", self.current_sense_tau_s, 0.0, 1.0),
             ("overcurrent_scale_a", self.overcurrent_scale_a, 0.001, 5.0),
@@ -200,7 +204,10 @@ mod tests {
                 ..SimConfig::default()
             };
             let before = BEFORE.iter().find(|b| b.0 == lab && b.1 == Model::Create1);
-            assert_eq!(Some(digest(&sim, Model::Create1, 4000)), before.map(|b| b.2));
+            assert_eq!(
+                Some(digest(&sim, Model::Create1, 4000)),
+                before.map(|b| b.2)
+            );
         }
     }
 

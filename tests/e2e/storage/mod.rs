@@ -4,8 +4,8 @@
 
 mod checkpoint;
 mod checkpoint_runs;
-pub(crate) mod disk_full;
 mod crafted_files;
+pub(crate) mod disk_full;
 pub(crate) mod fixtures;
 mod no_secrets;
 mod recording_convert;

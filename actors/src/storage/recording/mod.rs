@@ -26,8 +26,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::provenance::Provenance;
 
-pub(crate) mod finish;
 mod bounded_file;
+pub(crate) mod finish;
 pub mod jsonl;
 mod mcap_fields;
 mod mcap_read;
