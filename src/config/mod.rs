@@ -15,6 +15,7 @@ mod dashboard;
 mod horde;
 mod link;
 mod rules;
+mod sim_params;
 mod tick;
 mod zenoh;
 pub use bounds::MAX_SAFETY_TIMEOUT_MS;
@@ -25,6 +26,7 @@ pub use dashboard::{
 pub use horde::{HordeConfig, Precision, Scheduling};
 pub use link::LinkConfig;
 pub use rules::{MAX_RULES, RuleSpec};
+pub use sim_params::SimParamsOverrides;
 pub use tick::{MAX_SPIN_US, TickConfig, TickTimer};
 pub use zenoh::{ZenohConfig, check_robot_name};
 
@@ -174,6 +176,9 @@ pub struct SimConfig {
     /// Draw the start charge, start pose and floor friction from the seed (`pavlov::sim::variation`), as
     /// runs in a lab differ; off: every run starts the same.
     pub lab_variation: bool,
+    /// `[sim.params]`: changes to the robot's physical parameters (robustness studies); empty by default.
+    #[serde(default, skip_serializing_if = "SimParamsOverrides::is_empty")]
+    pub params: SimParamsOverrides,
 }
 
 impl Default for SimConfig {
@@ -182,15 +187,18 @@ impl Default for SimConfig {
             seed: 1,
             faults: "none".into(),
             lab_variation: false,
+            params: SimParamsOverrides::default(),
         }
     }
 }
 
 impl SimConfig {
-    /// The simulated robot's parameters for `model`: the model's, with this run's lab variation drawn from
+    /// The simulated robot's parameters for `model`: the model's, changed by `[sim.params]`, with this run's lab variation drawn from
     /// the seed when `lab_variation` is on.
     pub fn robot_params(&self, model: crate::oi::Model) -> crate::sim::params::SimParams {
-        let params = crate::sim::params::SimParams::for_model(model);
+        let params = self
+            .params
+            .apply(&crate::sim::params::SimParams::for_model(model));
         if self.lab_variation {
             // Its own stream, apart from everything else the seed drives.
             let mut rng = crate::rng::Rng::new(self.seed).fork(LAB_VARIATION_STREAM);
@@ -442,6 +450,7 @@ impl Config {
         self.link.validate()?;
         self.zenoh.validate()?;
         self.sim.fault_spec()?;
+        self.sim.params.validate()?;
         if self.checkpoint.dir.trim().is_empty() {
             return Err(invalid("checkpoint.dir", "must name a directory"));
         }

@@ -12,7 +12,8 @@
 //!   the Create 1 [C1 p17]) by lowering the duty, as the spec says of its current limits ("If too much
 //!   current is requested, the current is limited and the overcurrent flag is set" [C1 p10]). The current
 //!   the duty would have driven, the *demand*, is what the over-current flag compares with the limit
-//!   (`sim::readings`); the battery supplies only the limited current.
+//!   (`sim::readings`); the battery supplies only the limited current. With `limit_wheel_current` off
+//!   (the other reading of the spec, for robustness studies) the current follows the demand.
 //! - **wheel**: mass `m`; kinetic friction, viscous friction and a breakaway (static) friction that
 //!   holds a wheel at rest until the motor force exceeds it. Friction is scaled by a slowly varying
 //!   floor-irregularity factor.
@@ -54,6 +55,7 @@ pub struct MotorConstants {
     floor_tau_s: f64,
     driver_efficiency: f64,
     current_limit_a: f64,
+    limit_current: bool,
     /// Sub-step length, s.
     dt_s: f64,
     /// Low-pass factor of the current measurement per sub-step.
@@ -85,6 +87,7 @@ impl MotorConstants {
             floor_tau_s: p.floor_friction_tau_s,
             driver_efficiency: p.driver_efficiency,
             current_limit_a: p.overcurrent_limit_a,
+            limit_current: p.limit_wheel_current,
             dt_s,
             sense_alpha,
         }
@@ -194,7 +197,7 @@ impl WheelMotor {
         };
         let demand = (self.duty * v_batt - c.back_emf * v) / c.resistance_ohm;
         self.current_a = demand;
-        if demand.abs() > c.current_limit_a && v_batt > 0.0 {
+        if c.limit_current && demand.abs() > c.current_limit_a && v_batt > 0.0 {
             // The driver lowers the duty until the current is at the limit.
             self.current_a = c.current_limit_a * demand.signum();
             self.duty = (self.current_a * c.resistance_ohm + c.back_emf * v) / v_batt;

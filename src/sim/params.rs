@@ -159,6 +159,10 @@ pub struct SimParams {
     /// flag is set" [C1 p10] (written on the low side drivers' page; applying it to the wheels is our
     /// reading of one table of limits).
     pub overcurrent_limit_a: f64,
+    /// Whether the driver limits a wheel's current to `overcurrent_limit_a` (true: the reading of [C1 p10,
+    /// p17] above) or only flags it, the current following the duty's demand (false: the other reading;
+    /// `[sim.params] limit_wheel_current`).
+    pub limit_wheel_current: bool,
     /// Each 15 ms the over-current bit of a wheel is set with probability
     /// `1 / (1 + exp(-(|I| - limit) / scale))`, `I` the sensed current the duty demands before the limit:
     /// rare when cruising (≈0.2 A), occasional on a hard start or a rough patch, almost always when
@@ -288,6 +292,7 @@ impl SimParams {
             overcurrent_limit_a: spec
                 .wheel_overcurrent_limit_a
                 .unwrap_or(UNPUBLISHED_OVERCURRENT_LIMIT_A),
+            limit_wheel_current: true,
             overcurrent_scale_a: 0.12,
             driver_efficiency: 0.9,
             capacity_mah: 3000.0,

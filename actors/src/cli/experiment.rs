@@ -144,6 +144,12 @@ pub struct StallArgs {
     /// shard-I-of-N.json into the results directory; `pavlov experiment merge` puts the shards together.
     #[arg(long, value_name = "I/N")]
     pub shard: Option<Shard>,
+    /// The robustness study: the whole study (--runs, --minutes, same seeds) once per variation of the
+    /// world, robot, sensing, default-policy speed, link and the 1.0 A current-limit reading, each with
+    /// its source or marked an estimate (`stall::variations`); never recorded. Writes variations.md,
+    /// variations.csv, variations.json and fig_variations.svg.
+    #[arg(long, conflicts_with_all = ["policies", "shard"])]
+    pub variations: bool,
 }
 
 fn load_config(path: Option<&PathBuf>, builtin: &str) -> Result<Config> {
@@ -181,6 +187,14 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
                 let (path, line) = stall::sharded::run_shard(&config, &opts, shard, true)?;
                 say!("{line}");
                 say!("wrote {}", path.display());
+                return Ok(());
+            }
+            if a.variations {
+                let folder = place.study("stall-variations", a.seed)?;
+                opts.out = folder.path.clone();
+                let table = stall::variations::run_and_report(&config, &opts, true)?;
+                say!("{}", table.trim_end());
+                say_latest(&folder);
                 return Ok(());
             }
             let policies = match &a.policies {

@@ -6,3 +6,4 @@ mod merge_bounds;
 mod results_folders;
 mod shards;
 mod stall;
+mod variations;

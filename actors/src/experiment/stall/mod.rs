@@ -5,7 +5,8 @@
 //! (`super::run_rng`), through the one `super::runner`.
 //!
 //! - `run`: what one run keeps (metrics, per-window counts, the Figure 1 excerpt);
-//! - [`analysis`]: the statistics; [`report`]: files and the terminal table; `plots`: the SVG figures.
+//! - [`analysis`]: the statistics; [`report`]: files and the terminal table; `plots`: the SVG figures;
+//! - `variations`: the same study under plausible variations (`--variations`), with its forest plot.
 
 pub(crate) mod accuracy;
 pub mod analysis;
@@ -14,6 +15,8 @@ pub mod policies;
 pub mod report;
 pub(crate) mod run;
 pub mod sharded;
+pub mod variations;
+pub(crate) mod variations_forest;
 
 use std::path::PathBuf;
 use std::time::Instant;
