@@ -72,8 +72,9 @@ impl Table {
     }
 }
 
-/// A number with about three significant digits (as the printed tables show it).
-fn num(x: f64) -> String {
+/// A number with about three significant digits (as the printed tables show it): the one formatter of
+/// every study's tables.
+pub(crate) fn num(x: f64) -> String {
     let a = x.abs();
     if !x.is_finite() {
         "–".into()

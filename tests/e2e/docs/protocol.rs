@@ -11,11 +11,8 @@ use std::time::Duration;
 
 use futures_util::StreamExt;
 use pavlov::config::Config;
-use pavlov::control::{Action, Mode};
 use pavlov::event::EventKind;
-use pavlov::oi::mode::DriveMode;
 use pavlov::record::SafetyStop;
-use pavlov::supervision::{LinkState, TripCause};
 use pavlov_actors::dashboard::Dashboard;
 use pavlov_actors::server::{RobotTarget, Server};
 use serde_json::Value;
@@ -214,66 +211,10 @@ fn every_safety_stop() -> Vec<SafetyStop> {
     all
 }
 
-/// One event of every kind, kept complete by the match as above.
+/// Every event kind, one example each: the core's own list (`EventKind::examples`, which an exhaustive
+/// match there keeps whole), so a kind added to the enum is checked against PROTOCOL.md here too.
 fn every_event_kind() -> Vec<EventKind> {
-    let all = vec![
-        EventKind::ModeSet {
-            mode: Mode::Pavlovian,
-        },
-        EventKind::Teleop {
-            action: Action {
-                left_mm_s: 0,
-                right_mm_s: 0,
-            },
-        },
-        EventKind::EStop { latched: true },
-        EventKind::Rearm {
-            cause: TripCause::Cliff,
-            mode: DriveMode::Safe,
-        },
-        EventKind::HumanRequest { until_tick: 1 },
-        EventKind::ParamsSet {
-            prediction: "stall".into(),
-            alpha: 0.01,
-            lambda: 0.9,
-            threshold: 0.5,
-        },
-        EventKind::WeightsReset,
-        EventKind::WeightsSaved { path: "w".into() },
-        EventKind::RecordingStarted { path: "r".into() },
-        EventKind::RecordingStopped {
-            path: "r".into(),
-            reason: Some("No space left on device (os error 28)".into()),
-        },
-        EventKind::CheckpointFailed {
-            path: "c".into(),
-            reason: "No space left on device (os error 28)".into(),
-        },
-        EventKind::Link {
-            state: LinkState::Up,
-            trip: None,
-            reconnects: 0,
-        },
-        EventKind::PipelineStall { ticks: 3 },
-    ];
-    for k in &all {
-        match k {
-            EventKind::ModeSet { .. }
-            | EventKind::Teleop { .. }
-            | EventKind::EStop { .. }
-            | EventKind::Rearm { .. }
-            | EventKind::HumanRequest { .. }
-            | EventKind::ParamsSet { .. }
-            | EventKind::WeightsReset
-            | EventKind::WeightsSaved { .. }
-            | EventKind::RecordingStarted { .. }
-            | EventKind::RecordingStopped { .. }
-            | EventKind::CheckpointFailed { .. }
-            | EventKind::Link { .. }
-            | EventKind::PipelineStall { .. } => {}
-        }
-    }
-    all
+    EventKind::examples().collect()
 }
 
 /// `hello`, then the first `tick` and the first `status`, from a fresh server on the simulated robot.

@@ -404,18 +404,7 @@ pub fn run_study(
 }
 
 fn fmt(x: f64) -> String {
-    let a = x.abs();
-    if !x.is_finite() {
-        "–".into()
-    } else if a >= 100.0 {
-        format!("{x:.0}")
-    } else if a >= 10.0 {
-        format!("{x:.1}")
-    } else if a >= 1.0 {
-        format!("{x:.2}")
-    } else {
-        format!("{x:.3}")
-    }
+    crate::experiment::tables::num(x)
 }
 
 fn pct(x: Option<f64>) -> String {

@@ -10,6 +10,7 @@ use super::analysis::{Analysis, TOTALS, total};
 use super::run::RunResult;
 use super::{StallOptions, WINDOW_S, plots};
 use crate::experiment::mode_name;
+use crate::experiment::tables::num;
 use crate::provenance::Provenance;
 
 /// Everything `summary.json` holds.
@@ -158,22 +159,6 @@ pub(crate) fn signals_csv(excerpts: &[(Mode, &[pavlov::record::TickRecord])]) ->
         }
     }
     s
-}
-
-/// A number with about three significant digits.
-fn num(x: f64) -> String {
-    let a = x.abs();
-    if !x.is_finite() {
-        "–".into()
-    } else if a >= 100.0 {
-        format!("{x:.0}")
-    } else if a >= 10.0 {
-        format!("{x:.1}")
-    } else if a >= 1.0 {
-        format!("{x:.2}")
-    } else {
-        format!("{x:.3}")
-    }
 }
 
 fn sd(d: &pavlov::analysis::stats::Describe) -> String {
