@@ -1,5 +1,5 @@
 //! The one command vocabulary of the running server (the router that hands each command to its owner is
-//! [`crate::pipeline::router`]).
+//! `crate::pipeline::router`).
 //!
 //! Every command a client (the websocket, a test, an experiment) can send is a variant of exactly one
 //! owner's enum below, and [`ControlCommand`] is the union of those enums: the wire names (`"cmd"`) come

@@ -1,6 +1,6 @@
 //! The recorder's queue: what goes through it ([`RecorderInput`]: ticks, events, and the attachment that
 //! tells the recorder where to ask for the learner's state), what a recording starts from
-//! ([`StartState`]), and a read-only gauge on the queue for `/metrics` ([`RecorderGauge`]).
+//! ([`StartState`]), and a read-only gauge on the queue for `/metrics` (`RecorderGauge`).
 //!
 //! The tick feed and the event log put into this queue, and the recorder (`storage::recorder`) takes from
 //! it; it lives on the bus, below both, so that neither reaches into the other. The queue's item is

@@ -15,8 +15,8 @@
 //! the server writes; from then on the connection is a websocket and leaves the pool.
 //!
 //! That deadline is meant for a request head, not for a response: a handler that answers with a long
-//! response (the recording's download, [`super::download`]) says so through the connection's
-//! [`LongResponse`] (handlers reach it as the second field of [`Peer`]). The connection then leaves the
+//! response (the recording's download, `super::download`) says so through the connection's
+//! `LongResponse` (handlers reach it as the second field of `Peer`). The connection then leaves the
 //! pool, like a websocket, and from then on ends only when the client takes no bytes for [`STALL_LIMIT`]
 //! (a slow reader is bounded by its progress, never by the total time).
 
@@ -64,7 +64,7 @@ fn lock(pool: &Mutex<PendingPool>) -> MutexGuard<'_, PendingPool> {
     pool.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
-/// The peer's address and its connection's [`LongResponse`] switch, for handlers (`ConnectInfo<Peer>`).
+/// The peer's address and its connection's `LongResponse` switch, for handlers (`ConnectInfo<Peer>`).
 #[derive(Debug, Clone)]
 pub(crate) struct Peer(pub(crate) SocketAddr, pub(crate) LongResponse);
 

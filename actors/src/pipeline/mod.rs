@@ -15,7 +15,7 @@
 //! - `learning`, `gating`, `actuation`: thin shells over the core's stages; actuation assembles
 //!   each tick's record.
 //! - `router`: every command to its owner's inbox without waiting (the e-stop latch it applies itself).
-//! - the feed ([`crate::bus::feed`], on the bus): every tick record out to the dashboard, the recorder and
+//! - the feed (`crate::bus::feed`, on the bus): every tick record out to the dashboard, the recorder and
 //!   the tests, without blocking.
 //!
 //! Every channel on the tick path is bounded and written with `try_send`: a stage that falls behind loses

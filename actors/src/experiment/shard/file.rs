@@ -270,7 +270,7 @@ fn check_format(path: &Path, format: &str) -> Result<(), MergeError> {
     }
 }
 
-/// Reads one shard file ([`read`]'s checks, then [`parse`]).
+/// Reads one shard file (`read`'s checks, then [`parse`]).
 pub fn load<R: for<'de> Deserialize<'de>>(path: &Path) -> Result<ShardFile<R>, MergeError> {
     parse(path, &read(path)?)
 }

@@ -10,10 +10,10 @@
 //!
 //! Every variation runs the same interleaved plan with the same run seeds (run `i` of every variation
 //! uses the seed of run `i` of the plain study), so the variations differ by their change alone. All runs
-//! of all variations go through the one pool ([`crate::experiment::runner::run_all`]), interleaved across
+//! of all variations go through the one pool (`crate::experiment::runner::run_all`), interleaved across
 //! variations (run 0 of every variation, then run 1, …); each variation is analysed with the stall
-//! study's own statistics ([`super::analyse`]). The study writes `variations.md`, `variations.csv`,
-//! `variations.json` and the forest plot `fig_variations.svg` ([`super::variations_forest`]).
+//! study's own statistics (`super::analyse`). The study writes `variations.md`, `variations.csv`,
+//! `variations.json` and the forest plot `fig_variations.svg` (`super::variations_forest`).
 
 use std::path::Path;
 use std::time::Instant;
