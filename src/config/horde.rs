@@ -64,6 +64,11 @@ impl HordeConfig {
         if !self.is_enabled() {
             return Ok(());
         }
+        // A name too long to quote whole in a message is named by its position.
+        for (i, f) in self.families.iter().enumerate() {
+            crate::learn::bounds::check_name_length(&f.name)
+                .map_err(|e| invalid(format!("horde.families[{i}]"), e.to_string()))?;
+        }
         crate::learn::horde::check(&self.families, names).map_err(|e| {
             // Name the family in the key when the error does.
             let key = self
