@@ -140,9 +140,11 @@ fn blueprint(families: &[FamilySpec], names: &SignalNames) -> Result<Blueprint, 
             }
         };
         let mut cumulants = Vec::new();
+        // A set, not a scan: `feature/*` expands to every feature (hundreds of thousands in a large bank).
+        let mut seen = std::collections::HashSet::new();
         for selector in &f.cumulants {
             for (canonical, source) in signals::expand(&f.name, selector, names, bounds.features)? {
-                if cumulants.iter().any(|(c, _)| *c == canonical) {
+                if !seen.insert(canonical.clone()) {
                     return Err(LearnError::DuplicateCumulant {
                         family: f.name.clone(),
                         cumulant: canonical,
