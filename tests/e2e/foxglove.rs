@@ -398,7 +398,7 @@ fn a_busy_or_unprotected_foxglove_address_stops_start_up_before_the_robot_is_tou
     let busy_addr = busy.local_addr().unwrap().to_string();
     let cases = [
         (busy_addr.as_str(), "in use"),
-        ("0.0.0.0:0", "requires a token"),
+        ("0.0.0.0:0", "requires a strong token"),
         ("localhost:x", "not an address"),
     ];
     for (addr, why) in cases {

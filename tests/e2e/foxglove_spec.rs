@@ -1,4 +1,4 @@
-//! `--foxglove` as the published protocol describes it (foxglove/ws-protocol `docs/spec.md`): a client
+//! `--foxglove` as the published protocol describes it (foxglove/ws-protocol, its docs/spec.md): a client
 //! written here from the spec alone, on tokio-tungstenite (neither Foxglove's client libraries nor this
 //! project's own code), offers the subprotocol `foxglove.websocket.v1`, reads `serverInfo` and
 //! `advertise`, subscribes to `/pavlov/ticks` and decodes the binary `messageData` frames (opcode 0x01,

@@ -99,11 +99,15 @@ fn markdown_targets(text: &str) -> Vec<String> {
 }
 
 /// Documents named in backquotes: `` `docs/SOURCES.md` ``.
+/// Markdown files the studies write into their results folder (not documents of the repository).
+const WRITTEN_BY_STUDIES: &[&str] = &["table.md", "variations.md"];
+
 fn quoted_documents(text: &str) -> Vec<String> {
     text.split('`')
         .skip(1)
         .step_by(2)
         .filter(|t| t.ends_with(".md") && !t.contains(char::is_whitespace) && !t.contains('*'))
+        .filter(|t| !WRITTEN_BY_STUDIES.contains(t))
         .map(str::to_string)
         .collect()
 }

@@ -66,7 +66,8 @@ pub(crate) fn tint(c: RGBColor, amount: f64) -> RGBColor {
     RGBColor(m(c.0), m(c.1), m(c.2))
 }
 
-fn register_font() {
+/// Registers the bundled font under [`FONT`] (once): every figure calls it before it draws.
+pub(crate) fn register_font() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
         // The crate's bytes are a valid TrueType file; a failure would only leave text unrendered.

@@ -10,7 +10,7 @@
 //!   can set one). A wrong token is refused (401); no token is refused (401) unless `watch_without_token`
 //!   is set.
 //!
-//! The subprotocol: the published protocol (foxglove/ws-protocol `docs/spec.md`) names
+//! The subprotocol: the published protocol (foxglove/ws-protocol, its docs/spec.md) names
 //! [`SPEC_SUBPROTOCOL`] (`foxglove.websocket.v1`); Foxglove's SDK negotiates only its own names
 //! (`foxglove.sdk.v1`, `foxglove.sdk.v1.1`). The messages of `foxglove.sdk.v1` are the spec's (inline
 //! schemas), so a client that offers only the spec's name is handed to the SDK as offering
@@ -22,7 +22,7 @@
 
 use pavlov::config::DashboardConfig;
 
-/// The subprotocol the published protocol names (foxglove/ws-protocol `docs/spec.md`).
+/// The subprotocol the published protocol names (foxglove/ws-protocol, its docs/spec.md).
 pub(crate) const SPEC_SUBPROTOCOL: &str = "foxglove.websocket.v1";
 /// The SDK's name for the same messages (inline schemas).
 pub(crate) const SDK_SUBPROTOCOL: &str = "foxglove.sdk.v1";

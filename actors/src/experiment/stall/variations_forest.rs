@@ -68,7 +68,7 @@ fn panel(
         names_owned.get(i as usize).cloned().unwrap_or_default()
     };
     let mut ch = ChartBuilder::on(area)
-        .caption(title, ("sans-serif", 16))
+        .caption(title, (crate::experiment::plot_style::FONT, 16))
         .margin(10)
         .x_label_area_size(40)
         .y_label_area_size(if names { 170 } else { 10 })
@@ -82,8 +82,8 @@ fn panel(
         .y_label_formatter(&label)
         .x_label_formatter(&tick_label)
         .x_desc("change, Pavlovian vs reactive (%)")
-        .axis_desc_style(("sans-serif", 13))
-        .label_style(("sans-serif", 12))
+        .axis_desc_style((crate::experiment::plot_style::FONT, 13))
+        .label_style((crate::experiment::plot_style::FONT, 12))
         .draw()
         .map_err(err)?;
     let top = -0.5;
@@ -126,6 +126,7 @@ fn panel(
 
 /// Draws the forest plot of `study` into `path`.
 pub(crate) fn forest(path: &Path, study: &VariationsStudy) -> Io {
+    crate::experiment::plot_style::register_font();
     let rows = &study.rows;
     let height = 150 + ROW_PX * rows.len().max(1) as u32;
     let root = SVGBackend::new(path, (1100, height)).into_drawing_area();
@@ -139,7 +140,7 @@ pub(crate) fn forest(path: &Path, study: &VariationsStudy) -> Io {
             o.runs_per_policy, o.runs_per_policy, o.minutes
         ),
         (10, 18),
-        ("sans-serif", 13),
+        (crate::experiment::plot_style::FONT, 13),
     ))
     .map_err(err)?;
     let (left, right) = body.split_horizontally(620);
