@@ -102,8 +102,13 @@ pub struct Provenance {
 impl Provenance {
     /// The provenance of an artifact made by this process under `config`.
     pub fn of(config: &Config) -> Self {
+        Self::of_json_config(&serde_json::to_value(config.redacted()).unwrap_or_default())
+    }
+
+    /// The same for a configuration already in JSON (a shard file's, redacted when it was written).
+    pub fn of_json_config(config: &serde_json::Value) -> Self {
         Provenance {
-            config_sha256: config_sha256(config),
+            config_sha256: json_sha256(config),
             ..Provenance::of_process()
         }
     }

@@ -56,10 +56,7 @@ impl<R> ShardFile<R> {
             o.remove("out");
         }
         let config = serde_json::to_value(config)?;
-        let provenance = Provenance {
-            config_sha256: crate::provenance::json_sha256(&config),
-            ..Provenance::of_process()
-        };
+        let provenance = Provenance::of_json_config(&config);
         Ok(ShardFile {
             provenance: Some(provenance),
             format: SHARD_FORMAT.into(),

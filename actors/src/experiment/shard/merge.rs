@@ -285,10 +285,7 @@ pub fn merge_study<O: DeserializeOwned, R: DeserializeOwned>(
         out,
         runs: merged.runs,
         wall_s: merged.wall_s,
-        provenance: crate::provenance::Provenance {
-            config_sha256: crate::provenance::json_sha256(&merged.config),
-            ..crate::provenance::Provenance::of_process()
-        },
+        provenance: crate::provenance::Provenance::of_json_config(&merged.config),
         sources: merged.sources,
     })
 }
