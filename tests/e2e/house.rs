@@ -380,11 +380,15 @@ fn no_new_circle_among_the_top_level_modules_of_either_crate() {
 #[test]
 fn the_buses_are_beneath_everything_that_uses_them() {
     let graph = module_graph(&root().join("actors/src"));
-    assert!(
-        graph["bus"].is_empty(),
-        "bus/ imports {:?}: it must import no module of the shell",
-        graph["bus"]
-    );
+    // The buses may use a leaf of the shell (a module that imports nothing of it, such as the
+    // `counter_set!` macro), never a module that could lead back up.
+    for used in &graph["bus"] {
+        assert!(
+            graph[used].is_empty(),
+            "bus/ imports {used}, which imports {:?}: the buses may import only leaves of the shell",
+            graph[used]
+        );
+    }
     for user in ["pipeline", "link", "storage", "telemetry"] {
         assert!(graph[user].contains("bus"), "{user} does not use the bus");
     }

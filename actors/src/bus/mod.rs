@@ -1,7 +1,8 @@
 //! The buses: how the actors hand things on without waiting for one another. The event log
 //! ([`events`]), the tick feed (`feed`) and the recorder's queue ([`recorder_queue`]) are used by the
 //! pipeline, the command router, the link, storage and the dashboard alike, so they live on their own floor
-//! beneath all of them and import none of them (only the core, `tokio` and each other).
+//! beneath all of them and import none of them (only the core, `tokio`, each other and the `counter_set!`
+//! macro, which imports nothing of the shell).
 
 pub mod events;
 pub(crate) mod feed;

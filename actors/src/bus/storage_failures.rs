@@ -1,48 +1,39 @@
 //! The count of storage failures among the events made: the event log counts them as it numbers each
 //! event, and `/metrics` reads the figures.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 
-/// Failures to write to storage, counted as their events are made (`recording_stopped` with a reason,
-/// `checkpoint_failed`; see [`pavlov::event::EventKind::is_storage_failure`]) by the event log, which every
-/// writer announces through. Every server has one.
-#[derive(Debug, Default)]
-pub(crate) struct StorageFailures {
-    /// Recordings stopped because a write (open, write, flush or finish) failed.
-    recordings: AtomicU64,
-    /// Checkpoints and saves that could not be written.
-    checkpoints: AtomicU64,
-}
+use crate::counter_set::counter_set;
 
-/// A copy of [`StorageFailures`] at one moment.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
-pub(crate) struct StorageFigures {
-    /// Recordings stopped by a write error.
-    pub(crate) recordings: u64,
-    /// Checkpoints and saves that could not be written.
-    pub(crate) checkpoints: u64,
+counter_set! {
+    /// A copy of [`StorageFailures`] at one moment.
+    pub(crate) struct StorageFigures;
+    /// Failures to write to storage, counted as their events are made (`recording_stopped` with a reason,
+    /// `checkpoint_failed`; see [`pavlov::event::EventKind::effects`]) by the event log, which
+    /// every writer announces through. Every server has one.
+    atomic pub(crate) struct StorageFailures;
+    "pavlov_recording_failures_total" counter "Recordings stopped because writing them failed (open, write, flush or finish; each sent a \
+         recording_stopped event with the reason)." {
+        /// Recordings stopped because a write (open, write, flush or finish) failed.
+        pub(crate) recordings: u64,
+    }
+    "pavlov_checkpoint_failures_total" counter "Checkpoints and saves that could not be written (each sent a checkpoint_failed event with the \
+         reason; its temporary file removed)." {
+        /// Checkpoints and saves that could not be written.
+        pub(crate) checkpoints: u64,
+    }
 }
 
 impl StorageFailures {
     /// Counts `kind` if it reports a storage failure.
     pub(crate) fn count(&self, kind: &pavlov::event::EventKind) {
-        use pavlov::event::EventKind;
-        if !kind.is_storage_failure() {
-            return;
-        }
-        let counter = match kind {
-            EventKind::CheckpointFailed { .. } => &self.checkpoints,
-            _ => &self.recordings,
+        use pavlov::event::StorageFailure;
+        let counter = match kind.effects().storage_failure {
+            Some(StorageFailure::Recording) => &self.recordings,
+            Some(StorageFailure::Checkpoint) => &self.checkpoints,
+            None => return,
         };
         counter.fetch_add(1, Ordering::Relaxed);
-    }
-
-    /// The figures now.
-    pub(crate) fn figures(&self) -> StorageFigures {
-        StorageFigures {
-            recordings: self.recordings.load(Ordering::Relaxed),
-            checkpoints: self.checkpoints.load(Ordering::Relaxed),
-        }
     }
 }
 

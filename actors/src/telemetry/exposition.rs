@@ -86,6 +86,17 @@ pub(crate) fn format_value(v: f64) -> String {
     }
 }
 
+/// Counter sets declared with `counter_set!` write their families here.
+impl crate::counter_set::MetricSink for Exposition {
+    fn family(&mut self, name: &str, kind: &str, help: &str) {
+        Exposition::family(self, name, kind, help);
+    }
+
+    fn sample(&mut self, name: &str, labels: &[(&str, &str)], value: f64) {
+        Exposition::sample(self, name, labels, value);
+    }
+}
+
 /// A histogram as Prometheus sees it: cumulative counts at increasing bounds, plus `+Inf`.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub(crate) struct HistogramSample {

@@ -107,17 +107,6 @@ const TRIP_CAUSES: [TripCause; 4] = [
     TripCause::Unknown,
 ];
 
-/// Help text of an actuation counter, by its field name.
-fn actuation_help(field: &str) -> String {
-    match field {
-        "commands" => "Motor commands written by actuation.".into(),
-        "pipeline_stalls" => "Stops forced because no fresh decision arrived in time.".into(),
-        "stale_observations" => "Stops forced because the observation was too old.".into(),
-        "writer_full" => "Motor commands the serial writer's queue could not take.".into(),
-        other => format!("Actuation counter `{other}`."),
-    }
-}
-
 fn link_metrics(e: &mut Exposition, link: &LinkStatus) {
     e.gauge(
         "pavlov_link_up",
@@ -184,221 +173,6 @@ fn link_metrics(e: &mut Exposition, link: &LinkStatus) {
     ];
     for (name, help, value) in counters {
         e.counter(name, help, value);
-    }
-}
-
-fn ws_metrics(e: &mut Exposition, ws: &DashboardStats) {
-    e.gauge(
-        "pavlov_ws_clients",
-        "Websocket clients connected now (operators and watchers).",
-        ws.clients as f64,
-    );
-    e.gauge(
-        "pavlov_ws_watchers",
-        "Watch-only websocket clients connected now.",
-        ws.watchers as f64,
-    );
-    e.gauge(
-        "pavlov_ws_history_ticks",
-        "Ticks the dashboard keeps to send a newly connected page ([dashboard] history_s).",
-        ws.history_ticks as f64,
-    );
-    e.gauge(
-        "pavlov_ws_history_bytes",
-        "Bytes the dashboard's history of ticks holds (rows and predictions).",
-        ws.history_bytes as f64,
-    );
-    e.gauge(
-        "pavlov_ws_pending_connections",
-        "TCP connections to the dashboard port that are not (yet) websockets, now.",
-        ws.pending as f64,
-    );
-    let counters: [(&str, &str, u64); 12] = [
-        (
-            "pavlov_ws_connections_total",
-            "Websocket connections accepted.",
-            ws.connections,
-        ),
-        (
-            "pavlov_ws_handshakes_rejected_total",
-            "Websocket handshakes refused (origin, token, wrong-token throttle, no operator or watcher seat).",
-            ws.rejected,
-        ),
-        (
-            "pavlov_ws_telemetry_dropped_total",
-            "Tick and status messages dropped for clients that did not keep up.",
-            ws.telemetry_dropped,
-        ),
-        (
-            "pavlov_ws_commands_total",
-            "Control commands forwarded from websocket clients to the server.",
-            ws.commands,
-        ),
-        (
-            "pavlov_ws_error_replies_total",
-            "Error replies sent to websocket clients (rate_limited included).",
-            ws.errors,
-        ),
-        (
-            "pavlov_ws_rate_limited_total",
-            "Websocket messages refused with rate_limited and not processed.",
-            ws.rate_limited,
-        ),
-        (
-            "pavlov_ws_tcp_refused_total",
-            "TCP connections closed on arrival because their address opened them faster than they were served.",
-            ws.tcp_refused,
-        ),
-        (
-            "pavlov_ws_token_failures_total",
-            "Websocket handshakes that presented a wrong token.",
-            ws.token_failures,
-        ),
-        (
-            "pavlov_ws_token_throttled_total",
-            "Websocket handshakes answered 429 because their address had used up its wrong-token allowance.",
-            ws.token_throttled,
-        ),
-        (
-            "pavlov_ws_hub_records_missed_total",
-            "Tick records the dashboard hub missed because it fell behind the tick feed.",
-            ws.records_missed,
-        ),
-        (
-            "pavlov_ws_horde_values_total",
-            "horde_values messages queued for websocket clients watching the Horde.",
-            ws.horde_values,
-        ),
-        (
-            "pavlov_ws_horde_values_skipped_total",
-            "Horde values not sent to a watching client because it had not yet taken the previous message.",
-            ws.horde_values_skipped,
-        ),
-    ];
-    for (name, help, value) in counters {
-        e.counter(name, help, value);
-    }
-    e.family(
-        "pavlov_ws_closed_total",
-        "counter",
-        "Connections the server closed: oversize (1009), protocol (1002), invalid_utf8 (1007), unread_replies, write_stall, no_upgrade (plain HTTP too long), evicted (a pending connection closed to make room).",
-    );
-    for (reason, value) in [
-        ("oversize", ws.closed_oversize),
-        ("protocol", ws.closed_protocol),
-        ("invalid_utf8", ws.closed_invalid_utf8),
-        ("unread_replies", ws.closed_unread),
-        ("write_stall", ws.closed_write_stall),
-        ("no_upgrade", ws.closed_no_upgrade),
-        ("evicted", ws.closed_evicted),
-    ] {
-        e.sample(
-            "pavlov_ws_closed_total",
-            &[("reason", reason)],
-            value as f64,
-        );
-    }
-}
-
-fn foxglove_metrics(e: &mut Exposition, f: &FoxgloveFigures) {
-    e.gauge(
-        "pavlov_foxglove_clients",
-        "Foxglove clients connected now (serve --foxglove; 0 without it).",
-        f.clients as f64,
-    );
-    e.counter(
-        "pavlov_foxglove_connections_total",
-        "Foxglove connections accepted and handed to the Foxglove server.",
-        f.connections,
-    );
-    e.family(
-        "pavlov_foxglove_refused_total",
-        "counter",
-        "Foxglove connections refused: token (missing or wrong, 401), busy (too many open, 503), address (the address has its share of the seats, 503), bad_request (not a websocket request, too large or too slow), write_stall (connected, then closed for taking none of the bytes waiting for it for 10 s).",
-    );
-    for (reason, value) in [
-        ("token", f.refused_token),
-        ("busy", f.refused_busy),
-        ("address", f.refused_address),
-        ("write_stall", f.evicted_slow),
-        ("bad_request", f.refused_bad_request),
-    ] {
-        e.sample(
-            "pavlov_foxglove_refused_total",
-            &[("reason", reason)],
-            value as f64,
-        );
-    }
-    e.family(
-        "pavlov_foxglove_missed_total",
-        "counter",
-        "Tick records and events the Foxglove publisher missed because it fell behind (never delays the tick).",
-    );
-    for (stream, value) in [("ticks", f.ticks_missed), ("events", f.events_missed)] {
-        e.sample(
-            "pavlov_foxglove_missed_total",
-            &[("stream", stream)],
-            value as f64,
-        );
-    }
-}
-
-fn zenoh_metrics(e: &mut Exposition, z: &ZenohFigures) {
-    e.family(
-        "pavlov_zenoh_published_total",
-        "counter",
-        "Messages the Zenoh bridge published (serve --zenoh; 0 without it), by stream.",
-    );
-    for (stream, value) in [
-        ("tick", z.ticks_published),
-        ("event", z.events_published),
-        ("status", z.status_published),
-    ] {
-        e.sample(
-            "pavlov_zenoh_published_total",
-            &[("stream", stream)],
-            value as f64,
-        );
-    }
-    e.family(
-        "pavlov_zenoh_missed_total",
-        "counter",
-        "Tick records and events the Zenoh publisher lost because it fell behind (its queue drops the oldest; never delays the tick).",
-    );
-    for (stream, value) in [("tick", z.ticks_missed), ("event", z.events_missed)] {
-        e.sample(
-            "pavlov_zenoh_missed_total",
-            &[("stream", stream)],
-            value as f64,
-        );
-    }
-    e.counter(
-        "pavlov_zenoh_put_errors_total",
-        "Zenoh puts that failed (session closing, transport error).",
-        z.put_errors,
-    );
-    e.counter(
-        "pavlov_zenoh_queries_total",
-        "Zenoh queries answered on pavlov/<robot>/config and pavlov/<robot>/checkpoint.",
-        z.queries,
-    );
-    e.family(
-        "pavlov_zenoh_commands_total",
-        "counter",
-        "Commands received over Zenoh by outcome: applied, refused_token (missing or wrong token), refused_off ([zenoh] commands = false), refused_invalid (not a command message), failed (the owner refused: busy, rejected, unavailable).",
-    );
-    for (outcome, value) in [
-        ("applied", z.commands_applied),
-        ("refused_token", z.commands_refused_token),
-        ("refused_off", z.commands_refused_off),
-        ("refused_invalid", z.commands_refused_invalid),
-        ("failed", z.commands_failed),
-    ] {
-        e.sample(
-            "pavlov_zenoh_commands_total",
-            &[("outcome", outcome)],
-            value as f64,
-        );
     }
 }
 
@@ -497,9 +271,9 @@ pub(crate) fn render(s: &MetricsSnapshot) -> String {
     if let Some(link) = &s.link {
         link_metrics(&mut e, link);
     }
-    ws_metrics(&mut e, &s.ws);
-    foxglove_metrics(&mut e, &s.foxglove);
-    zenoh_metrics(&mut e, &s.zenoh);
+    s.ws.expose(&mut e);
+    s.foxglove.expose(&mut e);
+    s.zenoh.expose(&mut e);
     if let Some(h) = &s.horde {
         horde_metrics(&mut e, h);
     }
@@ -515,26 +289,8 @@ pub(crate) fn render(s: &MetricsSnapshot) -> String {
             r.dropped,
         );
     }
-    e.counter(
-        "pavlov_recording_failures_total",
-        "Recordings stopped because writing them failed (open, write, flush or finish; each sent a \
-         recording_stopped event with the reason).",
-        s.storage.recordings,
-    );
-    e.counter(
-        "pavlov_checkpoint_failures_total",
-        "Checkpoints and saves that could not be written (each sent a checkpoint_failed event with the \
-         reason; its temporary file removed).",
-        s.storage.checkpoints,
-    );
-    if let Ok(serde_json::Value::Object(fields)) = serde_json::to_value(s.actuation) {
-        for (field, value) in fields {
-            if let Some(v) = value.as_u64() {
-                let name = format!("pavlov_actuation_{field}_total");
-                e.counter(&name, &actuation_help(&field), v);
-            }
-        }
-    }
+    s.storage.expose(&mut e);
+    s.actuation.expose(&mut e);
     if let Some(faults) = &s.sim_faults
         && let Ok(serde_json::Value::Object(fields)) = serde_json::to_value(faults)
     {
