@@ -22,15 +22,6 @@ use pavlov::rng::Rng;
 
 pub(crate) use runner::run_all;
 
-/// The policy's name in file names and tables.
-pub(crate) fn mode_name(mode: Mode) -> &'static str {
-    match mode {
-        Mode::Reactive => "reactive",
-        Mode::Pavlovian => "pavlovian",
-        Mode::Manual => "manual",
-    }
-}
-
 /// The policy of run `index` in an interleaved study: even runs reactive, odd runs Pavlovian.
 pub(crate) fn interleaved_mode(index: usize) -> Mode {
     if index % 2 == 0 {

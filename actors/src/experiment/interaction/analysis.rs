@@ -13,7 +13,6 @@ use pavlov::control::Mode;
 use serde::Serialize;
 
 use super::run::{BEFORE_TICKS, InteractionRun};
-use crate::experiment::mode_name;
 
 /// One aligned offset.
 #[derive(Debug, Clone, Serialize)]
@@ -122,7 +121,7 @@ pub(crate) fn timing(runs: &[InteractionRun], mode: Mode) -> PolicyTiming {
     let commands: usize = mine.iter().map(|r| r.commands.len()).sum();
     let anticipated: usize = mine.iter().map(|r| r.metrics.anticipated()).sum();
     PolicyTiming {
-        policy: mode_name(mode).into(),
+        policy: mode.name().into(),
         commands,
         latency_ms: describe(&latencies),
         current_latency_ms: describe(&physical(|l| l.current_ms)),

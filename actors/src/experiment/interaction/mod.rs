@@ -33,8 +33,8 @@ use serde::{Deserialize, Serialize};
 use analysis::{AlignedPoint, PolicyTiming, Shifts, aligned, shifts, timing};
 use run::{InteractionRun, RunPlan};
 
+use super::interleaved_mode;
 use super::runner::{RunError, run_all};
-use super::{interleaved_mode, mode_name};
 
 /// The study's settings.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -149,7 +149,7 @@ pub(crate) fn run_runs(
     let one = |&(i, m): &(usize, Mode)| {
         let dir = o
             .record
-            .then(|| o.out.join("runs").join(format!("{i:02}-{}", mode_name(m))));
+            .then(|| o.out.join("runs").join(format!("{i:02}-{}", m.name())));
         run::run(
             base,
             RunPlan {
@@ -170,7 +170,7 @@ pub(crate) fn run_runs(
         bar.set_message(format!(
             "run {} {}: mean latency {} ms, {:.1} s wall",
             r.index,
-            mode_name(r.mode),
+            r.mode.name(),
             r.metrics
                 .mean_latency_ms()
                 .map_or("–".into(), |x| format!("{x:.0}")),

@@ -8,7 +8,6 @@ use pavlov::analysis::bootstrap::{FEW_PAIRS, MeanDifference};
 use pavlov::analysis::stats::Describe;
 
 use super::{InteractionStudy, plots};
-use crate::experiment::mode_name;
 
 fn num(x: f64) -> String {
     if x.is_finite() {
@@ -206,7 +205,7 @@ pub fn table(s: &InteractionStudy) -> String {
             .map(|r| format!(
                 "{}:{} robot {} operator {}",
                 r.index,
-                &mode_name(r.mode)[..1],
+                &r.mode.name()[..1],
                 r.robot_seed,
                 r.human_seed
             ))
@@ -242,7 +241,7 @@ pub fn write_all(dir: &Path, s: &InteractionStudy) -> std::io::Result<()> {
                 c,
                 "{},{},{k},{},{},{out},{},{}",
                 r.index,
-                mode_name(r.mode),
+                r.mode.name(),
                 w.onset_ms,
                 w.end_ms,
                 opt(phys.current_ms),

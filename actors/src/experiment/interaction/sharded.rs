@@ -13,14 +13,15 @@ use std::sync::Arc;
 
 use pavlov::analysis::interaction::curve::RunTimeline;
 use pavlov::config::Config;
+use pavlov::control::Mode;
 use pavlov::record::TickRecord;
 use serde::{Deserialize, Serialize};
 
 use super::run::{AlignedWindow, InteractionRun, run_seeds};
 use super::{InteractionOptions, assemble, plan, report, run_runs};
+use crate::experiment::interleaved_mode;
 use crate::experiment::results::Placement;
 use crate::experiment::shard::{self, MergeError, PlannedRun, Shard};
-use crate::experiment::{interleaved_mode, mode_name};
 
 /// The experiment's name in shard files.
 pub const EXPERIMENT: &str = "interaction";
@@ -110,9 +111,9 @@ fn check_plan(
     runs: &[ShardRun],
     sources: &[(Range<usize>, PathBuf)],
 ) -> Result<(), MergeError> {
-    let key = |index, mode, (robot, operator)| PlannedRun {
+    let key = |index, mode: Mode, (robot, operator)| PlannedRun {
         index,
-        mode: mode_name(mode),
+        mode: mode.name(),
         seeds: vec![("robot seed", robot), ("operator seed", operator)],
     };
     shard::check_plan(
@@ -136,7 +137,6 @@ mod tests {
     use super::*;
     use pavlov::analysis::interaction::curve::CommandResult;
     use pavlov::analysis::interaction::{CommandOutcome, CommandWindow, ResponseTiming};
-    use pavlov::control::Mode;
 
     fn run() -> InteractionRun {
         InteractionRun {

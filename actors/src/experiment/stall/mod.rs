@@ -28,7 +28,7 @@ pub(crate) use analysis::analyse;
 pub(crate) use report::StallStudy;
 pub(crate) use run::{RunResult, RunSpec};
 
-use super::{interleaved_mode, mode_name, run_all, run_rng};
+use super::{interleaved_mode, run_all, run_rng};
 
 /// Length of a learning-curve window, seconds.
 pub(crate) const WINDOW_S: f64 = 30.0;
@@ -69,7 +69,7 @@ pub fn plan(config: &Config, opts: &StallOptions) -> Vec<RunSpec> {
     (0..2 * opts.runs_per_policy)
         .map(|index| {
             let mode = interleaved_mode(index);
-            let name = format!("{index:02}-{}", mode_name(mode));
+            let name = format!("{index:02}-{}", mode.name());
             RunSpec {
                 index,
                 mode,
@@ -79,7 +79,7 @@ pub fn plan(config: &Config, opts: &StallOptions) -> Vec<RunSpec> {
                 excerpt_from_tick: (ticks > excerpt_from).then_some(excerpt_from),
                 excerpt_len,
                 record_dir: opts.record.then(|| opts.out.join("runs").join(name)),
-                policy: mode_name(mode).to_string(),
+                policy: mode.name().to_string(),
                 gate_prediction: None,
                 score: None,
             }
@@ -109,7 +109,7 @@ fn run_runs(
         bar.set_message(format!(
             "run {} {}: {} over-current, {:.1} s wall",
             r.index,
-            mode_name(r.mode),
+            r.mode.name(),
             r.metrics.overcurrent_observations,
             r.wall_s
         ));

@@ -9,7 +9,6 @@ use serde::{Deserialize, Serialize};
 use super::analysis::{Analysis, TOTALS, total};
 use super::run::RunResult;
 use super::{StallOptions, WINDOW_S, plots};
-use crate::experiment::mode_name;
 use crate::experiment::tables::num;
 use crate::provenance::Provenance;
 
@@ -68,7 +67,7 @@ pub fn write_all(dir: &Path, study: &StallStudy) -> std::io::Result<()> {
 /// whose off-policy runs share the Pavlovian mode), the mode's name when the run has none.
 pub(crate) fn policy_label(r: &RunResult) -> &str {
     if r.policy.is_empty() {
-        mode_name(r.mode)
+        r.mode.name()
     } else {
         &r.policy
     }
@@ -147,7 +146,7 @@ pub(crate) fn signals_csv(excerpts: &[(Mode, &[pavlov::record::TickRecord])]) ->
             let _ = writeln!(
                 s,
                 "{},{},{},{v},{th},{},{},{},{},{}",
-                mode_name(*mode),
+                mode.name(),
                 r.seq,
                 r.t_ms / 1000.0,
                 u8::from(r.sensors.overcurrent_left || r.sensors.overcurrent_right),
@@ -309,7 +308,7 @@ pub fn table(study: &StallStudy) -> String {
         study
             .runs
             .iter()
-            .map(|r| format!("{}:{} {}", r.index, &mode_name(r.mode)[..1], r.seed))
+            .map(|r| format!("{}:{} {}", r.index, &r.mode.name()[..1], r.seed))
             .collect::<Vec<_>>()
             .join(", ")
     );

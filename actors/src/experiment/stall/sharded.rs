@@ -15,9 +15,9 @@ use serde::{Deserialize, Serialize};
 
 use super::report;
 use super::{RunResult, StallOptions, assemble, plan, run_runs, run_seed};
+use crate::experiment::interleaved_mode;
 use crate::experiment::results::Placement;
 use crate::experiment::shard::{self, MergeError, PlannedRun, Shard};
-use crate::experiment::{interleaved_mode, mode_name};
 
 /// The experiment's name in shard files.
 pub const EXPERIMENT: &str = "stall";
@@ -99,9 +99,9 @@ fn check_plan(
     runs: &[ShardRun],
     sources: &[(Range<usize>, PathBuf)],
 ) -> Result<(), MergeError> {
-    let key = |index, mode, seed| PlannedRun {
+    let key = |index, mode: Mode, seed| PlannedRun {
         index,
-        mode: mode_name(mode),
+        mode: mode.name(),
         seeds: vec![("seed", seed)],
     };
     shard::check_plan(

@@ -25,7 +25,7 @@ use serde::Serialize;
 use super::analysis::Comparison;
 use super::run::{RunResult, RunSpec};
 use super::{StallOptions, WINDOW_S, analyse, plan};
-use crate::experiment::{mode_name, run_all};
+use crate::experiment::run_all;
 
 /// Where a variation's range comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -387,7 +387,7 @@ pub fn run_variations(
             "{}: run {} {}",
             variations.get(r.0).map_or("", |v| v.name),
             r.1.index,
-            mode_name(r.1.mode)
+            r.1.mode.name()
         ));
     };
     let run_one = |(v, spec): &(usize, RunSpec)| {
