@@ -210,7 +210,9 @@ pub fn generate_token() -> std::io::Result<String> {
     Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
 }
 
-/// Compares without stopping at the first difference, so timing does not reveal how much of a guess is right.
+/// Compares without stopping at the first difference, so timing does not reveal how much of a guess is right
+/// (nor, beyond the guess's own length, how long the token is). The one comparison of a presented token with
+/// the configured one: the dashboard, the Foxglove gate and the Zenoh command queryable all use it.
 pub(crate) fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     let mut diff = a.len() ^ b.len();
     for (i, &x) in a.iter().enumerate() {
@@ -401,5 +403,8 @@ mod tests {
         assert!(!constant_time_eq(b"abc", b"ab"));
         assert!(!constant_time_eq(b"", b"a"));
         assert!(constant_time_eq(b"", b""));
+        assert!(!constant_time_eq(b"ab", b"abc"));
+        assert!(!constant_time_eq(b"a", b""));
+        assert!(!constant_time_eq(b"abcabc", b"abc"));
     }
 }

@@ -22,6 +22,8 @@
 
 use pavlov::config::DashboardConfig;
 
+use crate::dashboard::auth::constant_time_eq;
+
 /// The subprotocol the published protocol names (foxglove/ws-protocol, its docs/spec.md).
 pub(crate) const SPEC_SUBPROTOCOL: &str = "foxglove.websocket.v1";
 /// The SDK's name for the same messages (inline schemas).
@@ -242,14 +244,6 @@ fn percent_decode(s: &str) -> String {
         i += 1;
     }
     String::from_utf8_lossy(&out).into_owned()
-}
-
-/// Compares without stopping at the first difference, so the time taken does not tell how much matched.
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    if a.len() != b.len() {
-        return false;
-    }
-    a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
 #[cfg(test)]
