@@ -35,7 +35,7 @@ fn records() -> Vec<TickRecord> {
             .start()
             .await
             .expect("server");
-        let mut rx = server.feed.subscribe();
+        let mut rx = server.feed().subscribe();
         let mut out = Vec::with_capacity(TICKS);
         while out.len() < TICKS {
             if let Ok(r) = rx.recv().await {

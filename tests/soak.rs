@@ -103,7 +103,7 @@ async fn twenty_four_simulated_hours_with_faults() {
         .expect("server starts");
     let sim = server.health().sim_status().expect("simulated robot");
     let metrics = tokio::runtime::Handle::current().metrics();
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
 
     let mut first_hour: Vec<(bool, f64)> = Vec::with_capacity(TICKS_PER_HOUR);
     let mut last_hour: Vec<(bool, f64)> = Vec::with_capacity(TICKS_PER_HOUR);
@@ -155,7 +155,7 @@ async fn twenty_four_simulated_hours_with_faults() {
         };
         if tripped_for == 100 {
             let (req, _reply) = ControlRequest::new(LinkCommand::Rearm {});
-            if server.commands.try_send(req).is_ok() {
+            if server.commands().try_send(req).is_ok() {
                 rearms += 1;
             }
         }

@@ -145,8 +145,6 @@ impl ServerBuilder {
         let cancel = CancellationToken::new();
         let period = Duration::from_millis(config.tick.period_ms);
         let started = Instant::now() + period;
-        let (pose_tx, pose_rx) = watch::channel(PoseTracker::new(config.skeleton.max_joint_age_ms));
-        drop(pose_rx);
         // Every listening socket is bound before a byte goes to the robot.
         let skeleton = skeleton_ingest::bind_for(&config)
             .await
@@ -238,7 +236,6 @@ impl ServerBuilder {
             actors.push(task);
             ingest
         });
-        drop(pose_tx);
         let health = Health {
             ticks: pipeline.ticks,
             timer: pipeline.timer,
@@ -347,30 +344,30 @@ impl Stopper {
 /// A running server.
 pub struct Server {
     /// Every tick's record.
-    pub feed: TickFeed,
+    feed: TickFeed,
     /// Every change made at run time.
-    pub events: EventLog,
+    events: EventLog,
     /// Inject commands here.
-    pub commands: mpsc::Sender<ControlRequest>,
+    commands: mpsc::Sender<ControlRequest>,
     /// Publish skeleton poses here (the skeleton ingest actor, or a test).
-    pub pose: watch::Sender<PoseTracker>,
+    pose: watch::Sender<PoseTracker>,
     /// The time the first tick was due.
-    pub started: Instant,
+    started: Instant,
     /// The configuration in force at start-up.
-    pub config: Config,
+    config: Config,
     /// What start-up did with checkpoints: what was resumed, where this run's checkpoints go.
-    pub checkpoints: CheckpointStart,
+    checkpoints: CheckpointStart,
     /// The skeleton ingest, when `[skeleton]` is enabled and its socket opened.
-    pub skeleton: Option<SkeletonIngest>,
+    skeleton: Option<SkeletonIngest>,
     /// Names of the observation vector's dimensions, in record order.
-    pub obs_names: Vec<String>,
+    obs_names: Vec<String>,
     /// The Horde's figures and values, when `[horde]` has families.
-    pub horde: Option<HordeView>,
+    horde: Option<HordeView>,
     /// Every prediction's learning parameters at the first tick (a resumed checkpoint's, where it has
     /// them), in configuration order; later changes are `params_set` events.
-    pub params_at_start: Vec<pavlov::agent::learning::ParamsInForce>,
+    pub(crate) params_at_start: Vec<pavlov::agent::learning::ParamsInForce>,
     /// Which robot this server drives.
-    pub robot: RobotLinkKind,
+    pub(crate) robot: RobotLinkKind,
     health: Health,
     cancel: CancellationToken,
     actors: Vec<JoinHandle<()>>,
@@ -399,6 +396,57 @@ impl Server {
     /// Every health figure of this server (tick timing, latency, counters).
     pub fn health(&self) -> Health {
         self.health.clone()
+    }
+
+    /// Every tick's record.
+    pub fn feed(&self) -> &TickFeed {
+        &self.feed
+    }
+
+    /// Every change made at run time.
+    pub fn events(&self) -> &EventLog {
+        &self.events
+    }
+
+    /// Where commands go in (the router hands each to its owner).
+    pub fn commands(&self) -> &mpsc::Sender<ControlRequest> {
+        &self.commands
+    }
+
+    /// Where skeleton poses go in: the skeleton ingest publishes here, and so may a test or the simulated
+    /// operator of the interaction experiment.
+    pub fn pose(&self) -> &watch::Sender<PoseTracker> {
+        &self.pose
+    }
+
+    /// The time the first tick was due.
+    pub fn started(&self) -> Instant {
+        self.started
+    }
+
+    /// The configuration in force at start-up.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// What start-up did with checkpoints: what was resumed, where this run's checkpoints go.
+    pub fn checkpoints(&self) -> &CheckpointStart {
+        &self.checkpoints
+    }
+
+    /// The skeleton ingest, when `[skeleton]` is enabled and its socket opened.
+    pub fn skeleton(&self) -> Option<&SkeletonIngest> {
+        self.skeleton.as_ref()
+    }
+
+    /// Names of the observation vector's dimensions, in record order.
+    pub fn obs_names(&self) -> &[String] {
+        &self.obs_names
+    }
+
+    /// The Horde's figures and values, when `[horde]` has families.
+    pub fn horde(&self) -> Option<&HordeView> {
+        self.horde.as_ref()
     }
 
     /// Stops every actor, sends the shut-down sequence to the robot and waits for it to be written.

@@ -86,7 +86,7 @@ pub async fn run_sim(config: Config, n: usize) -> (Vec<TickRecord>, Server) {
         .start()
         .await
         .expect("server starts");
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     let records = collect(&mut rx, n).await;
     (records, server)
 }

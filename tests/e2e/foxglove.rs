@@ -113,7 +113,7 @@ fn log_time(v: &Value) -> u64 {
 /// The seqs of every record the server publishes from now on, collected in the background.
 fn published_seqs(server: &Server) -> std::sync::Arc<std::sync::Mutex<Vec<u64>>> {
     let seqs = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-    let mut feed = server.feed.subscribe();
+    let mut feed = server.feed().subscribe();
     let sink = seqs.clone();
     tokio::spawn(async move {
         while let Ok(r) = feed.recv().await {
@@ -180,7 +180,7 @@ async fn a_foxglove_client_receives_every_tick_in_order_with_the_events_and_the_
 
     // A change made now reaches the client as an event.
     let (req, reply) = ControlRequest::new(GatingCommand::SetMode { mode: Mode::Manual });
-    server.commands.send(req).await.unwrap();
+    server.commands().send(req).await.unwrap();
     reply.await.unwrap().unwrap();
 
     let (lines, code) = client.finish().await;
@@ -239,7 +239,7 @@ async fn a_foxglove_client_receives_every_tick_in_order_with_the_events_and_the_
     );
     let names: Vec<String> =
         serde_json::from_value(config["message"]["obs_names"].clone()).unwrap();
-    assert_eq!(names, server.obs_names);
+    assert_eq!(names, server.obs_names());
 
     // The flat message names every observation and prediction.
     let signals = &of_kind(&lines, "signals")[0];
@@ -249,7 +249,7 @@ async fn a_foxglove_client_receives_every_tick_in_order_with_the_events_and_the_
         .keys()
         .cloned()
         .collect();
-    assert_eq!(obs, server.obs_names.iter().cloned().collect());
+    assert_eq!(obs, server.obs_names().iter().cloned().collect());
     assert!(signals["predictions"]["stall"].is_number());
 
     let stats = fox.stats();
@@ -309,7 +309,7 @@ async fn without_the_token_a_foxglove_client_is_refused_and_with_it_can_only_rea
     let dash = Dashboard::start(&server, PathBuf::from("web"))
         .await
         .unwrap();
-    let mut events = server.events.subscribe();
+    let mut events = server.events().subscribe();
     let published = published_seqs(&server);
     assert!(fox.token_required());
 

@@ -481,11 +481,11 @@ async fn the_server_listens_for_skeletons_and_its_ticks_see_the_elbow() {
             .await
             .unwrap();
     let to = server
-        .skeleton
+        .skeleton()
         .as_ref()
         .expect("skeleton ingest")
         .local_addr;
-    let mut feed = server.feed.subscribe();
+    let mut feed = server.feed().subscribe();
     let sender = tokio::spawn(pavlov_actors::simulated::human::send_human(
         pavlov_actors::simulated::human::SenderOptions {
             to,
@@ -541,14 +541,14 @@ async fn drive_pose_feeds_the_servers_ticks_under_virtual_time() {
             .start()
             .await
             .unwrap();
-    assert!(server.skeleton.is_none());
-    let mut feed = server.feed.subscribe();
+    assert!(server.skeleton().is_none());
+    let mut feed = server.feed().subscribe();
     let cancel = CancellationToken::new();
     let human = pavlov::sim::human::SimHuman::new(Default::default(), 11);
     let driver = tokio::spawn(pavlov_actors::simulated::human::drive_pose(
         human,
-        server.pose.clone(),
-        server.started,
+        server.pose().clone(),
+        server.started(),
         cancel.clone(),
     ));
     // 60 s of virtual time: the operator commands a few times.

@@ -127,8 +127,8 @@ async fn run_one(config: &Config, dir: &Path, duration: Duration) -> Result<Side
     let server = Server::builder(config.clone(), RobotTarget::Simulated)
         .start()
         .await?;
-    let run_dir = server.checkpoints.run_dir.clone();
-    let status = server.horde.as_ref().map(|h| h.status.clone());
+    let run_dir = server.checkpoints().run_dir.clone();
+    let status = server.horde().as_ref().map(|h| h.status.clone());
     let health = server.health();
     let start = Instant::now();
     let mut samples = Vec::new();

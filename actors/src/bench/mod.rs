@@ -89,7 +89,7 @@ pub async fn run_realtime(config: Config, duration: Duration) -> Result<BenchRep
 
 /// Measures a running server for `duration` of real time (the histograms cover the whole run so far).
 pub(crate) async fn measure(server: &Server, duration: Duration) -> BenchReport {
-    let mut feed = server.feed.subscribe();
+    let mut feed = server.feed().subscribe();
     let records = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
     let count = records.clone();
     let counter = tokio::spawn(async move {

@@ -176,10 +176,10 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     let zenoh = match zenoh_config {
         None => None,
         Some(zc) => {
-            let url = if server.config.zenoh.dashboard_url.is_empty() {
+            let url = if server.config().zenoh.dashboard_url.is_empty() {
                 dash.url()
             } else {
-                server.config.zenoh.dashboard_url.clone()
+                server.config().zenoh.dashboard_url.clone()
             };
             match ZenohBridge::start(zc, &server, url).await {
                 Ok(z) => Some(z),
@@ -194,12 +194,12 @@ pub async fn run(args: ServeArgs) -> Result<()> {
             }
         }
     };
-    if let Some(resumed) = &server.checkpoints.resumed {
+    if let Some(resumed) = &server.checkpoints().resumed {
         for line in resumed.report_lines() {
             say!("{line}");
         }
     }
-    if let Some(dir) = &server.checkpoints.run_dir {
+    if let Some(dir) = &server.checkpoints().run_dir {
         say!("this run's checkpoints: {}", dir.display());
     }
     say!("pavlov is driving {robot_name}; press Ctrl-C to stop");
@@ -207,10 +207,10 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     if let Some(token) = &generated_token {
         say!(
             "no token was given for {}, so commands need this random one (pass --token to choose one): {token}",
-            server.config.dashboard.bind
+            server.config().dashboard.bind
         );
         say!("operator page: {}#token={token}", dash.url());
-    } else if server.config.dashboard.token.is_some() {
+    } else if server.config().dashboard.token.is_some() {
         say!(
             "dashboard commands need the token: open {}#token=<your token>",
             dash.url()
@@ -227,10 +227,10 @@ pub async fn run(args: ServeArgs) -> Result<()> {
             f.url()
         );
     }
-    if let Some(sk) = &server.skeleton {
+    if let Some(sk) = &server.skeleton() {
         say!(
             "skeleton: listening for {} on udp://{}",
-            skeleton_format_name(server.config.skeleton.format),
+            skeleton_format_name(server.config().skeleton.format),
             sk.local_addr
         );
     }
@@ -239,7 +239,7 @@ pub async fn run(args: ServeArgs) -> Result<()> {
         say!(
             "zenoh: publishing on pavlov/{}/{{tick,event,status}}; commands over Zenoh {}",
             z.robot(),
-            if server.config.zenoh.commands {
+            if server.config().zenoh.commands {
                 "on (with the token)"
             } else {
                 "off"

@@ -170,7 +170,7 @@ impl Dashboard {
 
     /// Binds `[dashboard] bind` and starts serving the dashboard of `server` (see [`Dashboard::serve`]).
     pub async fn start(server: &Server, web_dir: PathBuf) -> Result<Dashboard, DashboardError> {
-        let bound = Self::bind(&server.config.dashboard)?;
+        let bound = Self::bind(&server.config().dashboard)?;
         Self::serve(bound, server, web_dir).await
     }
 
@@ -181,7 +181,7 @@ impl Dashboard {
         server: &Server,
         web_dir: PathBuf,
     ) -> Result<Dashboard, DashboardError> {
-        let cfg = &server.config.dashboard;
+        let cfg = &server.config().dashboard;
         let BoundDashboard {
             listener: std_listener,
             addr,
@@ -215,19 +215,19 @@ impl Dashboard {
             );
         }
         let cancel = CancellationToken::new();
-        let period_ms = server.config.tick.period_ms;
+        let period_ms = server.config().tick.period_ms;
         let gesture_commands = matches!(
-            server.config.control.stimulus,
+            server.config().control.stimulus,
             pavlov::config::StimulusSpec::LeftElbow { .. }
         );
         let history = History::new(
             cfg.history_s,
             period_ms,
-            server.config.control.mode,
+            server.config().control.mode,
             server.params_at_start.iter().map(Into::into).collect(),
         );
         let (hub, hub_handle) = Hub::new(period_ms, gesture_commands, history);
-        let hub = hub.with_learning(&server.config.predictions);
+        let hub = hub.with_learning(&server.config().predictions);
         let hub_counters = Arc::new(HubCounters::default());
         let guard_counters = Arc::new(guard::GuardCounters::default());
         let pending = Arc::new(Mutex::new(pending::PendingPool::new(
@@ -237,25 +237,25 @@ impl Dashboard {
         let state = Arc::new(app_state::AppState {
             policy: AccessPolicy::new(cfg, addr),
             hub: hub_handle,
-            commands: server.commands.clone(),
+            commands: server.commands().clone(),
             tick_period_ms: period_ms,
             signals: Signals {
-                obs: server.obs_names.clone(),
+                obs: server.obs_names().to_vec(),
                 predictions: server
-                    .config
+                    .config()
                     .predictions
                     .iter()
                     .map(|p| p.name.clone())
                     .collect(),
-                gate_prediction: server.config.control.gate_prediction.clone(),
-                bounds: LearningBounds::for_config(&server.config),
-                horde_predictions: server.horde.as_ref().map_or(0, |h| h.names.len()),
+                gate_prediction: server.config().control.gate_prediction.clone(),
+                bounds: LearningBounds::for_config(server.config()),
+                horde_predictions: server.horde().as_ref().map_or(0, |h| h.names.len()),
             },
-            operator_config: hello_config::for_operator(&server.config),
-            watcher_config: hello_config::for_watcher(&server.config),
+            operator_config: hello_config::for_operator(server.config()),
+            watcher_config: hello_config::for_watcher(server.config()),
             hello_run: HelloRun {
                 run: run_id(),
-                robot: RobotInfo::new(server.config.robot.model, &server.robot),
+                robot: RobotInfo::new(server.config().robot.model, &server.robot),
                 history_s: cfg.history_s,
             },
             max_message_bytes: cfg.max_message_bytes,
@@ -275,16 +275,16 @@ impl Dashboard {
             token_throttled: AtomicU64::new(0),
             cancel: cancel.clone(),
             horde: server
-                .horde
+                .horde()
                 .as_ref()
                 .map(|view| Arc::new(horde_feed::HordeFeed::new(view))),
             downloads: Arc::new(tokio::sync::Semaphore::new(download::AT_ONCE)),
         });
-        let (earlier_events, events) = server.events.subscribe_with_recent();
+        let (earlier_events, events) = server.events().subscribe_with_recent();
         let hub = runtime.spawn(hub::run(
             hub,
             HubInputs {
-                feed: server.feed.subscribe(),
+                feed: server.feed().subscribe(),
                 earlier_events,
                 events,
             },

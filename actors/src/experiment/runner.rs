@@ -144,7 +144,7 @@ async fn collect<C: Collect>(
         .start()
         .await
         .map_err(|e| RunError::Server(e.to_string()))?;
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     collector.start(&server);
     let (mut seen, mut lagged) = (0u64, 0u64);
     while seen < ticks {
@@ -158,7 +158,7 @@ async fn collect<C: Collect>(
         }
     }
     let output = collector.finish().await;
-    let dropped = server.feed.recorder_dropped();
+    let dropped = server.feed().recorder_dropped();
     server.shutdown().await;
     Ok((output?, dropped, lagged))
 }

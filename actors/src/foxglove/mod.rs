@@ -15,7 +15,7 @@
 //!   client may connect without the token), the program and the observation names.
 //!
 //! Foxglove clients only read. The endpoint advertises no capability to publish, set parameters or call
-//! services, so the SDK refuses all of those, and nothing from Foxglove reaches `server.commands`. The
+//! services, so the SDK refuses all of those, and nothing from Foxglove reaches `server.commands()`. The
 //! dashboard's token decides who may watch (`access`): checked by the `gate` on the public port before
 //! the websocket upgrade. It listens on loopback unless told otherwise, and any other address needs a
 //! token.
@@ -142,14 +142,14 @@ impl Drop for Foxglove {
 /// its secrets redacted.
 fn config_message(server: &Server, watchers: bool) -> Vec<u8> {
     let config = if watchers {
-        crate::dashboard::watcher_config(&server.config)
+        crate::dashboard::watcher_config(server.config())
     } else {
-        serde_json::to_value(server.config.redacted()).unwrap_or_default()
+        serde_json::to_value(server.config().redacted()).unwrap_or_default()
     };
     let message = serde_json::json!({
         "program": crate::provenance::BUILD.program(),
         "config": config,
-        "obs_names": server.obs_names,
+        "obs_names": server.obs_names(),
     });
     serde_json::to_vec(&message).unwrap_or_default()
 }
@@ -213,12 +213,12 @@ impl Foxglove {
             runtime: None,
         };
         let predictions: Vec<String> = server
-            .config
+            .config()
             .predictions
             .iter()
             .map(|p| p.name.clone())
             .collect();
-        let channels = Channels::new(&ctx, &server.obs_names, &predictions)
+        let channels = Channels::new(&ctx, server.obs_names(), &predictions)
             .map_err(|e| FoxgloveError::Sdk(e.to_string()))?;
         let (listener_for_sdk, subscribed) = publish::subscribe_listener();
         // The SDK serves on a loopback port of its own, behind the gate; it starts on this runtime.
@@ -269,15 +269,15 @@ impl Foxglove {
             .push(runtime.spawn(gate::run(listener, gate, endpoint.cancel.clone())));
         let publisher = Publisher::new(
             channels,
-            RunClock::new(server.started, server.config.tick.period_ms),
-            server.obs_names.clone(),
+            RunClock::new(server.started(), server.config().tick.period_ms),
+            server.obs_names().to_vec(),
             config_message(server, watchers),
             watchers,
             counters,
         );
         let inputs = Inputs {
-            ticks: server.feed.subscribe(),
-            events: server.events.subscribe(),
+            ticks: server.feed().subscribe(),
+            events: server.events().subscribe(),
             subscribed,
         };
         endpoint

@@ -129,18 +129,18 @@ struct Refusal(&'static str, String);
 impl Answers {
     /// The answers for `server`.
     pub(crate) fn new(server: &Server, counters: Arc<ZenohCounters>) -> Answers {
-        let config = server.config.redacted();
+        let config = server.config().redacted();
         let message = json!({
             "program": crate::provenance::BUILD.program(),
             "config": config,
-            "obs_names": server.obs_names,
+            "obs_names": server.obs_names(),
         });
         Answers {
             config: serde_json::to_vec(&message).unwrap_or_default(),
-            run_dir: server.checkpoints.run_dir.clone(),
-            token: server.config.dashboard.token.clone(),
-            commands_on: server.config.zenoh.commands,
-            commands: server.commands.clone(),
+            run_dir: server.checkpoints().run_dir.clone(),
+            token: server.config().dashboard.token.clone(),
+            commands_on: server.config().zenoh.commands,
+            commands: server.commands().clone(),
             counters,
         }
     }

@@ -122,9 +122,9 @@ impl ZenohBridge {
         server: &Server,
         dashboard_url: String,
     ) -> Result<ZenohBridge, ZenohError> {
-        let settings = server.config.zenoh.clone();
+        let settings = server.config().zenoh.clone();
         if settings.commands {
-            match &server.config.dashboard.token {
+            match &server.config().dashboard.token {
                 None => return Err(ZenohError::CommandsNeedToken),
                 Some(t) => {
                     if let Some(problem) = pavlov::config::public_token_problem(t) {
@@ -164,8 +164,8 @@ impl ZenohBridge {
             settings.robot.clone(),
             counters.clone(),
             publish::Inputs {
-                ticks: server.feed.subscribe(),
-                events: server.events.subscribe(),
+                ticks: server.feed().subscribe(),
+                events: server.events().subscribe(),
             },
         );
         let publisher = runtime
@@ -180,8 +180,8 @@ impl ZenohBridge {
             .map_err(|e| ZenohError::Open(e.to_string()))??;
         let cancel = bridge.cancel.clone();
         let phase = publish::Phase {
-            first_tick: server.started,
-            period: Duration::from_millis(server.config.tick.period_ms.max(1)),
+            first_tick: server.started(),
+            period: Duration::from_millis(server.config().tick.period_ms.max(1)),
         };
         bridge.tasks.push(runtime.spawn(publisher.run(
             status,

@@ -65,9 +65,9 @@ impl StatusSource {
         counters: Arc<ZenohCounters>,
     ) -> StatusSource {
         StatusSource {
-            robot: server.config.zenoh.robot.clone(),
+            robot: server.config().zenoh.robot.clone(),
             dashboard_url,
-            commands: server.config.zenoh.commands,
+            commands: server.config().zenoh.commands,
             health: server.health(),
             counters,
             mode: None,

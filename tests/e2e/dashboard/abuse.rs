@@ -280,7 +280,7 @@ async fn abusers_neither_delay_the_tick_nor_starve_a_well_behaved_client() {
     // Every record the server publishes, to compare with what the good client got.
     let (stop_tx, stop_rx) = watch::channel(u64::MAX);
     let (feed_stop_tx, mut feed_stop) = watch::channel(false);
-    let mut feed = server.feed.subscribe();
+    let mut feed = server.feed().subscribe();
     let feed_seqs = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
     let newest = {
         let seqs = feed_seqs.clone();
@@ -586,7 +586,7 @@ async fn idle_tcp_connections_are_bounded_and_closed_while_a_websocket_keeps_str
         .await
         .unwrap();
     let addr = dash.local_addr();
-    let mut feed = server.feed.subscribe();
+    let mut feed = server.feed().subscribe();
     let mut ws = abuse::connect(addr).await.unwrap();
     // Fill the pending pool (the websocket is not in it) and try ten more at once, sending nothing: the
     // ten are closed on arrival, since the twenty before them may still be handshakes in flight.

@@ -69,7 +69,7 @@ impl Lab {
 
     /// Waits for `n` ticks on the server's feed and returns the last one's `seq`.
     async fn ticks(&self, n: usize) -> u64 {
-        let mut feed = self.server.feed.subscribe();
+        let mut feed = self.server.feed().subscribe();
         let mut last = 0;
         for _ in 0..n {
             last = feed.recv().await.unwrap().seq;
@@ -177,7 +177,7 @@ async fn a_client_connecting_mid_run_gets_the_recent_history_in_small_messages_t
     .await;
     // Every record the feed makes (it holds 20 s of them), to tell a tick skipped on a busy machine from
     // one the history or the live stream lost.
-    let mut feed = lab.server.feed.subscribe();
+    let mut feed = lab.server.feed().subscribe();
     lab.ticks(200).await;
     let (mut ws, hello) = ws_from(loopback(1), lab.addr(), Some(TOKEN)).await.unwrap();
     assert_eq!(hello["history_s"], 2, "{hello}");

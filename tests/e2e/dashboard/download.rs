@@ -72,7 +72,7 @@ impl Lab {
     /// Waits for `n` more ticks on the server's feed, then until the dashboard has them too (an operator
     /// is sent a tick at least as new); returns the newest one's `seq`.
     async fn ticks_seen_by_the_dashboard(&self, n: usize) -> u64 {
-        let mut feed = self.server.feed.subscribe();
+        let mut feed = self.server.feed().subscribe();
         let mut last = 0;
         for _ in 0..n {
             last = tokio::time::timeout(WAIT, feed.recv())

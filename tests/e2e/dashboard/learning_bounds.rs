@@ -177,7 +177,7 @@ async fn learning_stays_finite_for_thousands_of_ticks_after_refused_step_sizes()
     cfg.checkpoint.autosave = true;
     let (_, server) = run_sim(cfg, 10).await;
     let send = |c: ControlCommand| {
-        let tx = server.commands.clone();
+        let tx = server.commands().clone();
         async move {
             let (req, reply) = ControlRequest::new(c);
             tx.send(req).await.unwrap();
@@ -194,7 +194,7 @@ async fn learning_stays_finite_for_thousands_of_ticks_after_refused_step_sizes()
         let e = send(set_alpha(alpha).into()).await.unwrap_err().to_string();
         assert!(e.contains("exceeds 1/44"), "{e}");
     }
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     // Before the bound, α = 1 reached 1e241 within 750 ticks and α = 1e308 NaN within 75.
     let refused = collect(&mut rx, 3000).await;
     assert!(send(set_alpha(1.0 / 44.0).into()).await.is_ok());
@@ -209,7 +209,7 @@ async fn learning_stays_finite_for_thousands_of_ticks_after_refused_step_sizes()
     );
     drop(rx);
     let run_dir = server
-        .checkpoints
+        .checkpoints()
         .run_dir
         .clone()
         .expect("autosave has a run folder");

@@ -195,7 +195,7 @@ async fn learning_messages_carry_td_errors_and_returns_that_the_ticks_confirm() 
 
     // A client joining now gets the recent `learning` messages after its history, before the live ticks,
     // oldest first, and then the live ones without a repeat.
-    let mut feed = lab.server.feed.subscribe();
+    let mut feed = lab.server.feed().subscribe();
     let (mut late, _) = ws_from(loopback(3), lab.addr(), None).await.unwrap();
     let mut recent = Vec::new();
     let first_tick = loop {
@@ -306,7 +306,7 @@ fn base64_decode(text: &str) -> Vec<u8> {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_client_watches_the_horde_at_a_bounded_rate_and_bad_requests_are_refused() {
     let lab = Lab::start(with_horde).await;
-    let names = lab.server.horde.as_ref().unwrap().names.clone();
+    let names = lab.server.horde().as_ref().unwrap().names.clone();
     assert_eq!(names.len(), 132);
     let (mut ws, _) = ws_from(loopback(2), lab.addr(), None).await.unwrap();
     let errors_before = lab.dash.stats().errors;
@@ -465,7 +465,7 @@ async fn a_watcher_that_stops_reading_holds_no_backlog_of_horde_values() {
     use futures_util::SinkExt;
     use tokio_tungstenite::tungstenite::Message;
     let lab = Lab::start(with_a_bigger_horde).await;
-    assert_eq!(lab.server.horde.as_ref().unwrap().names.len(), 880);
+    assert_eq!(lab.server.horde().as_ref().unwrap().names.len(), 880);
     // A client with a 4 kB receive buffer, so that the server's socket fills within a second or two.
     let sock = tokio::net::TcpSocket::new_v4().unwrap();
     sock.set_recv_buffer_size(4096).unwrap();

@@ -124,7 +124,7 @@ async fn metrics_are_served_complete_valid_and_consistent() {
     let dash = Dashboard::start(&server, PathBuf::from("web"))
         .await
         .unwrap();
-    let mut feed = server.feed.subscribe();
+    let mut feed = server.feed().subscribe();
     for _ in 0..50 {
         feed.recv().await.unwrap();
     }

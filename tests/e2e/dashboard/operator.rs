@@ -67,7 +67,7 @@ fn summary(l: &[Duration]) -> String {
 async fn a_hundred_watchers_leave_the_operator_a_seat_and_the_estop_latches_at_once() {
     let lab = Lab::start(|_| {}).await;
     let addr = lab.addr();
-    let cfg = lab.server.config.dashboard.clone();
+    let cfg = lab.server.config().dashboard.clone();
     let readers = runtime("watchers");
     let mut admitted = 0usize;
     let mut refused = Vec::new();
@@ -157,7 +157,7 @@ async fn idle_socket(
 async fn two_hundred_reopened_idle_sockets_leave_healthz_and_the_operator_a_way_in() {
     let lab = Lab::start(|_| {}).await;
     let addr = lab.addr();
-    let max_pending = lab.server.config.dashboard.max_pending;
+    let max_pending = lab.server.config().dashboard.max_pending;
     // The flood: 200 idle sockets from 20 addresses, each reopened as soon as it is closed. It keeps a core
     // busy for the few seconds of the test (reopening as fast as the server closes is a busy loop).
     let flood = runtime("idle-flood");

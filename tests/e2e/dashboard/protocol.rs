@@ -252,7 +252,7 @@ async fn hello_comes_first_with_version_config_and_signals() {
         assert!(commands.contains(&c), "{c} missing from {commands:?}");
     }
     let names = hello["signals"]["obs"].as_array().unwrap();
-    assert_eq!(names.len(), lab.server.obs_names.len());
+    assert_eq!(names.len(), lab.server.obs_names().len());
     let tick = next_of(&mut ws, "tick").await;
     assert_eq!(tick["obs"].as_array().unwrap().len(), names.len());
     lab.stop().await;
@@ -261,7 +261,7 @@ async fn hello_comes_first_with_version_config_and_signals() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn ticks_stream_at_the_tick_rate_with_every_field() {
     let lab = start().await;
-    let mut feed = lab.server.feed.subscribe();
+    let mut feed = lab.server.feed().subscribe();
     let (mut ws, _) = lab.connect().await;
     let first = next_of(&mut ws, "tick").await;
     let mut seqs = vec![first["seq"].as_u64().unwrap()];
@@ -403,7 +403,7 @@ async fn statuses_of_the_gesture_command_run_carry_the_interaction_metrics() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_client_can_ask_for_a_lower_rate() {
     let lab = start().await;
-    let mut feed = lab.server.feed.subscribe();
+    let mut feed = lab.server.feed().subscribe();
     let (mut ws, _) = lab.connect().await;
     let ack = command(&mut ws, json!({"cmd":"set_rate","hz":10}), 1).await;
     assert_eq!(ack["type"], "ack", "{ack}");
@@ -737,7 +737,10 @@ async fn learning_commands_are_applied() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn with_a_token_only_its_holder_may_command() {
     let lab = start_with(|c| c.dashboard.token = Some("s3cret".into())).await;
-    assert_eq!(lab.server.config.dashboard.token.as_deref(), Some("s3cret"));
+    assert_eq!(
+        lab.server.config().dashboard.token.as_deref(),
+        Some("s3cret")
+    );
     // Without the token: watch-only.
     let (mut ws, hello) = lab.connect().await;
     assert_eq!(hello["can_command"], false);
@@ -876,7 +879,7 @@ async fn a_stalled_client_loses_old_ticks_and_delays_nobody() {
     let lab = start_with(|c| c.dashboard.client_queue = 8).await;
     // Every record the feed produces from here on (the feed holds 20 s of records for a slow reader).
     // It returns once it has the tick `until` names (the healthy client's last).
-    let mut feed = lab.server.feed.subscribe();
+    let mut feed = lab.server.feed().subscribe();
     let (until_tx, until) = tokio::sync::watch::channel(u64::MAX);
     let produced = tokio::spawn(async move {
         let mut seqs = Vec::new();

@@ -46,7 +46,7 @@ async fn run(horde: &str, ticks: usize, learn: u64) -> (Vec<Control>, Option<(u6
     let mut cfg = stall_with(horde);
     cfg.sim.seed = 5;
     let (records, server) = run_sim(cfg, ticks).await;
-    let mut status = server.horde.as_ref().map(|h| h.status.clone());
+    let mut status = server.horde().as_ref().map(|h| h.status.clone());
     if let Some(status) = &mut status {
         learned(status, learn).await;
     }

@@ -70,7 +70,7 @@ async fn start(cfg: Config) -> (Server, Dashboard) {
 async fn a_horde_learns_and_metrics_show_it() {
     let cfg = stall_with(&small_horde("[2.0, 10.0]"));
     let (server, dash) = start(cfg).await;
-    let view = server.horde.clone().expect("[horde] has families");
+    let view = server.horde().cloned().expect("[horde] has families");
     assert_eq!(view.names.len(), (44 + 2) * 2);
     assert!(view.names.contains(&"probe/bias@10".to_string()));
     let mut status = view.status.clone();
@@ -128,8 +128,8 @@ async fn a_horde_learns_and_metrics_show_it() {
 
     // Without [horde]: no Horde, and no pavlov_horde_* family.
     let (server, dash) = start(super::stall_with("")).await;
-    assert!(server.horde.is_none());
-    let mut feed = server.feed.subscribe();
+    assert!(server.horde().is_none());
+    let mut feed = server.feed().subscribe();
     feed.recv().await.unwrap();
     let plain = scrape(dash.local_addr()).await;
     assert!(

@@ -37,7 +37,7 @@ fn config_in(dir: &Path, taus: &str) -> Config {
 /// the records.
 async fn run_with_records(cfg: Config, ticks: usize) -> (PathBuf, Vec<TickRecord>) {
     let (records, server) = run_sim(cfg, ticks).await;
-    let run_dir = server.checkpoints.run_dir.clone().expect("autosave");
+    let run_dir = server.checkpoints().run_dir.clone().expect("autosave");
     server.shutdown().await;
     (run_dir, records)
 }
@@ -134,9 +134,9 @@ async fn horde_checkpoints_are_written_with_the_run_and_resumed() {
     other.checkpoint.resume = true;
     other.checkpoint.every_s = 0;
     let (_, server) = run_sim(other.clone(), 3).await;
-    assert!(server.checkpoints.resumed.is_some(), "control is resumed");
-    assert!(server.horde.is_some(), "the Horde runs");
-    let third_run = server.checkpoints.run_dir.clone().unwrap();
+    assert!(server.checkpoints().resumed.is_some(), "control is resumed");
+    assert!(server.horde().is_some(), "the Horde runs");
+    let third_run = server.checkpoints().run_dir.clone().unwrap();
     server.shutdown().await;
     let (_, restarted) =
         horde_file::read::<f32>(horde_files(&third_run).last().expect("a last checkpoint"))

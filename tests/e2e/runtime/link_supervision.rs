@@ -65,7 +65,7 @@ fn longest_run(records: &[TickRecord], pred: impl Fn(&TickRecord) -> bool) -> us
 async fn end_of_file_reconnects_and_control_resumes() {
     // An end of file every ~7.5 s on average.
     let server = start("eof=0.002", 3).await;
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     let records = common::collect(&mut rx, 3000).await; // 60 s
     let status = server.health().sim_status().expect("simulated");
     let eofs = status.borrow().faults.eofs;
@@ -108,7 +108,7 @@ async fn end_of_file_reconnects_and_control_resumes() {
 async fn a_silent_hang_goes_stale_stops_the_wheels_and_recovers() {
     // Hangs of 0.3–2.5 s, about one every 7.5 s.
     let server = start("hang=0.002,hang_ms=300..2500", 5).await;
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     let records = common::collect(&mut rx, 4500).await; // 90 s
     let status = server.health().sim_status().expect("simulated");
     let hangs = status.borrow().faults.hangs;
@@ -143,7 +143,7 @@ async fn a_silent_hang_goes_stale_stops_the_wheels_and_recovers() {
 /// that are longer than half a hang: from the first tick not up to the first tick up again, ms.
 async fn outages_of_hangs(hang_ms: u64, seed: u64) -> Vec<f64> {
     let server = start(&format!("hang=5e-4,hang_ms={hang_ms}..{hang_ms}"), seed).await;
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     let records = common::collect(&mut rx, 15_000).await;
     let hangs = server
         .health()
@@ -193,14 +193,14 @@ async fn control_resumes_within_250_ms_of_frames_returning_after_a_long_outage()
 
 async fn rearm(server: &Server) -> Outcome {
     let (req, reply) = ControlRequest::new(LinkCommand::Rearm {});
-    server.commands.send(req).await.expect("router up");
+    server.commands().send(req).await.expect("router up");
     reply.await.expect("reply")
 }
 
 async fn trip_waits_for_the_operator(faults: &str) {
     let server = start(faults, 11).await;
     let status = server.health().sim_status().expect("simulated");
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     // Before any trip, re-arming is refused with a reason.
     let refused = rearm(&server).await;
     assert!(refused.unwrap_err().to_string().contains("has not tripped"));
@@ -272,7 +272,7 @@ async fn a_line_too_slow_for_the_stream_never_drives() {
     // transmit buffer and arrive broken. The server must count bad frames, never drive on them, and keep
     // trying to reconnect.
     let server = start("baud=19200", 1).await;
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     let records = common::collect(&mut rx, 500).await; // 10 s
     let status = server.health().sim_status().expect("simulated");
     let robot_wheels = status.borrow().wheel_speed_mm_s;
@@ -311,7 +311,7 @@ async fn damage_on_the_way_to_the_robot_is_survived_even_a_baud_change() {
     // Host→robot bytes dropped or flipped at 1e-3: sooner or later a flipped Drive Direct (145) reads as
     // Baud (129) and the robot moves to another rate; the baud rescue must bring it back.
     let server = start("host_flip=1e-3,host_drop=1e-3", 7).await;
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     let records = common::collect(&mut rx, 30_000).await; // 10 min
     let status = server.health().sim_status().expect("simulated");
     let faults = status.borrow().faults.clone();

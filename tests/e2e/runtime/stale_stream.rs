@@ -81,7 +81,7 @@ async fn a_stale_sensor_stream_stops_the_wheels_within_five_ticks() {
     .start()
     .await
     .expect("server starts");
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     let records = common::collect(&mut rx, 100).await; // 2 s
     server.shutdown().await;
 

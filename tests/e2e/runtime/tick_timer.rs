@@ -27,7 +27,7 @@ async fn timer_tokio_keeps_tokios_interval_in_real_time() {
         .start()
         .await
         .expect("server starts");
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     collect(&mut rx, 5).await;
     assert_eq!(server.health().tick_timer(), TickTimer::Tokio);
     server.shutdown().await;

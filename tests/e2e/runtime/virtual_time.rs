@@ -64,9 +64,9 @@ async fn estop_stops_the_wheels_until_released() {
     let mut cfg = stall_config();
     cfg.control.mode = Mode::Reactive;
     let (_, server) = run_sim(cfg, 200).await;
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     let (req, reply) = ControlRequest::new(LatchCommand::Estop {});
-    server.commands.send(req).await.unwrap();
+    server.commands().send(req).await.unwrap();
     assert!(reply.await.unwrap().is_ok());
     let after = collect(&mut rx, 100).await;
     // From the first record produced after the latch, every command is a stop, flagged as the e-stop.
@@ -86,7 +86,7 @@ async fn estop_stops_the_wheels_until_released() {
             .all(|r| r.sensors.distance_mm == 0 && r.sensors.angle_deg == 0)
     );
     let (req, reply) = ControlRequest::new(LatchCommand::Release {});
-    server.commands.send(req).await.unwrap();
+    server.commands().send(req).await.unwrap();
     assert!(reply.await.unwrap().is_ok());
     let released = collect(&mut rx, 20).await;
     assert!(
@@ -127,7 +127,7 @@ async fn shutdown_leaves_the_simulated_wheels_stopped_in_passive() {
 async fn commands_are_acknowledged_or_refused_with_a_reason() {
     let (_, server) = run_sim(stall_config(), 10).await;
     let send = |c: ControlCommand| {
-        let tx = server.commands.clone();
+        let tx = server.commands().clone();
         async move {
             let (req, reply) = ControlRequest::new(c);
             tx.send(req).await.unwrap();
@@ -182,7 +182,7 @@ async fn commands_are_acknowledged_or_refused_with_a_reason() {
     .await;
     assert!(bad.is_err(), "negative alpha accepted");
     assert!(send(LearningCommand::ResetWeights {}.into()).await.is_ok());
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     let manual = collect(&mut rx, 5).await;
     assert!(manual.iter().all(|r| r.mode == Mode::Manual));
     assert!(manual.iter().any(|r| r.command == Action::new(100, 100)));

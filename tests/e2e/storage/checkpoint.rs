@@ -40,7 +40,7 @@ async fn checkpoints_are_periodic_pruned_final_and_resumable() {
     // 5 s of ticks at 20 ms: periodic checkpoints at ticks 100 and 200, a final one at shutdown.
     let (records, server) = run_sim(cfg.clone(), 250).await;
     let run_dir = server
-        .checkpoints
+        .checkpoints()
         .run_dir
         .clone()
         .expect("autosave has a run folder");
@@ -88,10 +88,10 @@ async fn checkpoints_are_periodic_pruned_final_and_resumable() {
     resumed.checkpoint.resume = true;
     resumed.checkpoint.every_s = 0;
     let (records, server) = run_sim(resumed.clone(), 5).await;
-    let report = server.checkpoints.resumed.as_ref().expect("resumed");
+    let report = server.checkpoints().resumed.as_ref().expect("resumed");
     assert_eq!(&report.path, final_path);
     assert!(report.skipped.is_empty(), "{:?}", report.skipped);
-    let second_run = server.checkpoints.run_dir.clone().unwrap();
+    let second_run = server.checkpoints().run_dir.clone().unwrap();
     assert_ne!(second_run, run_dir, "every run has its own folder");
     server.shutdown().await;
     let first = &records[0];

@@ -31,7 +31,7 @@ async fn a_fresh_run_keeps_its_checkpoints_and_leaves_older_runs_alone() {
     let before = snapshot_files(&dir);
     // 7 s of ticks: periodic checkpoints at ticks 100, 200 and 300, and a final one; keep = 2.
     let (records, server) = run_sim(cfg.clone(), 350).await;
-    let run_dir = server.checkpoints.run_dir.clone().unwrap();
+    let run_dir = server.checkpoints().run_dir.clone().unwrap();
     server.shutdown().await;
     let ours = list(&run_dir).unwrap();
     let ticks: Vec<u64> = ours.iter().map(|(t, _)| *t).collect();
@@ -53,7 +53,7 @@ async fn a_fresh_run_keeps_its_checkpoints_and_leaves_older_runs_alone() {
     resume.checkpoint.resume = true;
     resume.checkpoint.autosave = false;
     let (_, server) = run_sim(resume, 3).await;
-    let resumed = server.checkpoints.resumed.as_ref().unwrap();
+    let resumed = server.checkpoints().resumed.as_ref().unwrap();
     assert_eq!(resumed.path, ours[1].1);
     assert_eq!(resumed.tick, ticks[1]);
     server.shutdown().await;

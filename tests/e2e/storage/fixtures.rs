@@ -171,7 +171,7 @@ pub fn record_with_changes(
 
     async fn send(server: &Server, command: impl Into<ControlCommand>) {
         let (req, reply) = ControlRequest::new(command);
-        server.commands.send(req).await.expect("router up");
+        server.commands().send(req).await.expect("router up");
         let outcome = reply.await.expect("a reply");
         assert!(outcome.is_ok(), "{outcome:?}");
     }
@@ -196,7 +196,7 @@ pub fn record_with_changes(
             .start()
             .await
             .expect("server");
-        let mut rx = server.feed.subscribe();
+        let mut rx = server.feed().subscribe();
         let step = ticks / 6;
         crate::common::collect(&mut rx, step).await;
         let params = LearningCommand::SetParams {
@@ -257,7 +257,7 @@ pub fn record_plain(
             .start()
             .await
             .expect("server");
-        let mut rx = server.feed.subscribe();
+        let mut rx = server.feed().subscribe();
         let records = crate::common::collect(&mut rx, ticks).await;
         server.shutdown().await;
         records

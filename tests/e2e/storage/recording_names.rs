@@ -15,7 +15,7 @@ async fn start(server: &Server, dir: &str) -> Outcome {
     let (req, reply) = ControlRequest::new(RecorderCommand::StartRecording {
         dir: Some(dir.to_string()),
     });
-    server.commands.send(req).await.unwrap();
+    server.commands().send(req).await.unwrap();
     reply.await.unwrap()
 }
 

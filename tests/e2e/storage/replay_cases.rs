@@ -20,12 +20,12 @@ use crate::common;
 
 async fn send(server: &Server, command: impl Into<ControlCommand>) -> Outcome {
     let (req, reply) = ControlRequest::new(command);
-    server.commands.send(req).await.expect("router up");
+    server.commands().send(req).await.expect("router up");
     reply.await.expect("a reply")
 }
 
 async fn ticks(server: &Server, n: usize) {
-    let mut rx = server.feed.subscribe();
+    let mut rx = server.feed().subscribe();
     common::collect(&mut rx, n).await;
 }
 

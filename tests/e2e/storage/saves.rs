@@ -16,7 +16,7 @@ async fn save(server: &Server, path: Option<&str>) -> Outcome {
     let (req, reply) = ControlRequest::new(LearningCommand::SaveWeights {
         path: path.map(str::to_string),
     });
-    server.commands.send(req).await.unwrap();
+    server.commands().send(req).await.unwrap();
     reply.await.unwrap()
 }
 
@@ -51,8 +51,8 @@ async fn saves_are_named_not_placed_never_overwritten_never_pruned_and_limited()
         .start()
         .await
         .unwrap();
-    let run_dir = server.checkpoints.run_dir.clone().unwrap();
-    collect(&mut server.feed.subscribe(), 60).await;
+    let run_dir = server.checkpoints().run_dir.clone().unwrap();
+    collect(&mut server.feed().subscribe(), 60).await;
     let saved = dir.join(SAVED_DIR);
 
     // The automatic checkpoints' own names (five of them once made pruning delete every real one).
@@ -102,7 +102,7 @@ async fn saves_are_named_not_placed_never_overwritten_never_pruned_and_limited()
     assert!(!saved.join("c.json").exists());
 
     // Many automatic checkpoints later (keep = 1), every save is still there.
-    collect(&mut server.feed.subscribe(), 300).await;
+    collect(&mut server.feed().subscribe(), 300).await;
     server.shutdown().await;
     assert_eq!(
         list(&run_dir).unwrap().len(),
@@ -136,7 +136,7 @@ async fn saves_are_named_not_placed_never_overwritten_never_pruned_and_limited()
         .start()
         .await
         .unwrap();
-    let resumed = server.checkpoints.resumed.as_ref().unwrap();
+    let resumed = server.checkpoints().resumed.as_ref().unwrap();
     assert_eq!(resumed.path, Path::new(&w));
     assert_eq!(resumed.tick, read(Path::new(&w)).created_tick);
     server.shutdown().await;

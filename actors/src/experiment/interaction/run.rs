@@ -99,8 +99,8 @@ impl Collect for InteractionCollector {
         if let Some(human) = self.human.take() {
             self.driver = Some(tokio::spawn(crate::simulated::human::drive_pose(
                 human,
-                server.pose.clone(),
-                server.started,
+                server.pose().clone(),
+                server.started(),
                 self.cancel.clone(),
             )));
         }
