@@ -380,27 +380,29 @@ mod tests {
         assert_eq!(r.id, None);
     }
 
+    /// A message for command `name`: its required arguments where it has some, else none.
+    fn sample(name: &str) -> Value {
+        match name {
+            "set_mode" => json!({"cmd":name,"mode":"reactive"}),
+            "teleop" => json!({"cmd":name,"left_mm_s":100,"right_mm_s":-100}),
+            "set_params" => json!({"cmd":name,"alpha":0.1,"lambda":0.9,"threshold":0.4}),
+            _ => json!({"cmd":name}),
+        }
+    }
+
     #[test]
-    fn every_listed_control_command_is_a_real_one() {
-        let samples = [
-            json!({"cmd":"set_mode","mode":"reactive"}),
-            json!({"cmd":"estop"}),
-            json!({"cmd":"rearm"}),
-            json!({"cmd":"release"}),
-            json!({"cmd":"teleop","left_mm_s":100,"right_mm_s":-100}),
-            json!({"cmd":"human_request"}),
-            json!({"cmd":"set_params","alpha":0.1,"lambda":0.9,"threshold":0.4}),
-            json!({"cmd":"reset_weights"}),
-            json!({"cmd":"save_weights"}),
-            json!({"cmd":"start_recording"}),
-            json!({"cmd":"stop_recording"}),
-        ];
+    fn every_control_command_parses_into_the_variant_of_its_name() {
+        // The names come from the owners' enums, so a new command is covered here without a list to extend.
         let names: Vec<&str> = ControlCommand::names().collect();
-        assert_eq!(samples.len(), names.len());
-        for sample in samples {
-            let r = parse_request(&sample.to_string()).unwrap();
-            assert!(names.contains(&r.cmd.as_str()), "{}", r.cmd);
-            assert!(matches!(r.command, ClientCommand::Control(_)), "{}", r.cmd);
+        assert!(names.len() >= 11, "{names:?}");
+        for name in names {
+            let r = parse_request(&sample(name).to_string())
+                .unwrap_or_else(|e| panic!("{name}: {}", e.error));
+            assert_eq!(r.cmd, name);
+            let ClientCommand::Control(command) = r.command else {
+                panic!("{name} is not a control command");
+            };
+            assert_eq!(serde_json::to_value(&command).unwrap()["cmd"], name);
         }
     }
 
