@@ -11,6 +11,10 @@
 //! - `PAVLOV_RUSTC`: `rustc --version` of the compiler building it;
 //! - `PAVLOV_TARGET` and `PAVLOV_PROFILE`: the target triple and the profile (`debug`/`release`).
 //!
+//! It also asks the linker to compress the binary's debug sections (zlib, Linux release builds only): the
+//! release profile keeps line tables so that backtraces name files and lines, and compressed they cost a
+//! quarter of the space (Rust's backtraces and `perf` read compressed sections).
+//!
 //! So that the dirty flag stays true, the script runs again whenever git's HEAD, index or refs move, or a
 //! file the binary is compiled from changes (an edit to a test or a document alone is seen at the next
 //! such change; rebuilding the library for every edit of a test would slow every test run).
@@ -56,6 +60,16 @@ fn main() {
         "cargo:rustc-env=PAVLOV_PROFILE={}",
         std::env::var("PROFILE").unwrap_or_else(|_| "unknown".into())
     );
+    compress_debug_sections();
+}
+
+/// Linux release binaries: the linker compresses the debug sections (line tables) with zlib.
+fn compress_debug_sections() {
+    let linux = std::env::var("CARGO_CFG_TARGET_OS").is_ok_and(|os| os == "linux");
+    let release = std::env::var("PROFILE").is_ok_and(|p| p == "release");
+    if linux && release {
+        println!("cargo:rustc-link-arg-bins=-Wl,--compress-debug-sections=zlib");
+    }
 }
 
 /// The commit and dirty flag of the checkout at `root`, and the paths whose change reruns this script.

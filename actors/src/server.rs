@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use pavlov::config::Config;
-use pavlov::learn::checkpoint::Checkpoint;
+use pavlov::checkpoint::Checkpoint;
 use pavlov::oi::handshake;
 use pavlov::oi::parser::StreamParser;
 use pavlov::sim::faults::FaultInjector;

@@ -16,7 +16,7 @@ use pavlov::agent::{LearnInput, LearnOutput, LearningStage};
 use pavlov::config::Config;
 use pavlov::event::EventKind;
 use pavlov::learn::LearnError;
-use pavlov::learn::checkpoint::{Checkpoint, CheckpointError};
+use pavlov::checkpoint::{Checkpoint, CheckpointError};
 use pavlov::skeleton::{ElbowFeatureTracker, PoseTracker};
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::Instant;

@@ -14,7 +14,7 @@ use super::exposition::Exposition;
 pub(crate) use super::exposition::HistogramSample;
 use super::{Health, RecorderFigures};
 use crate::bus::storage_failures::StorageFigures;
-use crate::horde::status::HordeStatus;
+use super::horde_status::HordeStatus;
 
 /// The Content-Type of the exposition.
 pub(crate) const CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
