@@ -12,9 +12,9 @@
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use crate::config::{Config, StimulusSpec};
 use crate::learn::snapshot::SetSnapshot;
 use crate::learn::spec::PredictionSpec;
-use crate::config::{Config, StimulusSpec};
 use crate::oi::Model;
 
 /// The `format` of checkpoints this code writes and reads.

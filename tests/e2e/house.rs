@@ -343,10 +343,7 @@ fn circles(
 /// `telemetry/` (which the `Health` handle reads, and which the link, the Horde and the simulator write
 /// to); the core's checkpoint, which names both the configuration and the learners, sits above both. A
 /// change that adds a circle fails here, printing the imports that close it.
-const STANDING_CIRCLES: [(&str, &[&[&str]]); 2] = [
-    ("actors/src", &[]),
-    ("src", &[]),
-];
+const STANDING_CIRCLES: [(&str, &[&[&str]]); 2] = [("actors/src", &[]), ("src", &[])];
 
 #[test]
 fn no_new_circle_among_the_top_level_modules_of_either_crate() {
@@ -466,7 +463,10 @@ fn floors(
 }
 
 /// The floors ARCHITECTURE.md draws for the crate headed `heading` ("shell (actors/src)", "core (src)").
-fn documented_floors(architecture: &str, heading: &str) -> std::collections::BTreeMap<String, usize> {
+fn documented_floors(
+    architecture: &str,
+    heading: &str,
+) -> std::collections::BTreeMap<String, usize> {
     let mut out = std::collections::BTreeMap::new();
     let mut inside = false;
     for line in architecture.lines() {

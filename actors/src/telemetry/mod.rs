@@ -17,12 +17,12 @@ pub(crate) mod histogram;
 pub mod horde_status;
 pub mod logging;
 pub(crate) mod prometheus;
-pub mod sim_status;
 /// A strict reader of the `/metrics` text, for the end-to-end tests (always built: a feature for it put
 /// the package into its own dev-dependencies, which turned `--features pavlov-actors/zenoh` into a no-op
 /// for the binary).
 #[doc(hidden)]
 pub mod prometheus_check;
+pub mod sim_status;
 
 use pavlov::config::TickTimer;
 use pavlov::record::LinkStatus;

@@ -6,8 +6,8 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use pavlov::agent::LearningStage;
-use pavlov::config::Config;
 use pavlov::checkpoint::Checkpoint;
+use pavlov::config::Config;
 use pavlov_actors::storage::checkpoint_files::write_atomic;
 
 use crate::common::{TestDir, stall_config};

@@ -6,8 +6,8 @@
 
 use std::path::{Path, PathBuf};
 
-use pavlov::config::CheckpointConfig;
 use pavlov::checkpoint::Checkpoint;
+use pavlov::config::CheckpointConfig;
 
 use super::layout::create_run_dir;
 use super::saves::{SaveQuota, check_save_name, saved_dir};

@@ -12,8 +12,8 @@
 
 use std::path::{Path, PathBuf};
 
-use pavlov::config::Config;
 use pavlov::checkpoint::{Checkpoint, CheckpointError, ParamOverride, check_finite};
+use pavlov::config::Config;
 
 use super::layout::{RUNS_DIR, is_run_id, list};
 
