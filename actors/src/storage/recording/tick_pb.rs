@@ -468,7 +468,7 @@ pub(crate) mod tests {
                     elbow: (i % 3 == 0).then(|| ElbowAngles {
                         left: Some(91.25 + i as f64),
                         left_avg: (i % 2 == 0).then_some(0.1 + 0.2),
-                        right: None,
+                        right: (i % 2 == 1).then_some(170.5 - i as f64),
                         right_avg: Some(-0.0),
                         skeleton: [
                             SkeletonStatus::Tracked,
