@@ -48,18 +48,27 @@ function labelWidth(text) {
   return Math.ceil(measureCtx.measureText(text).width) + 8;
 }
 
-/** A marker label's hover text: what it is, when, what the kind means and its usual cause. */
+/**
+ * A marker label's hover text: its text and when, the markers it stands for (when several), and what each
+ * of their kinds means with its usual cause.
+ */
 function labelTitle(p) {
   const ts = p.items.map((m) => m.t);
-  const when = ts.length > 1 ? `${ts.length} times, ${ts[0].toFixed(2)}–${ts[ts.length - 1].toFixed(2)} s`
+  const when = ts.length > 1 ? `${ts.length} markers, ${ts[0].toFixed(2)}–${ts[ts.length - 1].toFixed(2)} s`
     : `at ${ts[0].toFixed(2)} s`;
-  return `${p.items[0].label} (${when})\n${markerKind(p.items[0].kind).explain}`;
+  const counts = new Map();
+  for (const m of p.items) counts.set(m.label, (counts.get(m.label) || 0) + 1);
+  const lines = [`${p.text} (${when})`];
+  if (counts.size > 1) lines.push([...counts].map(([label, n]) => (n > 1 ? `${label} ×${n}` : label)).join(', '));
+  const kinds = [...new Set(p.items.map((m) => markerKind(m.kind)))];
+  for (const k of kinds) lines.push(k.explain);
+  return lines.join('\n');
 }
 
 /**
  * A uPlot plugin drawing a dashed vertical line at each event marker inside the x range and, when `labels`,
  * their labels at the top as elements over the plot (with hover text saying what the kind means), laid out
- * by `layoutMarkerLabels`: runs of the same label merged (`×n`), up to three rows, none overlapping; those
+ * by `layoutMarkerLabels`: markers a few pixels apart share a label (`×n`, `+k`), up to three rows, none overlapping; those
  * left out are counted in the chart's `hiddenLabels` (and said in `moreEl`). Every marker drawn is kept on
  * the chart object (`drawnMarkers`), for the tests.
  */

@@ -263,11 +263,12 @@ export function markerColor(kind) {
 
 /**
  * Where the labels of the markers go so that none overlaps another: `items` are `{ x, label }` (x in
- * pixels within a plot `plotWidth` wide), `width(text)` a label's width in pixels. Markers with the same
- * label closer than `merge` pixels to the first of their run become one label `label ×n`; each label goes
- * right of its marker (left of it when it would leave the plot) in the first of `rows` rows where it keeps
- * `gap` pixels from the label before it; a label that fits in no row is left out. Returns the labels placed
- * (`{ left, row, width, text, items }`, `items` the markers they stand for) and how many markers have none.
+ * pixels within a plot `plotWidth` wide), `width(text)` a label's width in pixels. Markers closer than
+ * `merge` pixels to the first of their run share one label: `label ×n` when they all say the same, else the
+ * first one's `label +k` (k the others); each label goes right of its marker (left of it when it would leave
+ * the plot) in the first of `rows` rows where it keeps `gap` pixels from the label before it; a label that
+ * fits in no row is left out. Returns the labels placed (`{ left, row, width, text, items }`, `items` the
+ * markers they stand for) and how many markers have none.
  */
 export function layoutMarkerLabels(items, width, {
   rows = 3, gap = 4, plotWidth = Infinity, merge = 24,
@@ -276,14 +277,17 @@ export function layoutMarkerLabels(items, width, {
   const groups = [];
   for (const item of sorted) {
     const g = groups[groups.length - 1];
-    if (g && g.label === item.label && item.x - g.x <= merge) g.items.push(item);
-    else groups.push({ x: item.x, label: item.label, items: [item] });
+    if (g && item.x - g.x <= merge) g.items.push(item);
+    else groups.push({ x: item.x, items: [item] });
   }
   const ends = new Array(rows).fill(-Infinity);
   const placed = [];
   let hidden = 0;
   for (const g of groups) {
-    const text = g.items.length > 1 ? `${g.label} ×${g.items.length}` : g.label;
+    const first = g.items[0].label;
+    const same = g.items.every((m) => m.label === first);
+    const n = g.items.length;
+    const text = n === 1 ? first : (same ? `${first} ×${n}` : `${first} +${n - 1}`);
     const w = width(text);
     let left = g.x + 2;
     if (left + w > plotWidth) left = Math.max(0, g.x - 2 - w);
