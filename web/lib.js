@@ -271,7 +271,7 @@ export function markerColor(kind) {
  * markers they stand for) and how many markers have none.
  */
 export function layoutMarkerLabels(items, width, {
-  rows = 3, gap = 4, plotWidth = Infinity, merge = 24,
+  rows = 3, gap = 4, plotWidth = Infinity, merge = 12,
 } = {}) {
   const sorted = [...items].sort((a, b) => a.x - b.x);
   const groups = [];
