@@ -11,6 +11,15 @@
 //! - `PAVLOV_RUSTC`: `rustc --version` of the compiler building it;
 //! - `PAVLOV_TARGET` and `PAVLOV_PROFILE`: the target triple and the profile (`debug`/`release`).
 //!
+//! It also asks the linker to compress the binary's debug sections (zlib, Linux release builds only): the
+//! release profile keeps line tables so that backtraces name files and lines, and compressed they cost a
+//! quarter of the space (Rust's backtraces and `perf` read compressed sections).
+//!
+//! And it compiles the tick's schema, `proto/pavlov/tick.proto`, with `protox` (a protobuf compiler in Rust:
+//! no `protoc` is needed) into `OUT_DIR/pavlov.rs` (the prost structs, by `prost-build`) and
+//! `OUT_DIR/tick_descriptor_set.bin` (the serialised `FileDescriptorSet` a recording carries as its `ticks`
+//! schema, without source comments), for `actors/src/storage/recording/{tick_pb,schema}.rs`.
+//!
 //! So that the dirty flag stays true, the script runs again whenever git's HEAD, index or refs move, or a
 //! file the binary is compiled from changes (an edit to a test or a document alone is seen at the next
 //! such change; rebuilding the library for every edit of a test would slow every test run).
@@ -18,7 +27,14 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use prost::Message as _;
+
 fn main() {
+    if let Err(e) = tick_schema() {
+        // A build script reports by failing: the message names the .proto problem (file, line, column).
+        panic!("compiling proto/pavlov/tick.proto: {e}");
+    }
+
     let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
     let root = manifest
         .parent()
@@ -56,6 +72,16 @@ fn main() {
         "cargo:rustc-env=PAVLOV_PROFILE={}",
         std::env::var("PROFILE").unwrap_or_else(|_| "unknown".into())
     );
+    compress_debug_sections();
+}
+
+/// Linux release binaries: the linker compresses the debug sections (line tables) with zlib.
+fn compress_debug_sections() {
+    let linux = std::env::var("CARGO_CFG_TARGET_OS").is_ok_and(|os| os == "linux");
+    let release = std::env::var("PROFILE").is_ok_and(|p| p == "release");
+    if linux && release {
+        println!("cargo:rustc-link-arg-bins=-Wl,--compress-debug-sections=zlib");
+    }
 }
 
 /// The commit and dirty flag of the checkout at `root`, and the paths whose change reruns this script.
@@ -106,4 +132,17 @@ fn git_state(root: &Path) -> (String, String) {
         None => "unknown",
     };
     (commit, dirty.into())
+}
+
+/// Compiles `proto/pavlov/tick.proto` into the prost structs and the descriptor set (see the module doc).
+fn tick_schema() -> Result<(), Box<dyn std::error::Error>> {
+    let out = PathBuf::from(std::env::var_os("OUT_DIR").ok_or("OUT_DIR is not set")?);
+    println!("cargo:rerun-if-changed=proto");
+    let mut files = protox::compile(["pavlov/tick.proto"], ["proto"])?;
+    prost_build::Config::new().compile_fds(files.clone())?;
+    for file in &mut files.file {
+        file.source_code_info = None;
+    }
+    std::fs::write(out.join("tick_descriptor_set.bin"), files.encode_to_vec())?;
+    Ok(())
 }

@@ -4,6 +4,8 @@
 //! no threads. The runtime in `actors/` is a thin async shell that moves data between channels and calls
 //! into these modules once per 20 ms tick.
 //!
+//! - [`checkpoint`]: lifelong checkpoints, the learned state with the configuration it belongs to (above
+//!   both [`learn`] and [`config`], which it names).
 //! - [`agent`]: the per-tick learning and gating stages that the runtime, replay and experiments share.
 //! - [`analysis`]: what a run means: run counters, interaction timing, statistics.
 //! - [`config`]: the TOML configuration, validated with errors that name the key.
@@ -20,6 +22,7 @@
 
 pub mod agent;
 pub mod analysis;
+pub mod checkpoint;
 pub mod config;
 pub mod control;
 pub mod event;

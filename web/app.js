@@ -8,7 +8,7 @@ import {
   paramLimits, sampleFromTick, samplesFromHistory, toCsv, tokenFromHash,
 } from './lib.js';
 import { ElbowPanel } from './elbow.js';
-import { AlignedCharts, Charts } from './charts.js';
+import { AlignedCharts, Charts, renderMarkerLegend } from './charts.js';
 import { wireControls } from './controls.js';
 import { HordeView, LearningView } from './learning.js';
 import {
@@ -50,10 +50,7 @@ const state = {
   backoff: new Backoff(),
   timeline,
 };
-// The gesture experiment's elbow chart and skeleton status (elbow.js).
-state.elbow = new ElbowPanel({
-  card: $('elbow-card'), chart: $('chart-elbow'), status: $('now-skeleton'), banner: $('skeleton-banner'),
-});
+
 // The learning view (learning.js): value against realised return, δ, running error; the Horde's grid.
 state.learning = new LearningView({
   pick: $('learn-pick'), params: $('learn-params'), empty: $('learn-empty'), rmse: $('learn-rmse'), mae: $('learn-mae'),
@@ -66,6 +63,10 @@ state.horde = new HordeView({
 }, (cmd, args) => send(cmd, args));
 const charts = new Charts(timeline, renderView);
 const aligned = new AlignedCharts();
+// The gesture experiment's elbow card and skeleton status (elbow.js); its chart is one of `charts`.
+state.elbow = new ElbowPanel({
+  card: $('elbow-card'), status: $('now-skeleton'), banner: $('skeleton-banner'), showChart: () => charts.addElbow(),
+});
 state.view = charts.view;
 Object.defineProperty(state, 'charts', { get: () => charts.list });
 // Exposed for the end-to-end tests and for poking around in the console.
@@ -92,14 +93,38 @@ function setConn(s, text) {
   $('conn-state').textContent = text;
 }
 
+/** What a watcher's command buttons say (they are disabled: the server would refuse them). */
+const NEEDS_TOKEN = 'needs the operator\'s token';
+
+/**
+ * Whether this page may command: live, and either the operator (the token) or not yet told. The E-STOP,
+ * Re-arm, Release and every other command button are disabled otherwise, saying why, and the banners never
+ * tell a watcher to do what only the operator can.
+ */
+function renderAuthority() {
+  const { live } = state;
+  const watcher = live && !state.canCommand;
+  const estop = $('estop');
+  estop.disabled = !live || watcher;
+  $('estop-note').textContent = !live ? 'cannot send: not connected' : (watcher ? NEEDS_TOKEN : '');
+  estop.title = !live ? 'Not connected to the server: this button cannot reach the robot'
+    : (watcher ? `Watch-only: the E-STOP ${NEEDS_TOKEN} (open the page with #token=…)`
+      : 'Emergency stop (Esc): stops the wheels until released');
+  for (const b of document.querySelectorAll('.mode, #request, #release, #rearm, .key, .card button, #p-apply')) {
+    b.disabled = watcher;
+    if (watcher) b.title = `Watch-only: ${NEEDS_TOKEN}`;
+    else if (b.dataset.title !== undefined) b.title = b.dataset.title;
+  }
+  $('rearm').textContent = watcher ? `Re-arm (${NEEDS_TOKEN})` : 'Re-arm';
+  $('release').textContent = watcher ? `Release (${NEEDS_TOKEN})` : 'Release';
+  $('trip-who').textContent = watcher ? 'control resumes when the operator re-arms.' : 'control resumes only when you re-arm.';
+  $('estop-who').textContent = watcher ? ' until the operator releases it.' : '.';
+}
+
 /** Live (a `hello` came on an open socket) or not: everything that acts or shows live data says which. */
 function setLive(live, why = '') {
   state.live = live;
-  const estop = $('estop');
-  estop.disabled = !live;
-  $('estop-note').textContent = live ? '' : 'cannot send: not connected';
-  estop.title = live ? 'Emergency stop (Esc): stops the wheels until released'
-    : 'Not connected to the server: this button cannot reach the robot';
+  renderAuthority();
   const lost = !live && why !== 'connecting';
   document.body.classList.toggle('disconnected', lost);
   $('disconnect-banner').hidden = !lost;
@@ -227,6 +252,7 @@ function onHello(h) {
   labelRequest(kind);
   $('watch-banner').hidden = h.can_command;
   document.body.classList.toggle('watch-only', !h.can_command);
+  renderAuthority();
   const inForce = h.in_force || {};
   state.params = Object.fromEntries((inForce.params || []).map((p) => [p.prediction, p]));
   state.recording = inForce.recording ?? null;
@@ -245,6 +271,7 @@ function onHello(h) {
 function onHistory(msg) {
   const samples = samplesFromHistory(msg);
   timeline.merge(samples);
+  state.elbow.see(samples.find((x) => x.elbow));
   state.learning.history(samples, state.hello ? state.hello.signals.predictions : []);
   for (const e of Array.isArray(msg.events) ? msg.events : []) onEvent(e, true);
   charts.touch();
@@ -290,7 +317,9 @@ function onTick(t) {
   state.gaps.see(t.seq, state.stride);
   state.last = t;
   state.dirty = true;
-  if (timeline.push(sampleFromTick(t))) charts.touch();
+  const sample = sampleFromTick(t);
+  if (timeline.push(sample)) charts.touch();
+  state.elbow.see(sample);
   state.elbow.push(t);
   state.learning.tick(t);
   if (state.mode !== t.mode) {
@@ -361,7 +390,7 @@ function downloadCsv() {
 
 function frame() {
   charts.draw();
-  state.learning.render();
+  state.learning.render(charts.visible());
   state.horde.render();
   if (state.dirty) {
     state.dirty = false;
@@ -378,6 +407,31 @@ if (typeof window.uPlot !== 'function') {
     + 'Run `npm ci --prefix web` in the repository and restart the server.';
   for (const el of document.querySelectorAll('.chart')) el.classList.add('unavailable');
 }
+/** The first-run note: shown until dismissed once (remembered in this browser's localStorage). */
+const FIRST_RUN_KEY = 'pavlov.firstRunNoteDismissed';
+function firstRunNote() {
+  let dismissed = false;
+  try {
+    dismissed = window.localStorage.getItem(FIRST_RUN_KEY) === '1';
+  } catch (e) {
+    dismissed = false;
+  }
+  $('first-run').hidden = dismissed;
+  $('first-run-close').addEventListener('click', () => {
+    $('first-run').hidden = true;
+    try {
+      window.localStorage.setItem(FIRST_RUN_KEY, '1');
+    } catch (e) {
+      // Storage refused (a private window): the note goes for this visit only.
+    }
+  });
+}
+
+for (const b of document.querySelectorAll('.mode, #request, #release, #rearm, .key, .card button, #p-apply')) {
+  b.dataset.title = b.title;
+}
+renderMarkerLegend($('marker-legend'));
+firstRunNote();
 wireControls({
   state, send, log, charts, aligned, downloadCsv, showParamsError,
 });

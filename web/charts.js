@@ -1,49 +1,94 @@
 // The dashboard's strip charts (uPlot): built from the timeline (timeline.js), with a window of 10 s to
-// 10 min, pause (the charts freeze while data keeps coming in), drag-to-zoom on time (all charts together,
+// 10 min (the gesture experiment's elbow chart among them, once the ticks carry elbow angles), pause (the charts freeze while data keeps coming in), drag-to-zoom on time (all charts together,
 // double-click to go back), a shared hover readout in each chart's legend, dashed vertical markers with a
-// short label where an event took effect, and gaps where ticks are missing or the robot link was down.
+// short label where an event took effect (laid out so that none overlaps; their legend and hover text say
+// what each kind means), and gaps where ticks are missing or the robot link was down. Every time chart of
+// the page (the learning view's too) has the same y-axis width, so their plot areas share one left edge.
 
 import {
-  columns, markerColor, redrawIntervalMs, sensorsLive,
+  MARKER_KINDS, columns, layoutMarkerLabels, markerColor, markerKind, redrawIntervalMs, sensorsLive,
 } from './lib.js';
+import { COMMAND_DEG, ELBOW_SERIES } from './elbow.js';
 
 const CHART_HEIGHT = 175;
 const COLORS = ['#2563eb', '#d97706', '#059669', '#7c3aed', '#db2777', '#0891b2'];
+/** The lanes of the Events chart (legend and hover); the axis shows them shorter (`LANE_TICKS`). */
 const EVENT_LANES = ['over-current R', 'over-current L', 'e-stop', 'gate', 'stimulus'];
-const SYNC_KEY = 'pavlov';
+const LANE_TICKS = ['OC right', 'OC left', 'e-stop', 'gate', 'stimulus'];
+/** Every chart's cursor moves together (the strip charts, the elbow chart and the learning view's). */
+export const SYNC_KEY = 'pavlov';
+/**
+ * The width of every time chart's y axis, px (its numbers and its title): the same for all, so one instant
+ * is at the same x in every chart of the page, their plot areas starting at the same left edge.
+ */
+export const Y_AXIS_SIZE = 64;
+const AXIS_FONT = '11px system-ui, sans-serif';
+/** Rows of marker labels at the top of a chart. */
+const LABEL_ROWS = 3;
+const LABEL_ROW_PX = 15;
 
-function axis(label, extra = {}) {
+/** A uPlot axis in the page's style; `size` is `Y_AXIS_SIZE` unless `extra` says otherwise. */
+export function axis(label, extra = {}) {
   return {
-    label, labelSize: 16, size: 52, stroke: '#5b6474', font: '11px system-ui, sans-serif',
-    labelFont: '11px system-ui, sans-serif', grid: { stroke: '#eef1f5', width: 1 }, ticks: { stroke: '#d9dee7' }, ...extra,
+    label, labelSize: 16, size: Y_AXIS_SIZE, stroke: '#5b6474', font: AXIS_FONT,
+    labelFont: AXIS_FONT, grid: { stroke: '#eef1f5', width: 1 }, ticks: { stroke: '#d9dee7' }, ...extra,
   };
 }
 
+/** The x axis of every time chart: seconds of run time. */
+export const timeAxis = () => axis('', { size: 28, values: (u, v) => v.map((s) => `${s}s`) });
+
+let measureCtx = null;
+/** A label's width in CSS pixels, in the labels' font, with its padding. */
+function labelWidth(text) {
+  if (!measureCtx) {
+    measureCtx = document.createElement('canvas').getContext('2d');
+    measureCtx.font = AXIS_FONT;
+  }
+  return Math.ceil(measureCtx.measureText(text).width) + 8;
+}
+
 /**
- * A uPlot plugin drawing a dashed vertical line at each event marker inside the x range, with its label at
- * the top when `labels` (labels that would overlap go one row down, up to three rows). The labels drawn
- * last are kept on the chart object (`drawnMarkers`), for the tests.
+ * A marker label's hover text: its text and when, the markers it stands for (when several), and what each
+ * of their kinds means with its usual cause.
  */
-function markersPlugin(chart, markers, labels) {
+function labelTitle(p) {
+  const ts = p.items.map((m) => m.t);
+  const when = ts.length > 1 ? `${ts.length} markers, ${ts[0].toFixed(2)}–${ts[ts.length - 1].toFixed(2)} s`
+    : `at ${ts[0].toFixed(2)} s`;
+  const counts = new Map();
+  for (const m of p.items) counts.set(m.label, (counts.get(m.label) || 0) + 1);
+  const lines = [`${p.text} (${when})`];
+  if (counts.size > 1) lines.push([...counts].map(([label, n]) => (n > 1 ? `${label} ×${n}` : label)).join(', '));
+  const kinds = [...new Set(p.items.map((m) => markerKind(m.kind)))];
+  for (const k of kinds) lines.push(k.explain);
+  return lines.join('\n');
+}
+
+/**
+ * A uPlot plugin drawing a dashed vertical line at each event marker inside the x range and, when `labels`,
+ * their labels at the top as elements over the plot (with hover text saying what the kind means), laid out
+ * by `layoutMarkerLabels`: markers a few pixels apart share a label (`×n`, `+k`), up to three rows, none overlapping; those
+ * left out are counted in the chart's `hiddenLabels` (and said in `moreEl`). Every marker drawn is kept on
+ * the chart object (`drawnMarkers`), for the tests.
+ */
+function markersPlugin(chart, markers, labels, moreEl) {
+  let layer = null;
   const draw = (u) => {
     const { left, top, width, height } = u.bbox;
     const { min, max } = u.scales.x;
     const dpr = window.devicePixelRatio || 1;
     const ctx = u.ctx;
-    const rows = [-Infinity, -Infinity, -Infinity];
     const drawn = [];
+    const items = [];
     ctx.save();
     ctx.beginPath();
     ctx.rect(left, top, width, height);
     ctx.clip();
-    ctx.font = `${Math.round(11 * dpr)}px system-ui, sans-serif`;
-    ctx.textBaseline = 'top';
-    ctx.textAlign = 'left';
     for (const m of markers()) {
       if (min == null || m.t < min || m.t > max) continue;
       const x = Math.round(u.valToPos(m.t, 'x', true)) + 0.5;
-      const color = markerColor(m.kind);
-      ctx.strokeStyle = color;
+      ctx.strokeStyle = markerColor(m.kind);
       ctx.lineWidth = Math.max(1, dpr);
       ctx.setLineDash([4 * dpr, 3 * dpr]);
       ctx.beginPath();
@@ -51,21 +96,53 @@ function markersPlugin(chart, markers, labels) {
       ctx.lineTo(x, top + height);
       ctx.stroke();
       drawn.push(m.label);
-      if (!labels) continue;
-      const w = ctx.measureText(m.label).width + 6 * dpr;
-      const row = rows.findIndex((right) => right < x);
-      if (row < 0) continue;
-      const y = top + 2 * dpr + row * 14 * dpr;
-      ctx.fillStyle = 'rgba(255,255,255,0.85)';
-      ctx.fillRect(x + 2 * dpr, y, w, 13 * dpr);
-      ctx.fillStyle = color;
-      ctx.fillText(m.label, x + 5 * dpr, y + 1 * dpr);
-      rows[row] = x + w + 4 * dpr;
+      items.push({
+        x: u.valToPos(m.t, 'x'), label: m.label, kind: m.kind, t: m.t,
+      });
     }
     ctx.restore();
     chart.drawnMarkers = drawn;
+    if (!labels) return;
+    if (!layer) {
+      layer = document.createElement('div');
+      layer.className = 'marker-labels';
+      u.over.append(layer);
+    }
+    const { placed, hidden } = layoutMarkerLabels(items, labelWidth, { rows: LABEL_ROWS, plotWidth: u.over.clientWidth });
+    while (layer.children.length > placed.length) layer.lastChild.remove();
+    while (layer.children.length < placed.length) layer.append(document.createElement('span'));
+    placed.forEach((p, i) => {
+      const el = layer.children[i];
+      el.className = 'marker-label';
+      el.textContent = p.text;
+      el.title = labelTitle(p);
+      el.dataset.kind = markerKind(p.items[0].kind).key;
+      el.style.left = `${p.left}px`;
+      el.style.top = `${2 + p.row * LABEL_ROW_PX}px`;
+      el.style.width = `${p.width}px`;
+      el.style.color = markerColor(p.items[0].kind);
+    });
+    chart.hiddenLabels = hidden;
+    if (moreEl) {
+      moreEl.hidden = hidden === 0;
+      moreEl.textContent = `${hidden} marker label${hidden === 1 ? '' : 's'} left out here: zoom in (drag) to read them`;
+    }
   };
   return { hooks: { draw: [draw] } };
+}
+
+/** Fills `el` with the legend of the marker kinds, each with its meaning and usual cause on hover. */
+export function renderMarkerLegend(el) {
+  el.replaceChildren(...MARKER_KINDS.map((k) => {
+    const item = document.createElement('span');
+    item.className = 'marker-key';
+    item.dataset.kind = k.key;
+    item.title = k.explain;
+    const swatch = document.createElement('i');
+    swatch.style.borderColor = k.color;
+    item.append(swatch, k.name);
+    return item;
+  }));
 }
 
 const fmtReadout = (digits) => (u, v) => (v == null ? '—' : Number(v).toFixed(digits));
@@ -110,7 +187,7 @@ export class Charts {
     const flag = (lane, on) => lane + (on ? 0.8 : 0);
     const specs = [
       {
-        id: 'chart-pred', labels: true, series: predSeries, values: predValues,
+        id: 'chart-pred', labels: true, more: 'markers-more', series: predSeries, values: predValues,
         y: { range: (u, lo, hi) => [Math.min(0, lo ?? 0), Math.max(1, hi ?? 1)] },
       },
       {
@@ -118,7 +195,7 @@ export class Charts {
         series: [lane(0, '#ea580c'), lane(1, '#f59e0b'), lane(2, '#111827'), lane(3, '#2563eb'), lane(4, '#dc2626')],
         values: [live((s) => flag(0, s.ocR)), live((s) => flag(1, s.ocL)), (s) => flag(2, s.estop), (s) => flag(3, s.gate), (s) => flag(4, s.stimulus)],
         y: { range: [-0.2, EVENT_LANES.length] },
-        axis: { size: 96, splits: () => EVENT_LANES.map((_, i) => i + 0.4), values: () => EVENT_LANES, grid: { show: false } },
+        axis: { splits: () => LANE_TICKS.map((_, i) => i + 0.4), values: () => LANE_TICKS, grid: { show: false } },
       },
       {
         id: 'chart-current',
@@ -144,9 +221,34 @@ export class Charts {
     this.dirty = true;
   }
 
+  /** The gesture experiment's elbow chart: both angles, their moving averages μ and the 90° line. */
+  elbowSpec() {
+    const angle = (k) => (s) => (s.elbow ? s.elbow[k] : null);
+    return {
+      id: 'chart-elbow',
+      series: ELBOW_SERIES.map((e) => ({ ...e, value: fmtReadout(1) })),
+      values: [angle(0), angle(1), angle(2), angle(3), (s) => (s.elbow ? COMMAND_DEG : null)],
+      y: { range: [0, 180] },
+      axis: { label: '°', splits: () => [0, 45, 90, 135, 180] },
+    };
+  }
+
+  /** Adds the elbow chart (once a tick or the history carries elbow angles); returns it. */
+  addElbow() {
+    let chart = this.list.find((c) => c.el.id === 'chart-elbow');
+    if (!chart && typeof window.uPlot === 'function' && this.list.length) {
+      chart = this.make(this.elbowSpec());
+      this.list.push(chart);
+      this.draw(true);
+    }
+    return chart || null;
+  }
+
   make(spec) {
     const el = document.getElementById(spec.id);
-    const chart = { el, values: spec.values, drawnMarkers: [] };
+    const chart = {
+      el, values: spec.values, drawnMarkers: [], hiddenLabels: 0,
+    };
     const markers = () => this.timeline.events.filter((e) => e.label);
     const opts = {
       width: Math.max(300, Math.floor(el.getBoundingClientRect().width)),
@@ -158,9 +260,9 @@ export class Charts {
       },
       legend: { live: true },
       scales: { x: { time: false }, y: spec.y },
-      axes: [axis('', { size: 28, values: (u, v) => v.map((s) => `${s}s`) }), axis(spec.axis?.label || '', spec.axis || {})],
+      axes: [timeAxis(), axis(spec.axis?.label || '', spec.axis || {})],
       series: [{ label: 't', value: (u, v) => (v == null ? '—' : `${v.toFixed(2)} s`) }, ...spec.series],
-      plugins: [markersPlugin(chart, markers, !!spec.labels)],
+      plugins: [markersPlugin(chart, markers, !!spec.labels, spec.more ? document.getElementById(spec.more) : null)],
       hooks: { setSelect: [(u) => this.zoomTo(u)] },
     };
     chart.u = new window.uPlot(opts, [[], ...spec.values.map(() => [])], el);

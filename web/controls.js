@@ -65,7 +65,12 @@ export function wireControls(ctx) {
   }
   document.addEventListener('keydown', (e) => {
     if (e.target instanceof HTMLInputElement) return;
-    if (e.key === 'Escape') { send('estop'); e.preventDefault(); return; }
+    if (e.key === 'Escape') {
+      e.preventDefault();
+      if (state.live && !state.canCommand) log('E-STOP: needs the operator\'s token (this page only watches)', 'warn');
+      else send('estop');
+      return;
+    }
     const dir = KEYS[e.key];
     if (dir) { e.preventDefault(); if (!e.repeat) hold(dir, true); }
   });
@@ -115,7 +120,6 @@ export function wireControls(ctx) {
       charts.resize();
       charts.draw(true);
       ctx.aligned.resize();
-      if (ctx.state.elbow) ctx.state.elbow.resize();
     }, 100);
   });
 }

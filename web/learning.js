@@ -1,6 +1,8 @@
 // The learning view (what RLPark's Zephyr showed): for a chosen control prediction, its value against the
 // realised return it was predicting (the return drawn at the value's tick, so it arrives a horizon late),
-// its TD error δ and running error, and the parameters in force; and the Horde: a grid of every prediction's
+// its TD error δ and running error, and the parameters in force, over the same time span as the strip
+// charts (the window selector, pause and zoom; the values from the server's history, δ and the returns from
+// its recent `learning` messages); and the Horde: a grid of every prediction's
 // current value (a canvas, one cell a prediction), hover for name and value, click to chart it over time.
 // The figures come from the server (`learning`, `horde_names`, `horde_values`; see PROTOCOL.md); the pure
 // parts are in learnlib.js.
@@ -8,20 +10,14 @@
 import {
   HordeSeries, LearningStore, OwnRanges, cellAt, colourOf, colourRange, decodeHordeValues, gridLayout, hordeName, sig,
 } from './learnlib.js';
-import { fmt, fmtParam } from './lib.js';
+import { WINDOWS, fmt, fmtParam, redrawIntervalMs } from './lib.js';
+import { SYNC_KEY, axis, timeAxis } from './charts.js';
 
-/** Seconds of learning figures kept and drawn. */
-const LEARN_SECONDS = 30;
+/** Seconds of learning figures kept: the page's widest window (the charts show the window selected). */
+const LEARN_SECONDS = Math.max(...WINDOWS.map((w) => w.seconds));
 /** The Horde's values a second the page asks for. */
 export const HORDE_HZ = 5;
 const COLORS = ['#2563eb', '#d97706', '#059669', '#7c3aed', '#db2777', '#0891b2'];
-
-function axis(label) {
-  return {
-    label, labelSize: 16, size: 52, stroke: '#5b6474', font: '11px system-ui, sans-serif',
-    labelFont: '11px system-ui, sans-serif', grid: { stroke: '#eef1f5', width: 1 }, ticks: { stroke: '#d9dee7' },
-  };
-}
 
 function readout(digits) {
   return (u, v) => (v == null ? '—' : fmt(v, digits));
@@ -31,16 +27,19 @@ function chartWidth(el) {
   return Math.max(300, Math.floor(el.getBoundingClientRect().width));
 }
 
-/** A small uPlot chart over time in seconds. */
+/**
+ * A small uPlot chart over run time in seconds, with the strip charts' axes (the same y-axis width, so
+ * the plot areas line up) and their shared cursor.
+ */
 function timeChart(el, yLabel, series, height = 170) {
   if (typeof window.uPlot !== 'function') return null;
   return new window.uPlot({
     width: chartWidth(el),
     height,
     scales: { x: { time: false } },
-    axes: [axis('run time (s)'), axis(yLabel)],
+    axes: [timeAxis(), axis(yLabel)],
     legend: { live: true },
-    cursor: { drag: { x: false, y: false } },
+    cursor: { drag: { x: false, y: false }, sync: { key: SYNC_KEY, setSeries: false } },
     series: [{ label: 't', value: readout(2) }, ...series],
   }, [[], ...series.map(() => [])], el);
 }
@@ -55,6 +54,8 @@ export class LearningView {
     this.params = {};
     this.charts = null;
     this.dirty = false;
+    this.span = null;
+    this.lastDraw = 0;
     els.pick.addEventListener('change', () => {
       this.selected = els.pick.value;
       this.dirty = true;
@@ -123,8 +124,18 @@ export class LearningView {
     this.dirty = true;
   }
 
-  render() {
-    if (!this.dirty || !this.selected) return;
+  /**
+   * Redraws for the time span the strip charts show (`span`: `{ min, max }` in seconds, from the window
+   * selector, the pause or the zoom), as often as that window warrants.
+   */
+  render(span) {
+    if (!this.selected) return;
+    const moved = span && (!this.span || span.min !== this.span.min || span.max !== this.span.max);
+    if (!this.dirty && !moved) return;
+    const now = performance.now();
+    if (span && now - this.lastDraw < redrawIntervalMs(span.max - span.min)) return;
+    this.lastDraw = now;
+    this.span = span ? { ...span } : null;
     this.dirty = false;
     const name = this.selected;
     const info = this.store.info(name);
@@ -144,12 +155,21 @@ export class LearningView {
     this.els.pairs.textContent = e.pairs != null ? String(e.pairs) : '—';
     this.els.horizon.textContent = info
       ? `${info.horizon} ticks (${fmt(info.horizon * this.periodS, 2)} s; truncation ≤ ${fmt(info.tailBound, 3)})` : '—';
-    const s = this.store.series(name, this.periodS);
+    const s = this.store.series(name, this.periodS, span ? span.min : -Infinity, span ? span.max : Infinity);
     let lastTd = null;
     for (let i = s.td.length - 1; i >= 0 && lastTd === null; i -= 1) lastTd = s.td[i];
     this.els.td.textContent = lastTd === null ? '—' : fmt(lastTd, 4);
-    if (this.charts && this.charts.ret) this.charts.ret.setData([s.t, s.value, s.ret]);
-    if (this.charts && this.charts.td) this.charts.td.setData([s.t, s.td, s.rmse]);
+    const show = (u, data) => {
+      if (!u) return;
+      u.batch(() => {
+        u.setData(data);
+        if (span) u.setScale('x', { min: span.min, max: span.max });
+      });
+    };
+    if (this.charts) {
+      show(this.charts.ret, [s.t, s.value, s.ret]);
+      show(this.charts.td, [s.t, s.td, s.rmse]);
+    }
   }
 }
 

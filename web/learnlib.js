@@ -97,9 +97,10 @@ export class LearningStore {
   /**
    * Columns for a chart of `name` over its kept ticks, at `periodS` seconds a tick: `t`, `value`, `ret`,
    * `td`, `rmse` (the running RMSE at each message's tick, null elsewhere), oldest first, one per tick from
-   * the oldest kept to the newest (null where a tick has no figure).
+   * the oldest kept to the newest (null where a tick has no figure); only the ticks from `fromS` to `toS`
+   * seconds when given (the time span the page's charts show).
    */
-  series(name, periodS) {
+  series(name, periodS, fromS = -Infinity, toS = Infinity) {
     const e = this.byName.get(name);
     const out = {
       t: [], value: [], ret: [], td: [], rmse: [],
@@ -107,8 +108,10 @@ export class LearningStore {
     if (!e || e.newest < 0) return out;
     let first = e.newest;
     for (const seq of e.rows.keys()) if (seq < first) first = seq;
+    first = Math.max(first, Math.ceil(fromS / periodS - 1e-9));
+    const last = Math.min(e.newest, Math.floor(toS / periodS + 1e-9));
     const rmse = new Map(e.errors.map((x) => [x.seq, x.rmse]));
-    for (let seq = first; seq <= e.newest; seq += 1) {
+    for (let seq = first; seq <= last; seq += 1) {
       const r = e.rows.get(seq);
       out.t.push(seq * periodS);
       out.value.push(r ? r.value : null);

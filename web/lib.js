@@ -204,3 +204,100 @@ export function applyStorageEvent(storage, event) {
     default: return storage;
   }
 }
+
+// ---------------------------------------------------------------- event markers: legend and labels
+
+/**
+ * The kinds of event marker the charts draw, as the legend shows them: a colour, the event kinds of the
+ * protocol it covers (`event.kind`), the labels it puts on the charts, and what it means with its usual
+ * cause (the legend's and every label's hover text).
+ */
+export const MARKER_KINDS = [
+  {
+    key: 'stall', name: 'pipeline stall', color: '#db2777', kinds: ['pipeline_stall'],
+    explain: 'pipeline stall: actuation stopped the wheels because no decision arrived within the configured '
+      + 'ticks ([safety] max_action_age_ticks). Usually host load (other programs, a slow disk or a busy CPU '
+      + 'kept the server from running on time), not the robot.',
+  },
+  {
+    key: 'link', name: 'link→…, re-arm', color: '#d97706', kinds: ['link', 'rearm'],
+    explain: 'link→stale: no sensor frame for longer than the stale limit (150 ms); usually host load delaying '
+      + 'the server, not the robot, and it comes back up by itself. link→reconnecting/down: the serial port '
+      + 'went away (cable, power). link→tripped: the robot dropped to Passive by itself (wheel drop, cliff) '
+      + 'until the operator re-arms. link→up: frames flow again. re-arm: the operator re-armed after a trip.',
+  },
+  {
+    key: 'estop', name: 'e-stop', color: '#dc2626', kinds: ['e_stop'],
+    explain: 'e-stop / e-stop released: the operator latched or released the emergency stop; the wheels stay '
+      + 'stopped while it is latched.',
+  },
+  {
+    key: 'control', name: 'mode, request', color: '#2563eb', kinds: ['mode_set', 'human_request'],
+    explain: 'mode→…: the operator switched the control mode (reactive, Pavlovian, manual). request: the '
+      + 'stimulus was forced on for a moment (the Request button or a client\'s human_request).',
+  },
+  {
+    key: 'learning', name: 'α λ θ, weights', color: '#7c3aed', kinds: ['params_set', 'weights_reset', 'weights_saved'],
+    explain: 'α=… λ=… θ=…: the operator changed a prediction\'s learning parameters (the label shows what '
+      + 'changed). weights reset / saved: every weight went back to its initial value, or was written to a file.',
+  },
+  {
+    key: 'storage', name: 'recording, checkpoint', color: '#059669',
+    kinds: ['recording_started', 'recording_stopped', 'checkpoint_failed'],
+    explain: 'recording ● / ■: a recording started or stopped ("failed": writing it failed, e.g. a full disk). '
+      + 'checkpoint failed: a checkpoint or a save could not be written; the previous file is unchanged.',
+  },
+];
+
+const OTHER_MARKER = { key: 'other', name: 'other', color: '#6b7280', kinds: [], explain: 'an event of a kind this page does not know' };
+
+/** The legend entry of an event kind (`other` for a kind this page does not know). */
+export function markerKind(kind) {
+  return MARKER_KINDS.find((k) => k.kinds.includes(kind)) || OTHER_MARKER;
+}
+
+/** The marker's colour by event kind. */
+export function markerColor(kind) {
+  return markerKind(kind).color;
+}
+
+/**
+ * Where the labels of the markers go so that none overlaps another: `items` are `{ x, label }` (x in
+ * pixels within a plot `plotWidth` wide), `width(text)` a label's width in pixels. Markers closer than
+ * `merge` pixels to the first of their run share one label: `label ×n` when they all say the same, else the
+ * first one's `label +k` (k the others); each label goes right of its marker (left of it when it would leave
+ * the plot) in the first of `rows` rows where it keeps `gap` pixels from the label before it; a label that
+ * fits in no row is left out. Returns the labels placed (`{ left, row, width, text, items }`, `items` the
+ * markers they stand for) and how many markers have none.
+ */
+export function layoutMarkerLabels(items, width, {
+  rows = 3, gap = 4, plotWidth = Infinity, merge = 12,
+} = {}) {
+  const sorted = [...items].sort((a, b) => a.x - b.x);
+  const groups = [];
+  for (const item of sorted) {
+    const g = groups[groups.length - 1];
+    if (g && item.x - g.x <= merge) g.items.push(item);
+    else groups.push({ x: item.x, items: [item] });
+  }
+  const ends = new Array(rows).fill(-Infinity);
+  const placed = [];
+  let hidden = 0;
+  for (const g of groups) {
+    const first = g.items[0].label;
+    const same = g.items.every((m) => m.label === first);
+    const n = g.items.length;
+    const text = n === 1 ? first : (same ? `${first} ×${n}` : `${first} +${n - 1}`);
+    const w = width(text);
+    let left = g.x + 2;
+    if (left + w > plotWidth) left = Math.max(0, g.x - 2 - w);
+    const row = ends.findIndex((end) => left >= end + gap);
+    if (row < 0) {
+      hidden += g.items.length;
+      continue;
+    }
+    ends[row] = left + w;
+    placed.push({ left, row, width: w, text, items: g.items });
+  }
+  return { placed, hidden };
+}

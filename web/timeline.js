@@ -13,6 +13,16 @@ export const WINDOWS = [
 
 const num = (v) => (typeof v === 'number' && Number.isFinite(v) ? v : null);
 
+/**
+ * A tick's elbow angles as `[left, left μ, right, right μ]` (degrees, null when invalid), or null when the
+ * tick carried none (every experiment but the gesture one).
+ */
+export function elbowAngles(elbow) {
+  if (!elbow || typeof elbow !== 'object') return null;
+  if (Array.isArray(elbow)) return [0, 1, 2, 3].map((k) => num(elbow[k]));
+  return [num(elbow.left), num(elbow.left_avg), num(elbow.right), num(elbow.right_avg)];
+}
+
 /** A sample: what the charts and the CSV use of one tick. */
 export function sampleFromTick(t) {
   const s = t.sensors || {};
@@ -34,6 +44,7 @@ export function sampleFromTick(t) {
     defR: num(t.default && t.default.right),
     link: link.state || (link.up ? 'up' : 'down'),
     preds: (t.predictions || []).map((p) => [num(p.value), num(p.threshold)]),
+    elbow: elbowAngles(t.elbow),
   };
 }
 
@@ -62,6 +73,7 @@ export function samplesFromHistory(msg) {
       defR: num(get('default_right')),
       link: get('link') || 'down',
       preds: preds.map((p) => (Array.isArray(p) ? [num(p[0]), num(p[1])] : [null, null])),
+      elbow: elbowAngles(get('elbow')),
     };
   }).filter((s) => Number.isInteger(s.seq) && typeof s.t === 'number');
 }
@@ -241,16 +253,6 @@ export function markerLabel(event, before = null) {
     case 'teleop': return null;
     default: return String(event.kind || 'event');
   }
-}
-
-/** The marker's colour by kind. */
-export function markerColor(kind) {
-  if (kind === 'params_set' || kind === 'weights_reset') return '#7c3aed';
-  if (kind === 'mode_set') return '#2563eb';
-  if (kind === 'e_stop' || kind === 'pipeline_stall' || kind === 'checkpoint_failed') return '#dc2626';
-  if (kind === 'link' || kind === 'rearm') return '#d97706';
-  if (kind === 'recording_started' || kind === 'recording_stopped') return '#059669';
-  return '#6b7280';
 }
 
 /**

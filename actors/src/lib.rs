@@ -6,7 +6,6 @@
 //! - [`server`]: starts a server run (link, pipeline, recorder, skeleton) and stops it in a safe order;
 //! - [`bus`]: the event log, the tick feed and the recorder's queue, beneath every actor that uses them;
 //! - [`command`]: the command vocabulary;
-//! - `counter_set`: the `counter_set!` macro that declares a set of counters once (imports nothing);
 //! - [`pipeline`]: the tick graph (ticker, sensor and skeleton ingest, learning, gating, actuation, feed);
 //! - [`horde`]: `[horde]`'s predictions, learned on a thread of their own, off the control path;
 //! - [`link`]: the serial link, its writer and its supervision;
@@ -21,7 +20,6 @@
 pub mod bench;
 pub mod bus;
 pub mod command;
-pub(crate) mod counter_set;
 pub mod dashboard;
 pub mod experiment;
 #[cfg(feature = "zenoh")]

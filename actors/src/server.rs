@@ -13,8 +13,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use pavlov::checkpoint::Checkpoint;
 use pavlov::config::Config;
-use pavlov::learn::checkpoint::Checkpoint;
 use pavlov::oi::handshake;
 use pavlov::oi::parser::StreamParser;
 use pavlov::sim::faults::FaultInjector;

@@ -21,7 +21,6 @@
 //! \[tiles3\] (`docs/SOURCES.md`).
 
 pub mod bounds;
-pub mod checkpoint;
 pub mod dense;
 pub mod error;
 pub mod group;

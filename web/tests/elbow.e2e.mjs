@@ -39,11 +39,12 @@ try {
   await page.waitForFunction(() => document.getElementById('now-skeleton').textContent === 'tracked', null, { timeout: 10000 });
   await page.waitForFunction(() => document.getElementById('skeleton-banner').hidden, null, { timeout: 5000 });
   await page.waitForFunction(() => {
-    const d = window.pavlov.elbow.win.data();
+    const d = window.pavlov.elbow.data();
+    if (!d) return false;
     const seen = (k) => d[k].filter((v) => v !== null).length;
     return seen(1) > 20 && seen(2) > 20 && seen(3) > 20 && seen(4) > 20;
   }, null, { timeout: 10000 });
-  summary.elbow_points = await page.evaluate(() => window.pavlov.elbow.win.data().slice(1).map((c) => c.filter((v) => v !== null).length));
+  summary.elbow_points = await page.evaluate(() => window.pavlov.elbow.data().slice(1).map((c) => c.filter((v) => v !== null).length));
 
   // Commands: the page's debounced count rises, and never exceeds the raw rising edges of the stimulus.
   const count = async () => Number((await page.locator('#i-commands').textContent()).split(' ')[0].replace(/,/g, '')) || 0;

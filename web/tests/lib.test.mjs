@@ -5,7 +5,7 @@ import { test } from 'node:test';
 import {
   Backoff, GapCounter, SUBPROTOCOL, Timeline, WINDOWS, alignedData, applyParams, applyStorageEvent, columns, connectionTarget, fmt, fmtDuration,
   fmtOnset, fmtParam, gateText, markerLabel, paramLimits, parseParam, redrawIntervalMs, sampleFromTick, samplesFromHistory, sensorsLive,
-  recordingView, teleopWheels, toCsv, tokenFromHash,
+  recordingView, teleopWheels, toCsv, tokenFromHash, MARKER_KINDS, elbowAngles, layoutMarkerLabels, markerColor, markerKind,
 } from '../lib.js';
 
 test('the token comes from the URL fragment', () => {
@@ -263,4 +263,47 @@ test('a storage failure shows until what failed works again', () => {
   assert.equal(markerLabel({ kind: 'recording_stopped', reason: full }), 'recording ■ failed');
   assert.equal(markerLabel({ kind: 'recording_stopped' }), 'recording ■');
   assert.equal(markerLabel({ kind: 'checkpoint_failed', reason: full }), 'checkpoint failed');
+});
+
+test('marker labels never overlap: neighbours share one, the rest fill three rows, what fits nowhere is counted', () => {
+  const width = (text) => text.length * 6;
+  const boxes = (placed) => placed.map((p) => ({ left: p.left, right: p.left + p.width, row: p.row }));
+  const apart = (placed, gap) => boxes(placed).every((a, i, all) => all.every((b, j) => i === j || a.row !== b.row
+    || a.right + gap <= b.left || b.right + gap <= a.left));
+  // A burst: thirty markers within a few pixels share one label.
+  const burst = Array.from({ length: 30 }, (_, i) => ({ x: 100 + i * 0.1, label: ['mode→reactive', 'request', 'α=0.01'][i % 3] }));
+  const one = layoutMarkerLabels(burst, width, { plotWidth: 900 });
+  assert.deepEqual(one.placed.map((p) => [p.text, p.items.length]), [['mode→reactive +29', 30]]);
+  assert.equal(one.hidden, 0);
+  const same = layoutMarkerLabels([{ x: 10, label: 'pipeline stall' }, { x: 20, label: 'pipeline stall' }], width);
+  assert.deepEqual(same.placed.map((p) => p.text), ['pipeline stall ×2']);
+  // Many markers spread over a narrow plot: none overlaps, three rows at most, the others are counted.
+  const spread = Array.from({ length: 200 }, (_, i) => ({ x: i * 30, label: `link→stale ${i}` }));
+  const many = layoutMarkerLabels(spread, width, { plotWidth: 6000 });
+  assert.ok(apart(many.placed, 4));
+  assert.ok(many.placed.every((p) => p.row >= 0 && p.row < 3 && p.left >= 0 && p.left + p.width <= 6000));
+  assert.equal(many.placed.reduce((n, p) => n + p.items.length, 0) + many.hidden, 200);
+  assert.ok(many.hidden > 0 && many.placed.length > 50);
+  // A label that would leave the plot goes left of its marker.
+  const edge = layoutMarkerLabels([{ x: 295, label: 'e-stop' }], width, { plotWidth: 300 });
+  assert.equal(edge.placed[0].left, 295 - 2 - 36);
+});
+
+test('every marker kind has a colour and an explanation; stalls and stale links name host load', () => {
+  assert.equal(markerKind('pipeline_stall').key, 'stall');
+  assert.equal(markerKind('link').key, 'link');
+  assert.equal(markerKind('something_new').key, 'other');
+  assert.match(markerKind('pipeline_stall').explain, /host load/);
+  assert.match(markerKind('link').explain, /link→stale: .*host load/);
+  assert.equal(markerColor('e_stop'), '#dc2626');
+  for (const k of MARKER_KINDS) assert.ok(k.explain.length > 40 && /^#[0-9a-f]{6}$/.test(k.color), k.key);
+});
+
+test('samples carry the elbow angles of a tick or a history row, null without them', () => {
+  const tick = { seq: 1, t: 0.02, elbow: { left: 72.5, left_avg: 101, right: null, right_avg: 160.2, skeleton: 'tracked' } };
+  assert.deepEqual(sampleFromTick(tick).elbow, [72.5, 101, null, 160.2]);
+  assert.equal(sampleFromTick({ seq: 1, t: 0.02, elbow: null }).elbow, null);
+  assert.deepEqual(elbowAngles([80, null, Number.NaN, 120]), [80, null, null, 120]);
+  const [row] = samplesFromHistory({ fields: ['seq', 't', 'elbow'], rows: [[4, 0.08, [85.5, 120, null, 170.25]]] });
+  assert.deepEqual(row.elbow, [85.5, 120, null, 170.25]);
 });

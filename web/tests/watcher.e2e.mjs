@@ -5,8 +5,8 @@
 // The server runs with a token; the page is opened without one, so its websocket is watch-only and its
 // `hello` carries only the watcher's view of the configuration (web/PROTOCOL.md, "What a watcher sees").
 // The page must still say which robot and tick period it shows, draw every chart from live ticks, show
-// the watch-only banner, and report the server's refusal when the E-STOP button is clicked (the tick
-// stream shows nothing latched). Saves a screenshot, prints a JSON summary, exits non-zero on any failure.
+// the watch-only banner, and a disabled E-STOP that says it needs the operator's token; an e-stop sent anyway
+// is refused by the server (the tick stream shows nothing latched). Saves a screenshot, prints a JSON summary, exits non-zero on any failure.
 
 import { harness, launch, openDashboard } from './browser.mjs';
 
@@ -36,9 +36,14 @@ try {
   const conn = await page.locator('#conn').textContent();
   if (!conn.includes('watch-only')) fail(`connection shown as "${conn}"`);
 
-  // A watcher's click on E-STOP reaches the server and is refused; nothing is latched.
+  // A watcher's E-STOP is disabled and says why; an e-stop sent anyway (by the page's own socket) is refused
+  // by the server, and nothing is latched.
+  const estop = await page.evaluate(() => ({
+    disabled: document.getElementById('estop').disabled, text: document.getElementById('estop').textContent,
+  }));
+  if (!estop.disabled || !estop.text.includes("needs the operator's token")) fail(`a watcher's E-STOP: ${JSON.stringify(estop)}`);
   const from = ticks.length;
-  await page.click('#estop');
+  await page.evaluate(() => window.pavlov.ws.send(JSON.stringify({ cmd: 'estop', id: 9999 })));
   await until('the refusal of the e-stop', () => acks.some((a) => a.type === 'error' && a.code === 'unauthorized'), 5000);
   await page.waitForTimeout(300);
   if (ticks.slice(from).some((t) => t.estop)) fail('a watcher latched the e-stop');

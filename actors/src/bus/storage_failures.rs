@@ -3,7 +3,7 @@
 
 use std::sync::atomic::Ordering;
 
-use crate::counter_set::counter_set;
+use super::counter_set::counter_set;
 
 counter_set! {
     /// A copy of [`StorageFailures`] at one moment.

@@ -2,7 +2,7 @@
 //! the events among them and the state in force (mode, learning parameters, the recording being written),
 //! so that a page opened mid-run starts with what came before rather than an empty chart.
 //!
-//! The hub pushes one compact [`TickRow`] per tick (about 40 bytes, plus 16 per prediction: a tenth of the
+//! The hub pushes one compact [`TickRow`] per tick (about 56 bytes, plus 16 per prediction: a tenth of the
 //! tick's JSON); rows fill chunks of [`CHUNK_TICKS`] that are sealed behind an `Arc`, so a new client's
 //! snapshot ([`History::snapshot`]) copies at most one open chunk under the lock and shares the rest. The
 //! client's own writer then turns the snapshot into `history` messages ([`super::history_messages`]), at
@@ -34,8 +34,12 @@ pub(crate) struct TickRow {
     pub(crate) mode: Mode,
     pub(crate) link: LinkState,
     pub(crate) safety_stop: Option<SafetyStop>,
-    /// [`FLAG_STIMULUS`] | [`FLAG_GATE`] | [`FLAG_ESTOP`] | [`FLAG_OC_LEFT`] | [`FLAG_OC_RIGHT`].
+    /// [`FLAG_STIMULUS`] | [`FLAG_GATE`] | [`FLAG_ESTOP`] | [`FLAG_OC_LEFT`] | [`FLAG_OC_RIGHT`] |
+    /// [`FLAG_ELBOW`].
     pub(crate) flags: u8,
+    /// The elbow angles of the interaction experiment, degrees: left, left average, right, right average
+    /// (NaN: invalid); meaningful only with [`FLAG_ELBOW`].
+    pub(crate) elbow: [f32; 4],
 }
 
 pub(crate) const FLAG_STIMULUS: u8 = 1;
@@ -43,6 +47,8 @@ pub(crate) const FLAG_GATE: u8 = 2;
 pub(crate) const FLAG_ESTOP: u8 = 4;
 pub(crate) const FLAG_OC_LEFT: u8 = 8;
 pub(crate) const FLAG_OC_RIGHT: u8 = 16;
+/// The tick carried elbow angles ([`TickRow::elbow`]).
+pub(crate) const FLAG_ELBOW: u8 = 32;
 
 impl TickRow {
     fn of(r: &TickRecord) -> Self {
@@ -60,7 +66,11 @@ impl TickRow {
                 | flag(r.gate, FLAG_GATE)
                 | flag(r.estop, FLAG_ESTOP)
                 | flag(r.sensors.overcurrent_left, FLAG_OC_LEFT)
-                | flag(r.sensors.overcurrent_right, FLAG_OC_RIGHT),
+                | flag(r.sensors.overcurrent_right, FLAG_OC_RIGHT)
+                | flag(r.elbow.is_some(), FLAG_ELBOW),
+            elbow: r.elbow.as_ref().map_or([f32::NAN; 4], |e| {
+                [e.left, e.left_avg, e.right, e.right_avg].map(|v| v.map_or(f32::NAN, |v| v as f32))
+            }),
         }
     }
 

@@ -17,7 +17,8 @@ use serde::Serialize;
 use serde::ser::{SerializeSeq, Serializer};
 
 use super::history::{
-    FLAG_ESTOP, FLAG_GATE, FLAG_OC_LEFT, FLAG_OC_RIGHT, FLAG_STIMULUS, Snapshot, TickRow,
+    FLAG_ELBOW, FLAG_ESTOP, FLAG_GATE, FLAG_OC_LEFT, FLAG_OC_RIGHT, FLAG_STIMULUS, Snapshot,
+    TickRow,
 };
 
 /// What a watcher sees of a file path.
@@ -27,7 +28,7 @@ pub(crate) use pavlov::config::REDACTED;
 pub(crate) const HISTORY_MESSAGE_BYTES: usize = 32 * 1024;
 
 /// The entries of a history row, in order (`hello` and every `history` message name them).
-pub(crate) const HISTORY_FIELDS: [&str; 16] = [
+pub(crate) const HISTORY_FIELDS: [&str; 17] = [
     "seq",
     "t",
     "mode",
@@ -44,6 +45,7 @@ pub(crate) const HISTORY_FIELDS: [&str; 16] = [
     "default_right",
     "link",
     "predictions",
+    "elbow",
 ];
 
 #[derive(Serialize)]
@@ -102,7 +104,9 @@ pub(crate) fn event_json(event: &Event, period_ms: u64, watcher: bool) -> String
 }
 
 /// A history row: `[seq, t, mode, stimulus, gate, estop, safety_stop, oc_left, oc_right, current,
-/// command_left, command_right, default_left, default_right, link, [[value, threshold], …]]`, flags as 0/1.
+/// command_left, command_right, default_left, default_right, link, [[value, threshold], …], elbow]`, flags
+/// as 0/1; `elbow` is `[left, left_avg, right, right_avg]` (degrees, `null` when invalid) on a tick that
+/// carried elbow angles, else `null`.
 struct RowJson<'a> {
     row: &'a TickRow,
     predictions: &'a [f64],
@@ -130,6 +134,10 @@ impl Serialize for RowJson<'_> {
         seq.serialize_element(&r.link)?;
         let pairs: Vec<&[f64]> = self.predictions.chunks(2).collect();
         seq.serialize_element(&pairs)?;
+        let elbow = r
+            .has(FLAG_ELBOW)
+            .then(|| r.elbow.map(|v| (!v.is_nan()).then_some(v)));
+        seq.serialize_element(&elbow)?;
         seq.end()
     }
 }
@@ -254,7 +262,7 @@ mod tests {
     use super::*;
     use pavlov::control::Mode;
     use pavlov::event::EventKind;
-    use pavlov::record::{PredictionValue, TickRecord};
+    use pavlov::record::{ElbowAngles, PredictionValue, TickRecord};
     use serde_json::{Value, json};
     use std::sync::Arc;
 
@@ -329,7 +337,8 @@ mod tests {
                 0,
                 0,
                 "up",
-                [[0.25, 0.5]]
+                [[0.25, 0.5]],
+                null
             ])
         );
         let events: Vec<&Value> = messages
@@ -347,6 +356,27 @@ mod tests {
             .collect();
         assert!(more[..more.len() - 1].iter().all(|&m| m) && !more[more.len() - 1]);
         assert_eq!(messages[0]["fields"], json!(HISTORY_FIELDS));
+    }
+
+    #[test]
+    fn a_row_carries_the_elbow_angles_of_its_tick_and_null_for_an_invalid_one() {
+        let h = History::new(60, 20, Mode::Pavlovian, vec![]);
+        h.push(&TickRecord {
+            elbow: Some(ElbowAngles {
+                left: Some(85.5),
+                left_avg: Some(120.0),
+                right: None,
+                right_avg: Some(170.25),
+                ..ElbowAngles::default()
+            }),
+            ..TickRecord::at_rest(0, 0.0, Mode::Pavlovian)
+        });
+        h.push(&TickRecord::at_rest(1, 20.0, Mode::Pavlovian));
+        let messages = all(&h, 4096, false);
+        let rows = messages[0]["rows"].as_array().unwrap();
+        let at = HISTORY_FIELDS.iter().position(|f| *f == "elbow").unwrap();
+        assert_eq!(rows[0][at], json!([85.5, 120.0, null, 170.25]));
+        assert_eq!(rows[1][at], Value::Null);
     }
 
     #[test]

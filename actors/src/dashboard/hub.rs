@@ -30,8 +30,9 @@ use crate::telemetry::Health;
 /// Capacity of the hub's broadcast to the clients' forwarders, in messages (about 4 s of ticks).
 pub(crate) const HUB_CAPACITY: usize = 256;
 
-/// `learning` messages kept for a client that joins (30 s at 50 Hz): its learning view starts with them.
-pub(crate) const RECENT_LEARNING: usize = 150;
+/// `learning` messages kept for a client that joins (300 s at 50 Hz, the default `[dashboard] history_s`,
+/// about 0.6 MB): its learning view starts with them, over the same window as the history's charts.
+pub(crate) const RECENT_LEARNING: usize = 1500;
 
 /// Statuses carry `interaction.aligned` every this many ticks (a multiple of [`STATUS_EVERY_TICKS`]; once a
 /// second at 50 Hz): the curves are about 76 points × 2 series × 2 modes, too many for every status.

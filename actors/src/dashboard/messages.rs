@@ -426,7 +426,7 @@ mod tests {
                 skipped_bytes: 3,
                 ..Default::default()
             },
-            inputs: None,
+            ..TickRecord::at_rest(12, 240.0, Mode::Pavlovian)
         };
         let v: Value = serde_json::from_str(&TickMessage::new(&record).to_json()).unwrap();
         assert_eq!(v["type"], "tick");

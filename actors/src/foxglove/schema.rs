@@ -6,11 +6,21 @@
 //! "null"]` union, a missing type, an array of arrays — which would make the whole channel unusable. So a
 //! field that may be `null` (a missing sensor packet, no elbow angles yet) is declared with its non-null
 //! type, and the tests below check every schema against those rules and every field of real messages
-//! against the schema, so a field added to [`TickRecord`](pavlov::record::TickRecord) without a line here
-//! fails a test instead of silently disappearing from Foxglove's field lists.
+//! against the schema.
+//!
+//! The schema of `/pavlov/ticks` is not written here: it is derived from the tick's one definition,
+//! `actors/proto/pavlov/tick.proto`, through the descriptor the recordings carry
+//! ([`TICK_DESCRIPTOR_SET`]), so a field added there appears in Foxglove's field lists with no line here
+//! (the tests check that a [`TickRecord`](pavlov::record::TickRecord)'s JSON has exactly the descriptor's
+//! fields, both ways).
 
 use pavlov::event::EventKind;
+use prost::Message as _;
+use prost_types::field_descriptor_proto::{Label, Type};
+use prost_types::{FileDescriptorProto, FileDescriptorSet};
 use serde_json::{Map, Value, json};
+
+use crate::storage::recording::schema::TICK_DESCRIPTOR_SET;
 
 /// A field of one JSON type.
 fn of(ty: &str) -> Value {
@@ -76,80 +86,87 @@ fn mode() -> Value {
     one_of(&pavlov::control::Mode::ALL.map(pavlov::control::Mode::name))
 }
 
-/// `pavlov.TickRecord`: a [`pavlov::record::TickRecord`] as the recorder writes it.
+/// `SafetyStop` → `SAFETY_STOP`: the prefix of an enum's value names in the style protobuf asks for.
+fn screaming(name: &str) -> String {
+    let mut out = String::new();
+    for (i, c) in name.chars().enumerate() {
+        if c.is_ascii_uppercase() && i > 0 {
+            out.push('_');
+        }
+        out.push(c.to_ascii_uppercase());
+    }
+    out
+}
+
+/// The JSON Schema of the message named `type_name` (`.pavlov.Tick`) in `file`, as the record it encodes
+/// is written in JSON (serde's names): a field of the same name and the JSON type of its protobuf type, a
+/// repeated field an array, a message an object, an enum a string among its value names without the
+/// enum's prefix in lower case (`SAFETY_STOP_E_STOP` → `e_stop`; `*_UNSPECIFIED` is never written and
+/// left out; `*_NONE` is listed as `none`, though a record whose option is `None` writes `null`).
+fn from_descriptor(file: &FileDescriptorProto, type_name: &str) -> Value {
+    let local = |t: &str| {
+        t.strip_prefix('.')
+            .and_then(|t| t.strip_prefix(file.package()))
+            .and_then(|t| t.strip_prefix('.'))
+            .unwrap_or(t)
+            .to_string()
+    };
+    let name = local(type_name);
+    let Some(message) = file.message_type.iter().find(|m| m.name() == name) else {
+        return object([]);
+    };
+    let fields: Vec<(String, Value)> = message
+        .field
+        .iter()
+        .map(|f| {
+            let one = match f.r#type() {
+                Type::Bool => boolean(),
+                Type::String | Type::Bytes => string(),
+                Type::Double | Type::Float => number(),
+                Type::Message | Type::Group => from_descriptor(file, f.type_name()),
+                Type::Enum => {
+                    let name = local(f.type_name());
+                    let prefix = format!("{}_", screaming(&name));
+                    let values: Vec<String> = file
+                        .enum_type
+                        .iter()
+                        .filter(|e| e.name() == name)
+                        .flat_map(|e| &e.value)
+                        .map(|v| v.name().strip_prefix(&prefix).unwrap_or(v.name()))
+                        .filter(|v| *v != "UNSPECIFIED")
+                        .map(str::to_ascii_lowercase)
+                        .collect();
+                    json!({ "type": "string", "enum": values })
+                }
+                _ => integer(),
+            };
+            let schema = if f.label() == Label::Repeated {
+                array(one)
+            } else {
+                one
+            };
+            (f.name().to_string(), schema)
+        })
+        .collect();
+    object(fields.iter().map(|(k, v)| (k.as_str(), v.clone())))
+}
+
+/// `pavlov.TickRecord`: a [`pavlov::record::TickRecord`] as the recorder writes it, derived from the
+/// descriptor of `pavlov.Tick` (see the module doc).
 pub(crate) fn tick_record() -> Value {
-    let sensors = object([
-        ("overcurrent_left", boolean()),
-        ("overcurrent_right", boolean()),
-        ("bump_left", boolean()),
-        ("bump_right", boolean()),
-        ("battery_current_ma", integer()),
-        ("battery_voltage_mv", integer()),
-        ("battery_charge_mah", integer()),
-        ("distance_mm", integer()),
-        ("angle_deg", integer()),
-        ("oi_mode", integer()),
-    ]);
-    let elbow = object([
-        ("left", number()),
-        ("left_avg", number()),
-        ("right", number()),
-        ("right_avg", number()),
-        ("skeleton", one_of(&["tracked", "stale", "none"])),
-    ]);
-    let prediction = object([
-        ("name", string()),
-        ("value", number()),
-        ("threshold", number()),
-    ]);
-    let link = object([
-        ("up", boolean()),
-        ("good_frames", integer()),
-        ("bad_frames", integer()),
-        ("skipped_bytes", integer()),
-        ("state", link_state()),
-        ("mode", integer()),
-        ("trip", trip_cause()),
-        ("reconnects", integer()),
-        ("stale_events", integer()),
-    ]);
-    let inputs = object([
-        (
-            "values",
-            object([("values", array(integer())), ("present", integer())]),
-        ),
-        ("forced_stimulus", boolean()),
-        ("previous_followed_default", boolean()),
-    ]);
+    let set = FileDescriptorSet::decode(TICK_DESCRIPTOR_SET).unwrap_or_default();
+    let fields = set
+        .file
+        .iter()
+        .find(|f| f.message_type.iter().any(|m| m.name() == "Tick"))
+        .map_or_else(|| object([]), |file| from_descriptor(file, ".pavlov.Tick"));
     titled(
         "pavlov.TickRecord",
         "Everything that happened on one 20 ms tick (the recorder's record). Fields that can be null: \
          obs entries (a packet the snapshot lacks), obs_age_ticks, elbow, safety_stop, the battery and \
          mode sensors, link.mode, link.trip, inputs. rule (what engaged the gate: a rule's name or \
          `stimulus`) is absent while the gate is off.",
-        object([
-            ("seq", integer()),
-            ("t_ms", number()),
-            ("mode", mode()),
-            ("obs_age_ticks", integer()),
-            ("sensors", sensors),
-            ("obs", array(number())),
-            ("elbow", elbow),
-            ("stimulus", boolean()),
-            ("predictions", array(prediction)),
-            ("gate", boolean()),
-            ("rule", string()),
-            ("default_action", action()),
-            ("command", action()),
-            (
-                "safety_stop",
-                one_of(&["e_stop", "stale_observation", "link_down", "robot_tripped"]),
-            ),
-            ("estop", boolean()),
-            ("lateness_us", integer()),
-            ("link", link),
-            ("inputs", inputs),
-        ]),
+        fields,
     )
 }
 
@@ -411,6 +428,75 @@ pub(crate) mod tests {
         let mut value = serde_json::to_value(full_record()).unwrap();
         value["rule"] = json!(3);
         assert!(conforms(&value, &schema, "$").is_err());
+    }
+
+    /// The declared fields `value` lacks (`schema` an object schema; arrays are checked on their first
+    /// item).
+    fn undeclared_in(value: &Value, schema: &Value, path: &str, missing: &mut Vec<String>) {
+        match (schema["type"].as_str(), value) {
+            (Some("object"), Value::Object(fields)) => {
+                for (name, declared) in schema["properties"].as_object().into_iter().flatten() {
+                    let at = format!("{path}.{name}");
+                    match fields.get(name) {
+                        None => missing.push(at),
+                        Some(v) => undeclared_in(v, declared, &at, missing),
+                    }
+                }
+            }
+            (Some("array"), Value::Array(items)) => {
+                if let Some(first) = items.first() {
+                    undeclared_in(first, &schema["items"], &format!("{path}[0]"), missing);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    #[test]
+    fn the_tick_schema_is_the_descriptors_and_a_record_writes_every_field_of_it() {
+        let schema = tick_record();
+        let mut missing = Vec::new();
+        let value = serde_json::to_value(full_record()).unwrap();
+        undeclared_in(&value, &schema, "$", &mut missing);
+        assert_eq!(
+            missing,
+            Vec::<String>::new(),
+            "fields of tick.proto a record lacks"
+        );
+        // As many fields as the descriptor's Tick, and the enums' values in serde's names.
+        let set = FileDescriptorSet::decode(TICK_DESCRIPTOR_SET).unwrap();
+        let tick = set.file[0]
+            .message_type
+            .iter()
+            .find(|m| m.name() == "Tick")
+            .unwrap();
+        let declared = schema["properties"].as_object().unwrap();
+        assert_eq!(declared.len(), tick.field.len());
+        assert_eq!(declared["mode"]["enum"], json!(Mode::ALL.map(Mode::name)));
+        assert_eq!(
+            declared["safety_stop"]["enum"],
+            json!([
+                "none",
+                "e_stop",
+                "stale_observation",
+                "link_down",
+                "robot_tripped"
+            ])
+        );
+        assert_eq!(
+            declared["link"]["properties"]["state"]["enum"],
+            json!(["up", "stale", "reconnecting", "tripped", "down"])
+        );
+        assert_eq!(
+            declared["inputs"]["properties"]["values"]["properties"]["values"]["type"],
+            "array"
+        );
+        // A record without a field of the descriptor would be caught.
+        let mut value = serde_json::to_value(full_record()).unwrap();
+        value["link"].as_object_mut().unwrap().remove("reconnects");
+        let mut missing = Vec::new();
+        undeclared_in(&value, &schema, "$", &mut missing);
+        assert_eq!(missing, ["$.link.reconnects"]);
     }
 
     #[test]

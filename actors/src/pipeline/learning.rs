@@ -13,10 +13,10 @@
 use pavlov::agent::learning::request_end;
 use pavlov::agent::safety::observation_is_fresh;
 use pavlov::agent::{LearnInput, LearnOutput, LearningStage};
+use pavlov::checkpoint::{Checkpoint, CheckpointError};
 use pavlov::config::Config;
 use pavlov::event::EventKind;
 use pavlov::learn::LearnError;
-use pavlov::learn::checkpoint::{Checkpoint, CheckpointError};
 use pavlov::skeleton::{ElbowFeatureTracker, PoseTracker};
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::Instant;

@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use futures_util::FutureExt;
 
-use pavlov::sim::faults::{FaultCounters, FaultInjector, LinkFault};
+use pavlov::sim::faults::{FaultInjector, LinkFault};
 use pavlov::sim::robot::SimRobot;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, ReadHalf, WriteHalf};
 use tokio::sync::{mpsc, watch};
@@ -20,24 +20,10 @@ use tokio_util::sync::CancellationToken;
 
 use super::device::{SIM_LINK_BUFFER, SimDevice};
 use crate::link::{LinkError, LinkReader, LinkWriter};
+pub use crate::telemetry::sim_status::SimStatus;
 
 /// The OI sensor period: the robot steps and streams every 15 ms [C1 p13; C2 p21].
 pub(crate) const SIM_STEP: Duration = Duration::from_millis(15);
-
-/// What the simulator task publishes after every step, for tests, soak runs and `pavlov sim`'s report.
-#[derive(Debug, Clone, Default)]
-pub struct SimStatus {
-    /// The OI mode (packet 35 value, without any quirk).
-    pub oi_mode: i32,
-    /// Actual wheel speeds `[left, right]`, mm/s.
-    pub wheel_speed_mm_s: [f64; 2],
-    /// A host connection is plugged in.
-    pub connected: bool,
-    /// Bytes flow on the line this step (not hung, not unplugged, host and robot at the same rate).
-    pub flowing: bool,
-    /// What the fault injector has done so far.
-    pub faults: FaultCounters,
-}
 
 /// A simulated robot running behind an in-process byte stream.
 pub(crate) struct SimLink {

@@ -3,13 +3,13 @@
 //! them under a short lock or from a `watch`, never on the tick's critical path.
 //!
 //! The sets that `/metrics` reports (actuation, the dashboard, Foxglove, Zenoh) are each declared once
-//! with [`counter_set!`](crate::counter_set::counter_set): the copy, the atomic struct its writers count
+//! with [`counter_set!`](crate::bus::counter_set::counter_set): the copy, the atomic struct its writers count
 //! in, `since`/`plus` and its Prometheus families all come from one declaration. (The storage failures'
 //! set lives with the event log that counts them, `bus/storage_failures.rs`.)
 
 use std::sync::{Arc, Mutex};
 
-use crate::counter_set::counter_set;
+use crate::bus::counter_set::counter_set;
 
 use super::histogram::LatencyHistogram;
 

@@ -87,7 +87,7 @@ pub(crate) fn format_value(v: f64) -> String {
 }
 
 /// Counter sets declared with `counter_set!` write their families here.
-impl crate::counter_set::MetricSink for Exposition {
+impl crate::bus::counter_set::MetricSink for Exposition {
     fn family(&mut self, name: &str, kind: &str, help: &str) {
         Exposition::family(self, name, kind, help);
     }

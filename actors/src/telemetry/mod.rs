@@ -6,6 +6,7 @@
 //! - `histogram`: the allocation-free latency histogram that sits on the tick path;
 //! - `exposition`: a writer of the Prometheus text format; `prometheus`: the `/metrics` text;
 //!   [`prometheus_check`]: a strict reader of that format, for tests;
+//! - `sim_status`, `horde_status`: what the simulator and the Horde report, read by [`Health`];
 //! - `health_log`: the tick-health line logged once a minute;
 //! - [`logging`]: logging that never blocks or fails the caller (a queue and a writer thread).
 
@@ -13,6 +14,7 @@ pub(crate) mod counters;
 pub(crate) mod exposition;
 pub(crate) mod health_log;
 pub(crate) mod histogram;
+pub mod horde_status;
 pub mod logging;
 pub(crate) mod prometheus;
 /// A strict reader of the `/metrics` text, for the end-to-end tests (always built: a feature for it put
@@ -20,6 +22,7 @@ pub(crate) mod prometheus;
 /// for the binary).
 #[doc(hidden)]
 pub mod prometheus_check;
+pub mod sim_status;
 
 use pavlov::config::TickTimer;
 use pavlov::record::LinkStatus;
@@ -33,7 +36,7 @@ use counters::{
 };
 use histogram::{LatencyHistogram, LatencyQuantiles};
 
-use crate::simulated::SimStatus;
+use sim_status::SimStatus;
 
 /// One handle on every health figure of a running server. Cheap to clone; reading never blocks the tick
 /// for longer than copying a histogram under its lock.
@@ -51,7 +54,7 @@ pub struct Health {
     /// The Zenoh bridge's counters (all zero without `serve --zenoh`).
     pub(crate) zenoh: std::sync::Arc<ZenohCounters>,
     /// The Horde's figures, when there is a Horde.
-    pub(crate) horde: Option<watch::Receiver<crate::horde::status::HordeStatus>>,
+    pub(crate) horde: Option<watch::Receiver<horde_status::HordeStatus>>,
     /// Failures to write recordings and checkpoints (the event log's count).
     pub(crate) storage: std::sync::Arc<StorageFailures>,
 }

@@ -12,9 +12,9 @@ use pavlov::supervision::{LinkState, TripCause};
 use super::counters::{ActuationStats, DashboardStats, FoxgloveFigures, ZenohFigures};
 use super::exposition::Exposition;
 pub(crate) use super::exposition::HistogramSample;
+use super::horde_status::HordeStatus;
 use super::{Health, RecorderFigures};
 use crate::bus::storage_failures::StorageFigures;
-use crate::horde::status::HordeStatus;
 
 /// The Content-Type of the exposition.
 pub(crate) const CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";

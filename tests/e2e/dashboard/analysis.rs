@@ -239,7 +239,7 @@ async fn a_client_connecting_mid_run_gets_the_recent_history_in_small_messages_t
         "the history lacks ticks the feed made: {seqs:?}, made {made:?}"
     );
     let row = &rows[0];
-    assert_eq!(row.as_array().unwrap().len(), 16, "{row}");
+    assert_eq!(row.as_array().unwrap().len(), 17, "{row}");
     assert_eq!(row[2], "pavlovian");
     assert_eq!(row[14], "up");
     assert!(row[15][0][0].is_number() && row[15][0][1] == 0.5, "{row}");

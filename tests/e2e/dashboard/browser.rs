@@ -7,7 +7,8 @@
 //! (`web/tests/trip.e2e.mjs`, simulator with trips injected) checks the trip banner, its cause, that nothing
 //! re-arms by itself, and the Re-arm button (`target/dashboard-trip.png`). A third (`web/tests/watcher.e2e.mjs`,
 //! a server with a token, the page opened without it) checks that a watcher's page draws from the
-//! watcher's `hello` and that its E-STOP click is refused (`target/dashboard-watcher.png`). A fourth (`web/tests/elbow.e2e.mjs`,
+//! watcher's `hello`, that its E-STOP is disabled, and that an e-stop it sends anyway is refused
+//! (`target/dashboard-watcher.png`). A fourth (`web/tests/elbow.e2e.mjs`,
 //! config/interaction.toml) checks the gesture experiment's elbow chart, the skeleton status and its warning
 //! before and after a `pavlov human` operator starts, and the debounced command count
 //! (`target/dashboard-elbow.png`, and `target/dashboard-elbow-none.png` before the operator).

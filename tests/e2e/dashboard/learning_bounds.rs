@@ -9,7 +9,7 @@ use crate::common;
 use std::time::Duration;
 
 use futures_util::{SinkExt, StreamExt};
-use pavlov::learn::checkpoint::Checkpoint;
+use pavlov::checkpoint::Checkpoint;
 use pavlov_actors::command::{ControlCommand, ControlRequest, LearningCommand};
 use pavlov_actors::dashboard::Dashboard;
 use pavlov_actors::server::{RobotTarget, Server};

@@ -1,6 +1,7 @@
 //! The dashboard endpoint: the websocket protocol, the browser page, abuse, who gets in when it is abused
 //! (`operator`), what it refuses to guess and keeps to itself (`strictness`), `/metrics`, the recording's
-//! download (`download`), and a full disk as the page shows it (`browser_storage`).
+//! download (`download`), a full disk as the page shows it (`browser_storage`), and the page without traps
+//! (`browser_traps`: one time axis, marker labels, a watcher's buttons).
 
 mod abuse;
 mod abusers;
@@ -9,6 +10,7 @@ pub(crate) mod browser;
 mod browser_analysis;
 mod browser_learning;
 mod browser_storage;
+mod browser_traps;
 mod download;
 mod learning_bounds;
 mod learning_view;

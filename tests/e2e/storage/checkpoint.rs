@@ -5,8 +5,8 @@
 use crate::common;
 
 use pavlov::agent::{LearnInput, LearningStage};
+use pavlov::checkpoint::{Checkpoint, config_fingerprint};
 use pavlov::config::Config;
-use pavlov::learn::checkpoint::{Checkpoint, config_fingerprint};
 use pavlov::record::TickRecord;
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::storage::checkpoint_files::{RUNS_DIR, list};

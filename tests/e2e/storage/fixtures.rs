@@ -6,8 +6,8 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use pavlov::agent::LearningStage;
+use pavlov::checkpoint::Checkpoint;
 use pavlov::config::Config;
-use pavlov::learn::checkpoint::Checkpoint;
 use pavlov_actors::storage::checkpoint_files::write_atomic;
 
 use crate::common::{TestDir, stall_config};

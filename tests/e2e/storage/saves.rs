@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use pavlov::learn::checkpoint::Checkpoint;
+use pavlov::checkpoint::Checkpoint;
 use pavlov_actors::command::{Applied, ControlRequest, LearningCommand, Outcome};
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::storage::checkpoint_files::{SAVED_DIR, list};

@@ -404,7 +404,7 @@ mod tests {
             estop: false,
             lateness_us: 0,
             link: LinkStatus::default(),
-            inputs: None,
+            ..TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Reactive)
         }
     }
 

@@ -14,7 +14,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use pavlov::learn::checkpoint::{Checkpoint, check_finite};
+use pavlov::checkpoint::{Checkpoint, check_finite};
 
 use crate::storage::utc;
 

@@ -6,8 +6,8 @@
 
 use std::path::{Path, PathBuf};
 
+use pavlov::checkpoint::Checkpoint;
 use pavlov::config::CheckpointConfig;
-use pavlov::learn::checkpoint::Checkpoint;
 
 use super::layout::create_run_dir;
 use super::saves::{SaveQuota, check_save_name, saved_dir};

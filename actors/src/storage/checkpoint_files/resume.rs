@@ -12,8 +12,8 @@
 
 use std::path::{Path, PathBuf};
 
+use pavlov::checkpoint::{Checkpoint, CheckpointError, ParamOverride, check_finite};
 use pavlov::config::Config;
-use pavlov::learn::checkpoint::{Checkpoint, CheckpointError, ParamOverride, check_finite};
 
 use super::layout::{RUNS_DIR, is_run_id, list};
 

@@ -21,7 +21,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::thread::JoinHandle;
 
-use pavlov::learn::checkpoint::Checkpoint;
+use pavlov::checkpoint::Checkpoint;
 
 use super::layout::{encode, file_name, prune, write_atomic};
 use super::saves::{SaveError, SaveQuota, write_save};

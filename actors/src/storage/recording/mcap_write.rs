@@ -126,7 +126,7 @@ impl<W: Write + Seek> McapSink<W> {
         let tick_schema = out.add_schema(
             schema::TICK_SCHEMA_NAME,
             "protobuf",
-            &schema::tick_descriptor_set(),
+            schema::TICK_DESCRIPTOR_SET,
         )?;
         let event_schema = out.add_schema(
             "pavlov.Event",

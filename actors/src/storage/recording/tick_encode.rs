@@ -186,8 +186,64 @@ const _: () = assert!(PbMode::Unspecified as i32 == 0 && PbSafetyStop::None as i
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::storage::recording::schema::TICK_DESCRIPTOR_SET;
     use crate::storage::recording::tick_pb;
     use prost::Message as _;
+    use prost::encoding::{DecodeContext, decode_key, decode_varint, skip_field};
+    use prost_types::field_descriptor_proto::Type;
+    use prost_types::{FileDescriptorProto, FileDescriptorSet};
+    use std::collections::BTreeSet;
+
+    /// Adds to `seen` the (message, field number) of every field in `bytes`, a `message` of `file`,
+    /// and of the messages nested in it.
+    fn fields_in(
+        file: &FileDescriptorProto,
+        message: &str,
+        mut bytes: &[u8],
+        seen: &mut BTreeSet<(String, i32)>,
+    ) {
+        let m = file
+            .message_type
+            .iter()
+            .find(|m| m.name() == message)
+            .unwrap();
+        while !bytes.is_empty() {
+            let (tag, wire) = decode_key(&mut bytes).unwrap();
+            seen.insert((message.to_string(), tag as i32));
+            let field = m.field.iter().find(|f| f.number() == tag as i32);
+            match field {
+                Some(f) if f.r#type() == Type::Message => {
+                    let len = decode_varint(&mut bytes).unwrap() as usize;
+                    let (inner, rest) = bytes.split_at(len);
+                    let nested = f.type_name().rsplit('.').next().unwrap();
+                    fields_in(file, nested, inner, seen);
+                    bytes = rest;
+                }
+                _ => skip_field(wire, tag, &mut bytes, DecodeContext::default()).unwrap(),
+            }
+        }
+    }
+
+    #[test]
+    fn every_field_of_tick_proto_is_written_for_some_record() {
+        // A field added to tick.proto that the encoder never writes fails here (the test records use
+        // every field of the record).
+        let set = FileDescriptorSet::decode(TICK_DESCRIPTOR_SET).unwrap();
+        let file = &set.file[0];
+        let mut enc = TickEncoder::default();
+        let mut seen = BTreeSet::new();
+        for r in &tick_pb::tests::records() {
+            fields_in(file, "Tick", enc.encode(r), &mut seen);
+        }
+        let declared: BTreeSet<(String, i32)> = file
+            .message_type
+            .iter()
+            .flat_map(|m| m.field.iter().map(|f| (m.name().to_string(), f.number())))
+            .collect();
+        let never: Vec<_> = declared.difference(&seen).collect();
+        assert!(never.is_empty(), "fields never written: {never:?}");
+        assert_eq!(seen, declared);
+    }
 
     #[test]
     fn it_writes_exactly_the_derived_encoders_bytes_for_every_record() {

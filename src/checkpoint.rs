@@ -12,9 +12,9 @@
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use super::snapshot::SetSnapshot;
-use super::spec::PredictionSpec;
 use crate::config::{Config, StimulusSpec};
+use crate::learn::snapshot::SetSnapshot;
+use crate::learn::spec::PredictionSpec;
 use crate::oi::Model;
 
 /// The `format` of checkpoints this code writes and reads.
@@ -113,8 +113,8 @@ pub fn check_finite(state: &SetSnapshot) -> Result<(), CheckpointError> {
             }
         }
         let threshold = match p.threshold {
-            super::spec::Threshold::Fixed(t) => t,
-            super::spec::Threshold::Steps(_) => 0.0,
+            crate::learn::spec::Threshold::Fixed(t) => t,
+            crate::learn::spec::Threshold::Steps(_) => 0.0,
         };
         let gamma = p.previous.as_ref().map_or(0.0, |prev| prev.gamma);
         for (field, v) in [
@@ -334,7 +334,7 @@ mod tests {
     use super::*;
 
     fn stall() -> Config {
-        Config::from_toml(include_str!("../../config/stall.toml")).unwrap()
+        Config::from_toml(include_str!("../config/stall.toml")).unwrap()
     }
 
     fn learned_state(cfg: &Config) -> SetSnapshot {
@@ -385,7 +385,7 @@ mod tests {
     fn off_policy_secondary_weights_round_trip_and_must_be_finite() {
         let text = format!(
             "{}\n{}",
-            include_str!("../../config/stall.toml"),
+            include_str!("../config/stall.toml"),
             r#"
 [[predictions]]
 name = "stall_pi"

@@ -4,9 +4,9 @@
 //! copy's Prometheus families (name, `# HELP`, `# TYPE`, samples). Adding a counter to a set is one line in
 //! its declaration, and its metric cannot be forgotten.
 //!
-//! This module imports nothing of the shell, so every floor may use it: the buses (the event log counts
-//! storage failures) as well as telemetry. The families are written through [`MetricSink`], which
-//! telemetry's exposition writer implements.
+//! It lives with the buses, on the ground floor, because the event log counts storage failures with it
+//! (`storage_failures.rs`); telemetry, above, declares the other sets. It imports nothing: the families
+//! are written through [`MetricSink`], which telemetry's exposition writer implements.
 
 /// Where a counter set writes its Prometheus families (telemetry's exposition writer).
 pub(crate) trait MetricSink {
@@ -112,17 +112,17 @@ macro_rules! counter_set {
 
         impl $Figures {
             /// Writes the figures' Prometheus families into `e`.
-            pub(crate) fn expose(&self, e: &mut impl $crate::counter_set::MetricSink) {
-                $( $crate::counter_set::counter_set!(
+            pub(crate) fn expose(&self, e: &mut impl $crate::bus::counter_set::MetricSink) {
+                $( $crate::bus::counter_set::counter_set!(
                     @family e, self, $kind, $name, $help, [$($label)?], [$( $field [$($value)?] ),*]
                 ); )*
             }
         }
 
-        $crate::counter_set::counter_set!(
+        $crate::bus::counter_set::counter_set!(
             @atomic $Figures, [$( $( $(#[$doc])* $field, )* )*], $( $(#[$ameta])* $avis struct $Atomic )?
         );
-        $crate::counter_set::counter_set!(
+        $crate::bus::counter_set::counter_set!(
             @arithmetic $Figures, [$( $( $field, )* )*], $( [$(#[$arith])*] )?
         );
     };
