@@ -117,4 +117,4 @@ PAVLOV_BIN="${CARGO_TARGET_DIR:-target}/debug/pavlov" \
 # --- end of the Python loader ----------------------------------------------------------------------------
 
 step "soak: 24 simulated hours of the whole server with faults injected (release build, ~1 min)"
-cargo test --release -p pavlov-actors --test soak -- --nocapture
+cargo test --profile soak -p pavlov-actors --test soak -- --nocapture

@@ -10,8 +10,8 @@
 //! last hour no worse than in the first).
 //!
 //! Built with `test = false` (see actors/Cargo.toml): `cargo test --workspace --all-targets` does not run it;
-//! `tests/run.sh` runs it in release (`cargo test --release -p pavlov-actors --test soak`). Set
-//! `PAVLOV_SOAK_HOURS` to run a shorter soak by hand.
+//! `tests/run.sh` runs it in release code (`cargo test --profile soak -p pavlov-actors --test soak`: the
+//! release profile without LTO, Cargo.toml). Set `PAVLOV_SOAK_HOURS` to run a shorter soak by hand.
 
 use pavlov::config::Config;
 use pavlov::control::{Action, Mode};
