@@ -11,6 +11,8 @@
 //! - `PAVLOV_RUSTC`: `rustc --version` of the compiler building it;
 //! - `PAVLOV_TARGET` and `PAVLOV_PROFILE`: the target triple and the profile (`debug`/`release`).
 //!
+//! It also embeds the dashboard's files (`build/web_assets.rs`).
+//!
 //! So that the dirty flag stays true, the script runs again whenever git's HEAD, index or refs move, or a
 //! file the binary is compiled from changes (an edit to a test or a document alone is seen at the next
 //! such change; rebuilding the library for every edit of a test would slow every test run).
@@ -18,7 +20,11 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+#[path = "build/web_assets.rs"]
+mod web_assets;
+
 fn main() {
+    web_assets::embed();
     let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
     let root = manifest
         .parent()

@@ -3,7 +3,6 @@
 //! alike: counting a refusal, refusing a foreign host or origin, checking a token against the wrong-token
 //! allowance.
 
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 
@@ -59,8 +58,8 @@ pub(crate) struct AppState {
     pub(crate) rate: RateLimit,
     /// The server's health figures (for `/metrics`).
     pub(crate) health: Health,
-    /// Where `node_modules/uplot` lives.
-    pub(crate) web_dir: PathBuf,
+    /// Where the page's files come from.
+    pub(crate) assets: super::assets::WebAssets,
     /// Connected clients (shared with the hub's status).
     pub(crate) hub_counters: Arc<HubCounters>,
     /// Session counters.

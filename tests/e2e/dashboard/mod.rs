@@ -1,6 +1,7 @@
 //! The dashboard endpoint: the websocket protocol, the browser page, abuse, who gets in when it is abused
 //! (`operator`), what it refuses to guess and keeps to itself (`strictness`), `/metrics`, the recording's
-//! download (`download`), and a full disk as the page shows it (`browser_storage`).
+//! download (`download`), a full disk as the page shows it (`browser_storage`), and the page of a copied
+//! binary run from an empty folder (`installed`).
 
 mod abuse;
 mod abusers;
@@ -10,6 +11,7 @@ mod browser_analysis;
 mod browser_learning;
 mod browser_storage;
 mod download;
+mod installed;
 mod learning_bounds;
 mod learning_view;
 mod metrics;
