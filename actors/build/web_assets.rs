@@ -45,7 +45,11 @@ pub(crate) fn embed() {
             ));
         }
     }
-    files.extend(UPLOT_FILES.iter().map(|rel| (rel.to_string(), web.join(rel))));
+    files.extend(
+        UPLOT_FILES
+            .iter()
+            .map(|rel| (rel.to_string(), web.join(rel))),
+    );
     let version = uplot_version(&web.join(UPLOT_PACKAGE));
 
     let mut code = String::from(

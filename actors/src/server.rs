@@ -260,6 +260,7 @@ impl ServerBuilder {
             feed,
             events,
             commands: pipeline.commands,
+            estop: pipeline.estop,
             pose,
             started,
             config,
@@ -352,6 +353,9 @@ pub struct Server {
     pub events: EventLog,
     /// Inject commands here.
     pub commands: mpsc::Sender<ControlRequest>,
+    /// The e-stop latch itself, for a client that must latch it ahead of its own earlier commands (an
+    /// operator's websocket connection); every other e-stop goes through `commands`.
+    pub estop: crate::pipeline::latch::EstopLatch,
     /// Publish skeleton poses here (the skeleton ingest actor, or a test).
     pub pose: watch::Sender<PoseTracker>,
     /// The time the first tick was due.

@@ -16,8 +16,7 @@ pub(crate) const UPLOT_JS: &str = "node_modules/uplot/dist/uPlot.iife.min.js";
 /// uPlot's style sheet, under `web/`.
 pub(crate) const UPLOT_CSS: &str = "node_modules/uplot/dist/uPlot.min.css";
 /// What to run when a `--web-dir` has no uPlot.
-pub(crate) const INSTALL_HINT: &str =
-    "run `npm ci --prefix web` in the repository (or leave out --web-dir to use the files built into the binary)";
+pub(crate) const INSTALL_HINT: &str = "run `npm ci --prefix web` in the repository (or leave out --web-dir to use the files built into the binary)";
 
 /// Where the dashboard's files come from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -153,13 +152,24 @@ mod tests {
             assert!(!bytes.is_empty(), "{}", r.file);
         }
         let urls: Vec<&str> = routes.iter().map(|r| r.url.as_str()).collect();
-        for url in ["/", "/app.js", "/lib.js", "/style.css", "/vendor/uplot.iife.min.js"] {
+        for url in [
+            "/",
+            "/app.js",
+            "/lib.js",
+            "/style.css",
+            "/vendor/uplot.iife.min.js",
+        ] {
             assert!(urls.contains(&url), "{url} not routed: {urls:?}");
         }
         assert!(!urls.iter().any(|u| u.contains("fleet")), "{urls:?}");
         let uplot = String::from_utf8_lossy(embedded(UPLOT_JS).unwrap_or_default());
         assert!(uplot.contains("uPlot") && uplot.len() > 20_000);
-        assert!(UPLOT_VERSION.chars().next().is_some_and(|c| c.is_ascii_digit()));
+        assert!(
+            UPLOT_VERSION
+                .chars()
+                .next()
+                .is_some_and(|c| c.is_ascii_digit())
+        );
     }
 
     #[tokio::test]
@@ -177,7 +187,11 @@ mod tests {
         assert!(!missing.contains(&dir.join("index.html")));
         assert!(WebAssets::Embedded.missing().is_empty());
         assert!(assets.describe().contains("--web-dir"));
-        assert!(WebAssets::Embedded.describe().contains("built into the binary"));
+        assert!(
+            WebAssets::Embedded
+                .describe()
+                .contains("built into the binary")
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

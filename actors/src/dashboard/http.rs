@@ -17,8 +17,8 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 
-use super::assets::{INSTALL_HINT, Route};
 use super::app_state::{AppState, WsQuery, check_token, header_text, refuse, refuse_foreign};
+use super::assets::{INSTALL_HINT, Route};
 use super::auth::{Access, presented_token};
 use super::guard::Peer;
 use super::messages::{Hello, Limits};
@@ -30,7 +30,14 @@ const CSP: &str = "default-src 'self'; connect-src 'self'; img-src 'self' data:;
 frame-ancestors 'none'; base-uri 'none'; form-action 'none'";
 
 /// `200 ok` while the tick loop runs and the robot link is up; `503` with the reason otherwise.
-async fn healthz(State(state): State<Arc<AppState>>) -> Response {
+///
+/// The probe's connection leaves the pending pool as soon as its request is read, and closes after the
+/// answer, so a probe never holds a pending place as an idle keep-alive connection.
+async fn healthz(
+    State(state): State<Arc<AppState>>,
+    ConnectInfo(Peer(_, connection)): ConnectInfo<Peer>,
+) -> Response {
+    connection.begin();
     let verdict = state.health.verdict();
     let status = match verdict {
         crate::telemetry::Verdict::Ok => StatusCode::OK,
@@ -39,6 +46,8 @@ async fn healthz(State(state): State<Arc<AppState>>) -> Response {
     let mut r = (status, verdict.describe()).into_response();
     r.headers_mut()
         .insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    r.headers_mut()
+        .insert(header::CONNECTION, HeaderValue::from_static("close"));
     r
 }
 
@@ -64,9 +73,9 @@ pub(crate) fn router(state: Arc<AppState>) -> Router<()> {
         let url = route.url.clone();
         router = router.route(
             &url,
-            get(move |State(state): State<Arc<AppState>>| async move {
-                file(&state, &route).await
-            }),
+            get(
+                move |State(state): State<Arc<AppState>>| async move { file(&state, &route).await },
+            ),
         );
     }
     router
@@ -172,6 +181,7 @@ async fn ws_handler(
         peer,
         hub: state.hub.clone(),
         commands: state.commands.clone(),
+        estop: state.estop.clone(),
         access,
         hello,
         history_message_bytes: state

@@ -240,6 +240,7 @@ impl Dashboard {
             policy: AccessPolicy::new(cfg, addr),
             hub: hub_handle,
             commands: server.commands.clone(),
+            estop: server.estop.clone(),
             tick_period_ms: period_ms,
             signals: Signals {
                 obs: server.obs_names.clone(),

@@ -16,9 +16,9 @@ use std::time::{Duration, Instant};
 
 use futures_util::{SinkExt, StreamExt};
 use pavlov::config::Config;
-use pavlov_actors::dashboard::{Dashboard, WebAssets};
 use pavlov_actors::dashboard::rate::DEFAULT_RATE_LIMIT;
 use pavlov_actors::dashboard::session::UNREAD_PATIENCE;
+use pavlov_actors::dashboard::{Dashboard, WebAssets};
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::telemetry::prometheus_check;
 use serde_json::{Value, json};

@@ -16,6 +16,7 @@ mod learning_bounds;
 mod learning_view;
 mod metrics;
 mod operator;
+mod operator_first;
 mod protocol;
 mod rig;
 mod strictness;

@@ -1006,7 +1006,11 @@ async fn the_page_its_assets_and_healthz_are_served() {
     // uPlot, built into the binary from web/node_modules.
     let (status, _, body) = http_get(addr, "/vendor/uplot.iife.min.js").await;
     assert_eq!(status, 200);
-    assert!(body.contains("uPlot") && body.len() > 20_000, "{}", body.len());
+    assert!(
+        body.contains("uPlot") && body.len() > 20_000,
+        "{}",
+        body.len()
+    );
     assert_eq!(http_get(addr, "/vendor/uplot.min.css").await.0, 200);
     assert_eq!(healthy(addr).await, (200, "ok".to_string()));
     assert_eq!(http_get(addr, "/nope").await.0, 404);
