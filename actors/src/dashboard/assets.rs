@@ -2,7 +2,7 @@
 //! takes `web/*.html`, `web/*.js`, `web/*.css` and uPlot's built files from `web/node_modules`), or, with
 //! `serve --web-dir DIR`, read from `DIR` at every request, for working on the page without rebuilding.
 //!
-//! The routes are the same either way ([`routes`]): `/` is `index.html`, every script and style sheet of
+//! The routes are the same either way (`routes`): `/` is `index.html`, every script and style sheet of
 //! the page is served under its own name, and uPlot under `/vendor/`. Only these names are served, so a
 //! directory override cannot expose any other file.
 
