@@ -15,10 +15,12 @@
 //! release profile keeps line tables so that backtraces name files and lines, and compressed they cost a
 //! quarter of the space (Rust's backtraces and `perf` read compressed sections).
 //!
-//! And it compiles the tick's schema, `proto/pavlov/tick.proto`, with `protox` (a protobuf compiler in Rust:
+//! It compiles the tick's schema, `proto/pavlov/tick.proto`, with `protox` (a protobuf compiler in Rust:
 //! no `protoc` is needed) into `OUT_DIR/pavlov.rs` (the prost structs, by `prost-build`) and
 //! `OUT_DIR/tick_descriptor_set.bin` (the serialised `FileDescriptorSet` a recording carries as its `ticks`
 //! schema, without source comments), for `actors/src/storage/recording/{tick_pb,schema}.rs`.
+//!
+//! And it embeds the dashboard's files (`build/web_assets.rs`).
 //!
 //! So that the dirty flag stays true, the script runs again whenever git's HEAD, index or refs move, or a
 //! file the binary is compiled from changes (an edit to a test or a document alone is seen at the next
@@ -29,11 +31,15 @@ use std::process::Command;
 
 use prost::Message as _;
 
+#[path = "build/web_assets.rs"]
+mod web_assets;
+
 fn main() {
     if let Err(e) = tick_schema() {
         // A build script reports by failing: the message names the .proto problem (file, line, column).
         panic!("compiling proto/pavlov/tick.proto: {e}");
     }
+    web_assets::embed();
 
     let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
     let root = manifest

@@ -257,6 +257,7 @@ impl ServerBuilder {
             feed,
             events,
             commands: pipeline.commands,
+            estop: pipeline.estop,
             pose,
             started,
             config,
@@ -349,6 +350,9 @@ pub struct Server {
     events: EventLog,
     /// Inject commands here.
     commands: mpsc::Sender<ControlRequest>,
+    /// The e-stop latch itself, for a client that must latch it ahead of its own earlier commands (an
+    /// operator's websocket connection); every other e-stop goes through `commands`.
+    estop: crate::pipeline::latch::EstopLatch,
     /// Publish skeleton poses here (the skeleton ingest actor, or a test).
     pose: watch::Sender<PoseTracker>,
     /// The time the first tick was due.
@@ -411,6 +415,11 @@ impl Server {
     /// Where commands go in (the router hands each to its owner).
     pub fn commands(&self) -> &mpsc::Sender<ControlRequest> {
         &self.commands
+    }
+
+    /// The e-stop latch itself, for a client that must latch it ahead of its own earlier commands.
+    pub fn estop(&self) -> &crate::pipeline::latch::EstopLatch {
+        &self.estop
     }
 
     /// Where skeleton poses go in: the skeleton ingest publishes here, and so may a test or the simulated

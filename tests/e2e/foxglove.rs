@@ -15,7 +15,7 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 use pavlov::config::Config;
 use pavlov::control::Mode;
 use pavlov_actors::command::{ControlRequest, GatingCommand};
-use pavlov_actors::dashboard::Dashboard;
+use pavlov_actors::dashboard::{Dashboard, WebAssets};
 use pavlov_actors::foxglove::{Foxglove, TOPIC_CONFIG, TOPIC_EVENTS, TOPIC_SIGNALS, TOPIC_TICKS};
 use pavlov_actors::server::{RobotTarget, Server};
 use serde_json::Value;
@@ -306,7 +306,7 @@ async fn without_the_token_a_foxglove_client_is_refused_and_with_it_can_only_rea
     cfg.dashboard.token = Some("s3cret".into());
     cfg.dashboard.watch_without_token = false;
     let (server, fox) = start(cfg).await;
-    let dash = Dashboard::start(&server, PathBuf::from("web"))
+    let dash = Dashboard::start(&server, WebAssets::Embedded)
         .await
         .unwrap();
     let mut events = server.events().subscribe();

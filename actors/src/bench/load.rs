@@ -12,7 +12,6 @@
 
 use std::fmt;
 use std::net::SocketAddr;
-use std::path::PathBuf;
 use std::time::Duration;
 
 use futures_util::StreamExt;
@@ -23,7 +22,7 @@ use super::abuse::{Abuse, Thrown};
 use super::estop_probe::{self, EstopLatency};
 use super::reconnect::{self, Fetches};
 use crate::bench::{BenchReport, measure};
-use crate::dashboard::{Dashboard, DashboardError, DashboardStats};
+use crate::dashboard::{Dashboard, DashboardError, DashboardStats, WebAssets};
 use crate::server::{RobotTarget, Server, ServerError};
 
 /// The operators' token in the benchmark's runs.
@@ -182,19 +181,19 @@ impl fmt::Display for AbuseReport {
 pub async fn run_abuse_comparison(
     config: Config,
     duration: Duration,
-    web_dir: PathBuf,
+    assets: WebAssets,
     load: Load,
     abuse: Abuse,
 ) -> Result<AbuseReport, LoadError> {
     let (baseline, _) = run_with(
         config.clone(),
         duration,
-        web_dir.clone(),
+        assets.clone(),
         load,
         Some(Abuse::none()),
     )
     .await?;
-    let (abused, thrown) = run_with(config, duration, web_dir, load, Some(abuse)).await?;
+    let (abused, thrown) = run_with(config, duration, assets, load, Some(abuse)).await?;
     Ok(AbuseReport {
         abuse,
         baseline,
@@ -207,10 +206,10 @@ pub async fn run_abuse_comparison(
 pub async fn run_realtime_with_clients(
     config: Config,
     duration: Duration,
-    web_dir: PathBuf,
+    assets: WebAssets,
     load: Load,
 ) -> Result<LoadReport, LoadError> {
-    run_with(config, duration, web_dir, load, None)
+    run_with(config, duration, assets, load, None)
         .await
         .map(|(report, _)| report)
 }
@@ -244,7 +243,7 @@ fn spawn_abusers(
 async fn run_with(
     mut config: Config,
     duration: Duration,
-    web_dir: PathBuf,
+    assets: WebAssets,
     load: Load,
     abuse: Option<Abuse>,
 ) -> Result<(LoadReport, Option<Thrown>), LoadError> {
@@ -262,7 +261,7 @@ async fn run_with(
     let server = Server::builder(config, RobotTarget::Simulated)
         .start()
         .await?;
-    let dash = match Dashboard::start(&server, web_dir).await {
+    let dash = match Dashboard::start(&server, assets).await {
         Ok(d) => d,
         Err(e) => {
             server.shutdown().await;

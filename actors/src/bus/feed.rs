@@ -65,7 +65,7 @@ impl TickFeed {
     }
 
     /// The newest record's tick (`None` before the first).
-    pub(crate) fn last_seq(&self) -> Option<u64> {
+    pub fn last_seq(&self) -> Option<u64> {
         self.next_seq.load(Ordering::Relaxed).checked_sub(1)
     }
 

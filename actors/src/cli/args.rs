@@ -7,6 +7,7 @@ use anyhow::{Context, Result};
 use pavlov::config::{Config, ConfigError, SkeletonFormat};
 use pavlov::control::Mode;
 use pavlov::oi::Model;
+use pavlov_actors::dashboard::WebAssets;
 
 /// The stall experiment's configuration, built in so that `pavlov serve` works with no files at all.
 pub const DEFAULT_CONFIG: &str = include_str!("../../../config/stall.toml");
@@ -44,7 +45,9 @@ pub struct DashboardArgs {
     /// (open the page as http://HOST:PORT/#token=TOKEN); at least 16 characters on a non-loopback address.
     #[arg(long, value_name = "TOKEN")]
     pub token: Option<String>,
-    /// Where the dashboard's npm packages are installed (its node_modules/uplot); default: the repository's web/.
+    /// Serve the dashboard's files (index.html, *.js, *.css, node_modules/uplot/dist/) from DIR, read at
+    /// every request, instead of the copies built into the binary: for working on the page (e.g. --web-dir web
+    /// in the repository, after `npm ci --prefix web`). Default: the built-in files; nothing else is needed.
     #[arg(long, value_name = "DIR")]
     pub web_dir: Option<PathBuf>,
 }
@@ -71,15 +74,12 @@ impl DashboardArgs {
         Ok(generated)
     }
 
-    /// Where the dashboard's npm packages are.
-    pub fn web_dir(&self) -> PathBuf {
-        self.web_dir.clone().unwrap_or_else(repository_web_dir)
+    /// Where the dashboard's files come from: built in, or `--web-dir`.
+    pub fn assets(&self) -> WebAssets {
+        self.web_dir
+            .clone()
+            .map_or(WebAssets::Embedded, WebAssets::Dir)
     }
-}
-
-/// The repository's `web/` folder (where `npm ci --prefix web` installs uPlot).
-pub fn repository_web_dir() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../web"))
 }
 
 fn parse_mode(s: &str) -> Result<Mode, String> {

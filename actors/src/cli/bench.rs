@@ -7,8 +7,9 @@ use anyhow::Result;
 #[cfg(feature = "zenoh")]
 use pavlov_actors::bench::zenoh_load;
 use pavlov_actors::bench::{self, abuse::Abuse, foxglove_load, horde, load, timers};
+use pavlov_actors::dashboard::WebAssets;
 
-use super::args::{ConfigArgs, load_config, repository_web_dir, validate};
+use super::args::{ConfigArgs, load_config, validate};
 
 /// `pavlov bench`'s arguments.
 #[derive(clap::Args)]
@@ -102,7 +103,7 @@ pub async fn run(args: BenchArgs) -> Result<()> {
             reconnect_every,
         };
         let report =
-            load::run_abuse_comparison(cfg, duration, repository_web_dir(), load, Abuse::default())
+            load::run_abuse_comparison(cfg, duration, WebAssets::Embedded, load, Abuse::default())
                 .await?;
         say!("{report}");
         return Ok(());
@@ -116,7 +117,7 @@ pub async fn run(args: BenchArgs) -> Result<()> {
             reconnect_every,
         };
         let loaded =
-            load::run_realtime_with_clients(cfg.clone(), duration, repository_web_dir(), load)
+            load::run_realtime_with_clients(cfg.clone(), duration, WebAssets::Embedded, load)
                 .await?;
         say!(
             "with {} websocket clients{}{}:",

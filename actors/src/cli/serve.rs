@@ -154,7 +154,9 @@ pub async fn run(args: ServeArgs) -> Result<()> {
         .start()
         .await
         .context("cannot start the server")?;
-    let dash = match Dashboard::serve(bound, &server, dashboard.web_dir()).await {
+    let assets = dashboard.assets();
+    let page_from = assets.describe();
+    let dash = match Dashboard::serve(bound, &server, assets).await {
         Ok(d) => d,
         Err(e) => {
             server.shutdown().await;
@@ -204,6 +206,7 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     }
     say!("pavlov is driving {robot_name}; press Ctrl-C to stop");
     say!("dashboard: {}", dash.url());
+    say!("dashboard page: {page_from}");
     if let Some(token) = &generated_token {
         say!(
             "no token was given for {}, so commands need this random one (pass --token to choose one): {token}",

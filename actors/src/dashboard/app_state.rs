@@ -3,7 +3,6 @@
 //! alike: counting a refusal, refusing a foreign host or origin, checking a token against the wrong-token
 //! allowance.
 
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 
@@ -35,6 +34,8 @@ pub(crate) struct AppState {
     pub(crate) hub: HubHandle,
     /// The server's command inbox.
     pub(crate) commands: mpsc::Sender<ControlRequest>,
+    /// The e-stop latch, which an operator's connection sets ahead of its own earlier commands.
+    pub(crate) estop: crate::pipeline::latch::EstopLatch,
     /// The tick period, ms.
     pub(crate) tick_period_ms: u64,
     /// Announced signals.
@@ -59,8 +60,8 @@ pub(crate) struct AppState {
     pub(crate) rate: RateLimit,
     /// The server's health figures (for `/metrics`).
     pub(crate) health: Health,
-    /// Where `node_modules/uplot` lives.
-    pub(crate) web_dir: PathBuf,
+    /// Where the page's files come from.
+    pub(crate) assets: super::assets::WebAssets,
     /// Connected clients (shared with the hub's status).
     pub(crate) hub_counters: Arc<HubCounters>,
     /// Session counters.
@@ -187,44 +188,39 @@ pub(crate) fn refuse_foreign(state: &AppState, headers: &HeaderMap) -> Option<Re
         .map(|why| refuse(state, StatusCode::FORBIDDEN, why))
 }
 
-/// Checks the token presented by a client from `source`: 429 without looking at it when the source has
-/// used up its wrong-token allowance, 401 (and one allowance less) when it is wrong. The error is the
-/// refusal's status and reason.
+/// Checks the token presented by a client from `source`, always, in constant time: the right token is
+/// admitted whatever else its address has sent, so a guesser sharing the operator's address (every local
+/// client on a loopback server) cannot lock the operator out. Only failures are throttled: a wrong token is
+/// 401 (and one allowance less) while its address has allowance left, 429 once it has used it up. The error
+/// is the refusal's status and reason.
 pub(crate) fn check_token(
     state: &AppState,
     presented: Option<&str>,
     source: Source,
 ) -> Result<Access, (StatusCode, String)> {
+    let denied = match state.policy.check_token(presented) {
+        Ok(access) => return Ok(access),
+        Err(denied) => denied,
+    };
+    if denied != Denied::WrongToken {
+        return Err((StatusCode::UNAUTHORIZED, denied.to_string()));
+    }
     let now = std::time::Instant::now();
-    let guessing = presented.is_some() && state.policy.token_required();
-    if guessing
-        && !state
-            .throttle
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .allows(source, now)
-    {
+    let mut throttle = state
+        .throttle
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner);
+    if !throttle.allows(source, now) {
         state.token_throttled.fetch_add(1, Ordering::Relaxed);
         return Err((
             StatusCode::TOO_MANY_REQUESTS,
             format!(
-                "too many wrong tokens from {source}: one more try is allowed every {} s",
+                "too many wrong tokens from {source}: one more wrong try is answered every {} s",
                 FAILURE_REFILL.as_secs().max(1)
             ),
         ));
     }
-    match state.policy.check_token(presented) {
-        Ok(access) => Ok(access),
-        Err(denied) => {
-            if denied == Denied::WrongToken {
-                state.token_failures.fetch_add(1, Ordering::Relaxed);
-                state
-                    .throttle
-                    .lock()
-                    .unwrap_or_else(PoisonError::into_inner)
-                    .failed(source, now);
-            }
-            Err((StatusCode::UNAUTHORIZED, denied.to_string()))
-        }
-    }
+    throttle.failed(source, now);
+    state.token_failures.fetch_add(1, Ordering::Relaxed);
+    Err((StatusCode::UNAUTHORIZED, denied.to_string()))
 }

@@ -6,7 +6,8 @@
 //! at the handshake: an abuser could open thousands of sockets and send nothing (or half a request), and
 //! reopen each one as soon as it is closed. `GuardedListener` admits every new connection into the pool,
 //! evicting the oldest pending connection of the source holding the most when the pool (or the new
-//! connection's own source) is full, so a fresh connection — the operator's handshake, a `/healthz`
+//! connection's own source) is full — its silent ones first, those that never sent a byte, which the guard
+//! learns from its reads — so a fresh connection — the operator's handshake, a `/healthz`
 //! probe — from an address holding fewer always gets in. Only a source bursting past its own share
 //! faster than [`super::pending::GRACE`] has its newest connections closed at once (refused), so that it does
 //! not kill its own handshakes in flight. `GuardedIo` ends a connection that is evicted, or that has not switched to
@@ -34,7 +35,7 @@ use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::time::Sleep;
 use tokio_util::sync::WaitForCancellationFutureOwned;
 
-use super::pending::{Admission, Admitted, PendingPool};
+use super::pending::{Activity, Admission, Admitted, PendingPool};
 use super::session::worth_logging;
 use super::source::Source;
 
@@ -71,6 +72,7 @@ pub(crate) struct Peer(pub(crate) SocketAddr, pub(crate) LongResponse);
 impl<L> Connected<IncomingStream<'_, GuardedListener<L>>> for Peer
 where
     L: Listener<Addr = SocketAddr>,
+    L::Io: BytesWaiting,
 {
     fn connect_info(stream: IncomingStream<'_, GuardedListener<L>>) -> Self {
         Peer(*stream.remote_addr(), stream.io().long.clone())
@@ -120,7 +122,27 @@ impl<L> GuardedListener<L> {
     }
 }
 
-impl<L: Listener<Addr = SocketAddr>> Listener for GuardedListener<L> {
+/// Whether a just-accepted connection already has bytes waiting to be read (its request, sent at once).
+/// When the server is behind — a flood — the request of a real client is there by the time it is
+/// accepted; an idle socket's never is.
+pub(crate) trait BytesWaiting {
+    /// Bytes are waiting (never blocks, never consumes them).
+    fn bytes_waiting(&self) -> bool;
+}
+
+impl BytesWaiting for tokio::net::TcpStream {
+    fn bytes_waiting(&self) -> bool {
+        let mut one = [std::mem::MaybeUninit::<u8>::uninit(); 1];
+        // The socket is non-blocking: no bytes is WouldBlock.
+        matches!(socket2::SockRef::from(self).peek(&mut one), Ok(n) if n > 0)
+    }
+}
+
+impl<L> Listener for GuardedListener<L>
+where
+    L: Listener<Addr = SocketAddr>,
+    L::Io: BytesWaiting,
+{
     type Io = GuardedIo<L::Io>;
     type Addr = SocketAddr;
 
@@ -128,7 +150,8 @@ impl<L: Listener<Addr = SocketAddr>> Listener for GuardedListener<L> {
         loop {
             let (io, addr) = self.inner.accept().await;
             let source = Source::of(addr.ip());
-            let admission = lock(&self.pool).admit(source, tokio::time::Instant::now());
+            let speaking = io.bytes_waiting();
+            let admission = lock(&self.pool).admit(source, tokio::time::Instant::now(), speaking);
             match admission {
                 Admission::Admitted(admitted) => return self.guard(io, addr, source, admitted),
                 Admission::Refused => {
@@ -175,6 +198,7 @@ impl<L: Listener<Addr = SocketAddr>> GuardedListener<L> {
             id: admitted.id,
             deadline: Box::pin(tokio::time::sleep(self.pre_upgrade_limit)),
             evicted: Box::pin(admitted.evict.cancelled_owned()),
+            activity: admitted.activity,
         };
         let io = GuardedIo {
             inner: io,
@@ -195,6 +219,8 @@ struct PendingSeat {
     id: u64,
     deadline: Pin<Box<Sleep>>,
     evicted: Pin<Box<WaitForCancellationFutureOwned>>,
+    /// What it has sent so far (silent connections are evicted first).
+    activity: Activity,
 }
 
 impl Drop for PendingSeat {
@@ -296,7 +322,26 @@ impl<T: AsyncRead + Unpin> AsyncRead for GuardedIo<T> {
         if self.ended(cx) {
             return Poll::Ready(Err(ended_error()));
         }
-        Pin::new(&mut self.inner).poll_read(cx, buf)
+        let before = buf.filled().len();
+        let read = Pin::new(&mut self.inner).poll_read(cx, buf);
+        let on_trial = match (&self.pending, &read) {
+            (Some(seat), Poll::Ready(Ok(()))) if buf.filled().len() > before => {
+                seat.activity.read_bytes();
+                false
+            }
+            (Some(seat), Poll::Pending) => {
+                seat.activity.found_nothing() && lock(&seat.pool).over_share(seat.source)
+            }
+            _ => false,
+        };
+        if on_trial {
+            // Silent while its source is over its share: it makes room at once.
+            self.pending = None;
+            self.ended = true;
+            self.counters.evicted.fetch_add(1, Ordering::Relaxed);
+            return Poll::Ready(Err(ended_error()));
+        }
+        read
     }
 }
 
@@ -366,6 +411,12 @@ mod tests {
         }
         fn local_addr(&self) -> io::Result<SocketAddr> {
             Ok(SocketAddr::from(([127, 0, 0, 1], 1)))
+        }
+    }
+
+    impl BytesWaiting for DuplexStream {
+        fn bytes_waiting(&self) -> bool {
+            false
         }
     }
 

@@ -3,9 +3,9 @@
 //! token (401), then a seat as operator or watcher (503), all before the upgrade. `/metrics` and
 //! `/recording` check `Host` and `Origin` first ([`refuse_foreign`]: 403, counted as a refusal).
 //!
-//! The page, its script and its style sheet are compiled into the binary. uPlot is not: it is an npm
-//! dependency, served from `<web dir>/node_modules/uplot/dist/` at run time; when it is missing the
-//! server answers 503 with the command that installs it, and the page says the same.
+//! The page, its scripts, its style sheet and uPlot come from [`super::assets`]: built into the binary, or
+//! read from `--web-dir` at each request; a file missing from that directory is answered 503 with what to
+//! do (for uPlot, the command that installs it), and the page says the same.
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -18,6 +18,7 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 
 use super::app_state::{AppState, WsQuery, check_token, header_text, refuse, refuse_foreign};
+use super::assets::{INSTALL_HINT, Route};
 use super::auth::{Access, presented_token};
 use super::guard::Peer;
 use super::messages::{Hello, Limits};
@@ -25,32 +26,18 @@ use super::protocol::SUBPROTOCOL;
 use super::session::Session;
 use super::source::Source;
 
-const INDEX_HTML: &str = include_str!("../../../web/index.html");
-const STYLE_CSS: &str = include_str!("../../../web/style.css");
-/// The page's modules, by path.
-const SCRIPTS: [(&str, &str); 9] = [
-    ("/app.js", include_str!("../../../web/app.js")),
-    ("/lib.js", include_str!("../../../web/lib.js")),
-    ("/timeline.js", include_str!("../../../web/timeline.js")),
-    ("/charts.js", include_str!("../../../web/charts.js")),
-    ("/controls.js", include_str!("../../../web/controls.js")),
-    ("/panels.js", include_str!("../../../web/panels.js")),
-    ("/elbow.js", include_str!("../../../web/elbow.js")),
-    ("/learning.js", include_str!("../../../web/learning.js")),
-    ("/learnlib.js", include_str!("../../../web/learnlib.js")),
-];
-
-/// The files of the uPlot package the page loads, relative to the web directory.
-pub(crate) const UPLOT_DIST: &str = "node_modules/uplot/dist";
-/// What to run when uPlot is missing.
-pub(crate) const INSTALL_HINT: &str =
-    "run `npm ci --prefix web` in the repository, then restart the server";
-
 const CSP: &str = "default-src 'self'; connect-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'; \
 frame-ancestors 'none'; base-uri 'none'; form-action 'none'";
 
 /// `200 ok` while the tick loop runs and the robot link is up; `503` with the reason otherwise.
-async fn healthz(State(state): State<Arc<AppState>>) -> Response {
+///
+/// The probe's connection leaves the pending pool as soon as its request is read, and closes after the
+/// answer, so a probe never holds a pending place as an idle keep-alive connection.
+async fn healthz(
+    State(state): State<Arc<AppState>>,
+    ConnectInfo(Peer(_, connection)): ConnectInfo<Peer>,
+) -> Response {
+    connection.begin();
     let verdict = state.health.verdict();
     let status = match verdict {
         crate::telemetry::Verdict::Ok => StatusCode::OK,
@@ -59,6 +46,8 @@ async fn healthz(State(state): State<Arc<AppState>>) -> Response {
     let mut r = (status, verdict.describe()).into_response();
     r.headers_mut()
         .insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    r.headers_mut()
+        .insert(header::CONNECTION, HeaderValue::from_static("close"));
     r
 }
 
@@ -78,31 +67,44 @@ async fn metrics(State(state): State<Arc<AppState>>, headers: HeaderMap) -> Resp
 }
 
 /// The router of the endpoint.
-pub(crate) fn router(state: Arc<AppState>) -> Router {
+pub(crate) fn router(state: Arc<AppState>) -> Router<()> {
     let mut router = Router::new();
-    for (path, text) in SCRIPTS {
+    for route in super::assets::routes() {
+        let url = route.url.clone();
         router = router.route(
-            path,
-            get(move || async move { asset("text/javascript; charset=utf-8", text) }),
+            &url,
+            get(
+                move |State(state): State<Arc<AppState>>| async move { file(&state, &route).await },
+            ),
         );
     }
     router
-        .route(
-            "/",
-            get(|| async { asset("text/html; charset=utf-8", INDEX_HTML) }),
-        )
-        .route(
-            "/style.css",
-            get(|| async { asset("text/css; charset=utf-8", STYLE_CSS) }),
-        )
-        .route("/vendor/uplot.iife.min.js", get(uplot_js))
-        .route("/vendor/uplot.min.css", get(uplot_css))
         .route("/healthz", get(healthz))
         .route("/metrics", get(metrics))
         .route("/recording", get(super::download::recording))
         .route("/ws", get(ws_handler))
         .fallback(|| async { (StatusCode::NOT_FOUND, "not found\n") })
         .with_state(state)
+}
+
+/// One of the page's files, from where the endpoint's assets come from.
+async fn file(state: &AppState, route: &Route) -> Response {
+    match state.assets.read(route.file).await {
+        Ok(bytes) => asset(route.content_type, bytes.into_owned()),
+        Err(e) => {
+            let hint = if route.file.starts_with("node_modules/") {
+                INSTALL_HINT
+            } else {
+                "point --web-dir at the repository's web/ folder, or leave it out"
+            };
+            tracing::error!("cannot serve {}: {e}; {hint}", route.url);
+            (
+                StatusCode::SERVICE_UNAVAILABLE,
+                format!("{} is missing ({e}): {hint}\n", route.file),
+            )
+                .into_response()
+        }
+    }
 }
 
 fn asset(content_type: &'static str, body: impl IntoResponse) -> Response {
@@ -123,42 +125,6 @@ fn asset(content_type: &'static str, body: impl IntoResponse) -> Response {
         HeaderValue::from_static("no-referrer"),
     );
     r
-}
-
-/// Whether uPlot's files are where the server serves them from.
-pub(crate) fn uplot_installed(web_dir: &std::path::Path) -> bool {
-    web_dir.join(UPLOT_DIST).join("uPlot.iife.min.js").is_file()
-}
-
-async fn vendor(state: &AppState, file: &str, content_type: &'static str) -> Response {
-    let path = state.web_dir.join(UPLOT_DIST).join(file);
-    match tokio::fs::read(&path).await {
-        Ok(bytes) => asset(content_type, bytes),
-        Err(e) => {
-            tracing::error!("cannot serve {}: {e}; {INSTALL_HINT}", path.display());
-            (
-                StatusCode::SERVICE_UNAVAILABLE,
-                format!(
-                    "uPlot is not installed ({}: {e}): {INSTALL_HINT}\n",
-                    path.display()
-                ),
-            )
-                .into_response()
-        }
-    }
-}
-
-async fn uplot_js(State(state): State<Arc<AppState>>) -> Response {
-    vendor(
-        &state,
-        "uPlot.iife.min.js",
-        "text/javascript; charset=utf-8",
-    )
-    .await
-}
-
-async fn uplot_css(State(state): State<Arc<AppState>>) -> Response {
-    vendor(&state, "uPlot.min.css", "text/css; charset=utf-8").await
 }
 
 async fn ws_handler(
@@ -215,6 +181,7 @@ async fn ws_handler(
         peer,
         hub: state.hub.clone(),
         commands: state.commands.clone(),
+        estop: state.estop.clone(),
         access,
         hello,
         history_message_bytes: state

@@ -19,6 +19,7 @@
 //!   `source` address, evicting the oldest of the busiest address) and their deadline to become one;
 //! - `strict_json`: client messages parsed with duplicate keys refused;
 //! - `hello_config`: what of the configuration operators and watchers see;
+//! - [`assets`]: the page's files, built into the binary (or read from `--web-dir`);
 //! - `http`: routes, static files and the handshake; `download`: the recording being written,
 //!   finished for the download by `download_copy`;
 //! - the websocket load behind `pavlov bench --ws-clients` is [`crate::bench::load`], its abusive clients
@@ -30,6 +31,7 @@
 
 pub(crate) mod admission;
 pub(crate) mod app_state;
+pub mod assets;
 pub(crate) mod auth;
 pub(crate) mod download;
 pub(crate) mod download_copy;
@@ -51,13 +53,13 @@ pub(crate) mod source;
 pub(crate) mod strict_json;
 pub mod token_throttle;
 
+pub use assets::WebAssets;
 pub use auth::generate_token;
 /// The watcher's reduced configuration and event view, for the other endpoints that may have watchers.
 pub(crate) use hello_config::for_watcher as watcher_config;
 pub(crate) use history_messages::for_watcher as event_for_watcher;
 
 use std::net::SocketAddr;
-use std::path::PathBuf;
 use std::sync::atomic::AtomicU64;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -169,17 +171,17 @@ impl Dashboard {
     }
 
     /// Binds `[dashboard] bind` and starts serving the dashboard of `server` (see [`Dashboard::serve`]).
-    pub async fn start(server: &Server, web_dir: PathBuf) -> Result<Dashboard, DashboardError> {
+    pub async fn start(server: &Server, assets: WebAssets) -> Result<Dashboard, DashboardError> {
         let bound = Self::bind(&server.config().dashboard)?;
-        Self::serve(bound, server, web_dir).await
+        Self::serve(bound, server, assets).await
     }
 
-    /// Starts serving the dashboard of `server` on `bound`; uPlot is served from
-    /// `web_dir/node_modules/uplot/dist`.
+    /// Starts serving the dashboard of `server` on `bound`, its page from `assets` (built into the binary,
+    /// or a directory).
     pub async fn serve(
         bound: BoundDashboard,
         server: &Server,
-        web_dir: PathBuf,
+        assets: WebAssets,
     ) -> Result<Dashboard, DashboardError> {
         let cfg = &server.config().dashboard;
         let BoundDashboard {
@@ -207,11 +209,11 @@ impl Dashboard {
                 });
             }
         };
-        if !http::uplot_installed(&web_dir) {
+        for missing in assets.missing() {
             tracing::error!(
-                "the dashboard's chart library is missing ({}): {}",
-                web_dir.join(http::UPLOT_DIST).display(),
-                http::INSTALL_HINT
+                "the dashboard's file {} is missing (--web-dir); {}",
+                missing.display(),
+                assets::INSTALL_HINT
             );
         }
         let cancel = CancellationToken::new();
@@ -238,6 +240,7 @@ impl Dashboard {
             policy: AccessPolicy::new(cfg, addr),
             hub: hub_handle,
             commands: server.commands().clone(),
+            estop: server.estop().clone(),
             tick_period_ms: period_ms,
             signals: Signals {
                 obs: server.obs_names().to_vec(),
@@ -265,7 +268,7 @@ impl Dashboard {
             pending: pending.clone(),
             rate: rate::DEFAULT_RATE_LIMIT,
             health: server.health(),
-            web_dir,
+            assets,
             hub_counters: hub_counters.clone(),
             session_counters: Arc::new(SessionCounters::default()),
             guard_counters: guard_counters.clone(),

@@ -1,5 +1,13 @@
 //! One websocket connection: a forwarder (hub → the client's queue, at the client's rate), a writer (queue →
-//! socket) and a reader (socket → parsed commands → the server's command router → ack or error).
+//! socket), a reader (socket → parsed messages) and a worker (messages, one at a time and in order → the
+//! server's command router → ack or error).
+//!
+//! The operator first: the reader applies an operator's `estop` itself, straight into the e-stop latch
+//! ([`crate::pipeline::latch`]), the moment it reads it, however many slow commands (a run of
+//! `save_weights`) the same connection sent before and the worker still has to do; it is not refused for
+//! the rate limit either. A `release` read before such an `estop` and still waiting is answered
+//! `superseded` instead of undoing it. Other messages wait for the worker, at most [`WAITING_MESSAGES`]
+//! (beyond that, `busy` at once); what a client sent before it closed is still done.
 //!
 //! On connect the client gets `hello`, then the history (the hub's snapshot, made into messages by the
 //! writer one at a time, replies going first), then live telemetry from where the history ends: the
@@ -35,10 +43,12 @@ use super::hub::{HubHandle, Outgoing};
 use super::messages::Hello;
 use super::out_queue::{Decimator, OutQueue};
 use super::protocol::{
-    ClientCommand, ClientRequest, SessionCommand, ack_json, error_json, parse_request, peek_id,
+    ClientCommand, ClientRequest, Rejection, SessionCommand, ack_json, error_json, parse_request,
+    peek_id,
 };
 use super::rate::{RateLimit, TokenBucket};
-use crate::command::ControlRequest;
+use crate::command::{ControlCommand, ControlRequest, LatchCommand};
+use crate::pipeline::latch::EstopLatch;
 
 /// A client whose socket accepts nothing for this long is disconnected.
 pub(crate) const WRITE_STALL: Duration = Duration::from_secs(10);
@@ -49,6 +59,10 @@ pub const UNREAD_PATIENCE: Duration = Duration::from_secs(5);
 pub(crate) const OVER_LIMIT_READS_PER_SECOND: u32 = 1000;
 /// Messages over the limit between two pauses of the reader.
 const PACE_BATCH: u32 = 10;
+/// Messages read from one connection and waiting for their turn (behind a command being applied) before
+/// the next one is answered `busy` at once; above the rate limit's burst, so a client within its limit
+/// never sees it.
+pub const WAITING_MESSAGES: usize = 64;
 /// How long a command may wait for room in the router's inbox.
 const ROUTER_SEND_TIMEOUT: Duration = Duration::from_secs(1);
 /// How long a command may take to be applied before the client is told it timed out.
@@ -143,6 +157,8 @@ pub(crate) struct Session {
     pub(crate) hub: HubHandle,
     /// The server's command inbox.
     pub(crate) commands: mpsc::Sender<ControlRequest>,
+    /// The e-stop latch, set by an operator's `estop` ahead of its earlier commands.
+    pub(crate) estop: EstopLatch,
     /// What this client may do.
     pub(crate) access: Access,
     /// The `hello`, but for what is in force (taken with the history when the session starts).
@@ -256,13 +272,39 @@ impl Session {
         forwarder.abort();
     }
 
+    /// Reads the connection and answers it: a reader takes every message off the socket as it comes, and
+    /// answers an operator's `estop` at once (the latch is set before the next tick); every other message
+    /// waits in a queue of [`WAITING_MESSAGES`] for a worker that handles them one at a time, in order.
     async fn read(
         &self,
-        mut stream: futures_util::stream::SplitStream<WebSocket>,
+        stream: futures_util::stream::SplitStream<WebSocket>,
         queue: &Arc<OutQueue<Out>>,
         stride: &AtomicU64,
     ) {
-        let mut horde = HordeSubscription::default();
+        let (waiting, turns) = mpsc::channel(WAITING_MESSAGES);
+        let estops = AtomicU64::new(0);
+        let worker = self.work(turns, stride, queue, &estops);
+        tokio::pin!(worker);
+        tokio::select! {
+            ended = self.receive(stream, waiting, queue, &estops) => {
+                if ended == Ended::Closed {
+                    // What the client sent before it closed is still done, in order.
+                    (&mut worker).await;
+                }
+            }
+            () = &mut worker => {}
+        }
+    }
+
+    /// Takes messages off the socket: an operator's `estop` is applied here, ahead of the queue; the rest
+    /// are queued for [`Session::work`] (or answered `busy` when [`WAITING_MESSAGES`] are waiting).
+    async fn receive(
+        &self,
+        mut stream: futures_util::stream::SplitStream<WebSocket>,
+        waiting: mpsc::Sender<Turn>,
+        queue: &Arc<OutQueue<Out>>,
+        estops: &AtomicU64,
+    ) -> Ended {
         let mut bucket = TokenBucket::new(self.rate, std::time::Instant::now());
         let mut pace = Pacer::default();
         while let Some(msg) = stream.next().await {
@@ -270,43 +312,133 @@ impl Session {
                 msg,
                 Ok(Message::Text(_) | Message::Binary(_) | Message::Ping(_) | Message::Pong(_))
             ) && !bucket.try_take(std::time::Instant::now());
-            let reply = match msg {
-                Ok(Message::Text(text)) if over_limit => self.rate_limited(peek_id(&text)),
-                Ok(Message::Binary(_)) if over_limit => self.rate_limited(None),
-                Ok(Message::Ping(_) | Message::Pong(_)) if over_limit => {
-                    pace.over_limit().await;
-                    continue;
+            let turn = match msg {
+                Ok(Message::Text(text)) => {
+                    let request = parse_request(&text);
+                    if self.access == Access::Command
+                        && let Ok(r) = &request
+                        && r.command
+                            == ClientCommand::Control(ControlCommand::Latch(LatchCommand::Estop {}))
+                    {
+                        // Never behind this connection's queue, nor refused for its rate.
+                        estops.fetch_add(1, Ordering::SeqCst);
+                        let reply = self.estop_now(r);
+                        if !self.reply(queue, reply).await {
+                            return Ended::Unread;
+                        }
+                        if over_limit {
+                            pace.over_limit().await;
+                        }
+                        continue;
+                    }
+                    if over_limit {
+                        Turn::Reply(self.rate_limited(peek_id(&text)))
+                    } else {
+                        Turn::Request {
+                            request,
+                            estops_before: estops.load(Ordering::SeqCst),
+                        }
+                    }
                 }
-                Ok(Message::Text(text)) => self.handle(&text, stride, queue, &mut horde).await,
+                Ok(Message::Binary(_)) if over_limit => Turn::Reply(self.rate_limited(None)),
                 Ok(Message::Binary(_)) => {
                     let e = super::protocol::ProtocolError::Binary;
-                    self.error(&None, e.code(), &e.to_string())
+                    Turn::Reply(self.error(&None, e.code(), &e.to_string()))
                 }
-                Ok(Message::Ping(_) | Message::Pong(_)) => continue,
-                Ok(Message::Close(_)) => return,
+                Ok(Message::Ping(_) | Message::Pong(_)) => {
+                    if over_limit {
+                        pace.over_limit().await;
+                    }
+                    continue;
+                }
+                Ok(Message::Close(_)) => return Ended::Closed,
                 Err(e) => {
                     self.close_after_read_error(&e, queue);
-                    return;
+                    return Ended::Broken;
                 }
             };
-            if queue
-                .push_control_waiting(Out::Text(reply.into()), UNREAD_PATIENCE)
-                .await
-                .is_err()
-            {
-                let n = self.counters.closed_unread.fetch_add(1, Ordering::Relaxed) + 1;
-                if worth_logging(n) {
-                    tracing::warn!(
-                        total = n,
-                        "websocket client does not read its replies; disconnecting it"
+            match waiting.try_send(turn) {
+                Ok(()) => {}
+                Err(mpsc::error::TrySendError::Full(turn)) => {
+                    let id = match &turn {
+                        Turn::Request { request: Ok(r), .. } => r.id.clone(),
+                        _ => None,
+                    };
+                    let busy = self.error(
+                        &id,
+                        "busy",
+                        &format!(
+                            "{WAITING_MESSAGES} messages of this connection are waiting for their turn; this one was not processed"
+                        ),
                     );
+                    if !self.reply(queue, busy).await {
+                        return Ended::Unread;
+                    }
                 }
-                return;
+                Err(mpsc::error::TrySendError::Closed(_)) => return Ended::Unread,
             }
             if over_limit {
                 pace.over_limit().await;
             }
         }
+        Ended::Closed
+    }
+
+    /// Handles the queued messages one at a time, in the order they came; returns when the reader is done
+    /// and the queue is empty, or when the client does not read its replies.
+    async fn work(
+        &self,
+        mut turns: mpsc::Receiver<Turn>,
+        stride: &AtomicU64,
+        queue: &Arc<OutQueue<Out>>,
+        estops: &AtomicU64,
+    ) {
+        let mut horde = HordeSubscription::default();
+        while let Some(turn) = turns.recv().await {
+            let reply = match turn {
+                Turn::Reply(reply) => reply,
+                Turn::Request {
+                    request,
+                    estops_before,
+                } => {
+                    let overtaken = estops.load(Ordering::SeqCst) > estops_before;
+                    self.handle(request, overtaken, stride, queue, &mut horde)
+                        .await
+                }
+            };
+            if !self.reply(queue, reply).await {
+                return;
+            }
+        }
+    }
+
+    /// Queues a reply, waiting up to [`UNREAD_PATIENCE`] for room; false (counted) when the client does not
+    /// read its replies and must be disconnected.
+    async fn reply(&self, queue: &OutQueue<Out>, reply: String) -> bool {
+        if queue
+            .push_control_waiting(Out::Text(reply.into()), UNREAD_PATIENCE)
+            .await
+            .is_ok()
+        {
+            return true;
+        }
+        let n = self.counters.closed_unread.fetch_add(1, Ordering::Relaxed) + 1;
+        if worth_logging(n) {
+            tracing::warn!(
+                total = n,
+                "websocket client does not read its replies; disconnecting it"
+            );
+        }
+        false
+    }
+
+    /// An operator's `estop`, applied the moment it is read.
+    fn estop_now(&self, request: &ClientRequest) -> String {
+        self.counters.commands.fetch_add(1, Ordering::Relaxed);
+        tracing::info!(cmd = %request.cmd, "command from a websocket client, ahead of its queue");
+        let applied = self.estop.set(true);
+        let result = serde_json::to_value(&applied).unwrap_or_default();
+        ack_json(&request.id, &request.cmd, &result)
     }
 
     /// Ends the connection after the websocket layer refused what the client sent: an over-size message
@@ -358,14 +490,16 @@ impl Session {
         error_json(id, code, message)
     }
 
+    /// Answers one message; `overtaken`: an `estop` read after it was applied before it.
     async fn handle(
         &self,
-        text: &str,
+        request: Result<ClientRequest, Rejection>,
+        overtaken: bool,
         stride: &AtomicU64,
         queue: &Arc<OutQueue<Out>>,
         horde: &mut HordeSubscription,
     ) -> String {
-        let ClientRequest { id, cmd, command } = match parse_request(text) {
+        let ClientRequest { id, cmd, command } = match request {
             Ok(r) => r,
             Err(rej) => return self.error(&rej.id, rej.error.code(), &rej.error.to_string()),
         };
@@ -392,6 +526,13 @@ impl Session {
                 "unauthorized",
                 "this connection may only watch: reconnect with the token to send commands",
             ),
+            ClientCommand::Control(ControlCommand::Latch(LatchCommand::Release {})) if overtaken => {
+                self.error(
+                    &id,
+                    "superseded",
+                    "an estop sent after this release was applied before it, so the release was not: send release again to release the e-stop",
+                )
+            }
             ClientCommand::Control(command) => {
                 self.counters.commands.fetch_add(1, Ordering::Relaxed);
                 tracing::info!(cmd = %cmd, "command from a websocket client");
@@ -487,6 +628,27 @@ impl Session {
             }),
         )
     }
+}
+
+/// A message waiting for its turn: a request (and how many e-stops had been applied ahead of the queue
+/// when it was read), or a reply already made (a refusal), kept in order with the others.
+enum Turn {
+    Request {
+        request: Result<ClientRequest, Rejection>,
+        estops_before: u64,
+    },
+    Reply(String),
+}
+
+/// Why the reader stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Ended {
+    /// The client closed the connection: what it sent before is still answered.
+    Closed,
+    /// The websocket layer refused what it sent (it is being closed with a code).
+    Broken,
+    /// It does not read its replies.
+    Unread,
 }
 
 /// Slows the reader of a connection that is over its rate limit: a pause after every [`PACE_BATCH`]

@@ -1,8 +1,11 @@
 //! The throttle on wrong tokens: each `Source` may present a wrong token [`FAILURE_BURST`] times in a
-//! row, then about once every [`FAILURE_REFILL`] (a token bucket that only failures draw from). A source
-//! with no failure left is answered 429 at once, before its token is even compared, so guessing a token
-//! costs a second per guess per address instead of a fraction of a millisecond. A right token never
-//! draws from the bucket, and other sources are not affected.
+//! row, then about once every [`FAILURE_REFILL`] (a token bucket that only failures draw from); its wrong
+//! tokens beyond that are answered 429 (with `Retry-After`) instead of 401, and are neither logged nor
+//! counted as failures one by one. It throttles failures only: every token is compared (in constant time)
+//! first, and the right one is admitted even from an address being throttled, so a guesser cannot lock out
+//! an operator who shares its address (every local client of a loopback server is 127.0.0.1). What makes
+//! guessing hopeless is the token's strength (at least 60 bits on a public bind, `pavlov::config`), not this
+//! throttle. Other sources are not affected.
 //!
 //! The table is bounded: past `MAX_SOURCES` entries, the sources whose buckets have refilled are
 //! forgotten (they are indistinguishable from new ones), and if that frees nothing the table starts

@@ -23,6 +23,7 @@
 
 pub(crate) mod actuation;
 pub(crate) mod gating;
+pub mod latch;
 pub(crate) mod learning;
 pub(crate) mod router;
 pub(crate) mod sensor_ingest;
@@ -78,6 +79,8 @@ pub(crate) struct PipelineParts {
 pub(crate) struct Pipeline {
     /// The command inbox (the router's).
     pub(crate) commands: mpsc::Sender<ControlRequest>,
+    /// The e-stop latch, for the clients that set it ahead of their other commands.
+    pub(crate) estop: latch::EstopLatch,
     /// Publish skeleton poses here.
     pub(crate) pose: watch::Sender<PoseTracker>,
     /// The ticker's figures.
@@ -121,6 +124,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
     let (learning_cmd_tx, learning_cmd_rx) = mpsc::channel(INBOX_CAPACITY);
     let (link_cmd_tx, link_cmd_rx) = mpsc::channel(INBOX_CAPACITY);
     let (estop_tx, estop_rx) = watch::channel(false);
+    let estop = latch::EstopLatch::new(estop_tx, Some((events.clone(), feed.clone())));
     let (stats_tx, stats_rx) = watch::channel(ActuationStats::default());
     let (pose_tx, pose_rx) = watch::channel(PoseTracker::new(config.skeleton.max_joint_age_ms));
     let ticks = SharedTickStats::default();
@@ -190,8 +194,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
         tokio::spawn(router::route(
             command_rx,
             Routes {
-                estop: estop_tx,
-                events: Some((events, feed)),
+                estop: estop.clone(),
                 gating: gating_cmd_tx,
                 learning: learning_cmd_tx,
                 link: link_cmd_tx,
@@ -202,6 +205,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
     ];
     Pipeline {
         commands: command_tx,
+        estop,
         pose: pose_tx,
         ticks,
         timer: ticker.timer,

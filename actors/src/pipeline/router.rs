@@ -1,24 +1,21 @@
 //! The router: takes every [`ControlRequest`] from the server's one command inbox and hands it to its
 //! owner (the vocabulary is in [`crate::command`]). The e-stop latch it applies itself, straight into the
-//! `watch` that actuation and gating read, so it works even if they stalled; every other command goes with
+//! `watch` that actuation and gating read ([`super::latch`]), so it works even if they stalled; every other command goes with
 //! its reply channel to its owner's inbox without waiting, and a full inbox is answered `busy` at once.
 
-use pavlov::event::EventKind;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 
-use crate::bus::{EventLog, TickFeed};
+use super::latch::EstopLatch;
 use crate::command::{
-    Applied, CommandError, ControlCommand, ControlRequest, Envelope, GatingCommand, LatchCommand,
+    CommandError, ControlCommand, ControlRequest, Envelope, GatingCommand, LatchCommand,
     LearningCommand, LinkCommand, RecorderCommand, Reply,
 };
 
 /// Where the router sends things.
 pub(crate) struct Routes {
     /// The e-stop latch that actuation and gating watch.
-    pub(crate) estop: watch::Sender<bool>,
-    /// Where e-stop changes are announced, and the feed that tells the newest tick.
-    pub(crate) events: Option<(EventLog, TickFeed)>,
+    pub(crate) estop: EstopLatch,
     /// Gating's inbox.
     pub(crate) gating: mpsc::Sender<Envelope<GatingCommand>>,
     /// Learning's inbox.
@@ -47,14 +44,7 @@ pub(crate) async fn route(
         match command {
             ControlCommand::Latch(c) => {
                 let on = matches!(c, LatchCommand::Estop {});
-                routes.estop.send_replace(on);
-                if on {
-                    tracing::warn!("e-stop latched");
-                }
-                if let Some((events, feed)) = &routes.events {
-                    events.emit(feed.last_seq(), EventKind::EStop { latched: on });
-                }
-                let _ = reply.send(Ok(Applied::Estop { estop: on }));
+                let _ = reply.send(Ok(routes.estop.set(on)));
             }
             ControlCommand::Gating(c) => forward(&routes.gating, c, reply, "gating"),
             ControlCommand::Learning(c) => forward(&routes.learning, c, reply, "learning"),
@@ -85,7 +75,9 @@ fn forward<C>(to: &mpsc::Sender<Envelope<C>>, command: C, reply: Reply, owner: &
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::command::Applied;
     use pavlov::control::Mode;
+    use tokio::sync::watch;
 
     #[tokio::test]
     async fn the_router_answers_busy_at_once_instead_of_waiting_for_a_full_inbox() {
@@ -98,8 +90,7 @@ mod tests {
         let router = tokio::spawn(route(
             rx,
             Routes {
-                estop,
-                events: None,
+                estop: EstopLatch::new(estop, None),
                 gating,
                 learning,
                 link,

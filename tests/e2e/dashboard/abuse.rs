@@ -12,14 +12,13 @@ use super::abusers as abuse;
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use futures_util::{SinkExt, StreamExt};
 use pavlov::config::Config;
-use pavlov_actors::dashboard::Dashboard;
 use pavlov_actors::dashboard::rate::DEFAULT_RATE_LIMIT;
 use pavlov_actors::dashboard::session::UNREAD_PATIENCE;
+use pavlov_actors::dashboard::{Dashboard, WebAssets};
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::telemetry::prometheus_check;
 use serde_json::{Value, json};
@@ -272,7 +271,7 @@ async fn abusers_neither_delay_the_tick_nor_starve_a_well_behaved_client() {
         .start()
         .await
         .unwrap();
-    let dash = Dashboard::start(&server, PathBuf::from("web"))
+    let dash = Dashboard::start(&server, WebAssets::Embedded)
         .await
         .unwrap();
     let addr = dash.local_addr();
@@ -520,7 +519,7 @@ async fn a_client_over_the_rate_limit_is_told_and_served_again_once_tokens_retur
         .start()
         .await
         .unwrap();
-    let dash = Dashboard::start(&server, PathBuf::from("web"))
+    let dash = Dashboard::start(&server, WebAssets::Embedded)
         .await
         .unwrap();
     let mut ws = abuse::connect(dash.local_addr()).await.unwrap();
@@ -582,7 +581,7 @@ async fn idle_tcp_connections_are_bounded_and_closed_while_a_websocket_keeps_str
         .start()
         .await
         .unwrap();
-    let dash = Dashboard::start(&server, PathBuf::from("web"))
+    let dash = Dashboard::start(&server, WebAssets::Embedded)
         .await
         .unwrap();
     let addr = dash.local_addr();

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use futures_util::{SinkExt, StreamExt};
 use pavlov::config::Config;
-use pavlov_actors::dashboard::Dashboard;
+use pavlov_actors::dashboard::{Dashboard, WebAssets};
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::storage::recorder::Recorder;
 use pavlov_actors::storage::recording::RecordingHeader;
@@ -52,7 +52,7 @@ impl Lab {
             .start()
             .await
             .unwrap();
-        let dash = Dashboard::start(&server, PathBuf::from("web"))
+        let dash = Dashboard::start(&server, WebAssets::Embedded)
             .await
             .unwrap();
         Lab {

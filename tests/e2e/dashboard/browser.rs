@@ -81,7 +81,7 @@ pub(crate) fn target_dir() -> PathBuf {
 }
 
 /// The server process; stopped with SIGTERM (then SIGKILL) when dropped.
-pub(super) struct Serve(Child);
+pub(super) struct Serve(pub(super) Child);
 
 impl Drop for Serve {
     fn drop(&mut self) {

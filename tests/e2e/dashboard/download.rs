@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use pavlov_actors::dashboard::Dashboard;
+use pavlov_actors::dashboard::{Dashboard, WebAssets};
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::storage::recorder::Recorder;
 use pavlov_actors::storage::recording::{self, RecordingHeader};
@@ -54,7 +54,7 @@ impl Lab {
             .start()
             .await
             .unwrap();
-        let dash = Dashboard::start(&server, PathBuf::from("web"))
+        let dash = Dashboard::start(&server, WebAssets::Embedded)
             .await
             .unwrap();
         Lab {

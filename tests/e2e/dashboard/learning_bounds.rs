@@ -11,7 +11,7 @@ use std::time::Duration;
 use futures_util::{SinkExt, StreamExt};
 use pavlov::checkpoint::Checkpoint;
 use pavlov_actors::command::{ControlCommand, ControlRequest, LearningCommand};
-use pavlov_actors::dashboard::Dashboard;
+use pavlov_actors::dashboard::{Dashboard, WebAssets};
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::storage::checkpoint_files::list;
 use serde_json::{Value, json};
@@ -70,7 +70,7 @@ async fn divergent_step_sizes_and_long_requests_are_refused_over_the_websocket()
         .start()
         .await
         .unwrap();
-    let dash = Dashboard::start(&server, std::env::temp_dir().join("pavlov-no-web"))
+    let dash = Dashboard::start(&server, WebAssets::Embedded)
         .await
         .unwrap();
     let (mut ws, _) = tokio_tungstenite::connect_async(format!("ws://{}/ws", dash.local_addr()))

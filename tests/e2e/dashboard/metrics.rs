@@ -5,12 +5,11 @@
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
-use std::path::PathBuf;
 use std::time::Duration;
 
 use pavlov::config::Config;
 use pavlov::supervision::LinkState;
-use pavlov_actors::dashboard::Dashboard;
+use pavlov_actors::dashboard::{Dashboard, WebAssets};
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::storage::recorder::Recorder;
 use pavlov_actors::storage::recording::RecordingHeader;
@@ -121,7 +120,7 @@ async fn metrics_are_served_complete_valid_and_consistent() {
         .start()
         .await
         .unwrap();
-    let dash = Dashboard::start(&server, PathBuf::from("web"))
+    let dash = Dashboard::start(&server, WebAssets::Embedded)
         .await
         .unwrap();
     let mut feed = server.feed().subscribe();

@@ -1,7 +1,8 @@
 //! The dashboard endpoint: the websocket protocol, the browser page, abuse, who gets in when it is abused
 //! (`operator`), what it refuses to guess and keeps to itself (`strictness`), `/metrics`, the recording's
-//! download (`download`), a full disk as the page shows it (`browser_storage`), and the page without traps
-//! (`browser_traps`: one time axis, marker labels, a watcher's buttons).
+//! download (`download`), a full disk as the page shows it (`browser_storage`), the page without traps
+//! (`browser_traps`: one time axis, marker labels, a watcher's buttons), and the page of a copied binary
+//! run from an empty folder (`installed`).
 
 mod abuse;
 mod abusers;
@@ -12,10 +13,12 @@ mod browser_learning;
 mod browser_storage;
 mod browser_traps;
 mod download;
+mod installed;
 mod learning_bounds;
 mod learning_view;
 mod metrics;
 mod operator;
+mod operator_first;
 mod protocol;
 mod rig;
 mod strictness;

@@ -237,7 +237,7 @@ fn serve(args: &[&str]) -> Command {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn weak_tokens_are_refused_and_guessing_is_throttled() {
+async fn weak_tokens_are_refused_guessing_is_throttled_and_the_right_token_always_gets_in() {
     // A 2-letter token on a public bind stops the start-up, naming the key and the bound.
     let mut weak = serve(&["--bind", "0.0.0.0:0", "--token", "ab"])
         .stdout(Stdio::null())
@@ -326,24 +326,35 @@ async fn weak_tokens_are_refused_and_guessing_is_throttled() {
         throttled as f64 >= 30.0 - (f64::from(FAILURE_BURST) + burst_secs + 1.0),
         "{statuses:?} in {burst_secs} s"
     );
-    // The right token works at once from another address, not from the throttled one…
+    // The right token works at once from another address, and from the throttled one too (only failures
+    // are throttled: an operator sharing the guesser's address is not locked out)…
     let (_, hello) = ws_from(loopback(1), addr, Some(TOKEN)).await.unwrap();
     assert_eq!(hello["can_command"], true);
-    let e = ws_from(guesser, addr, Some(TOKEN)).await.unwrap_err();
-    assert_eq!(refusal(&e), 429);
-    // …until its allowance refills.
-    tokio::time::sleep(Duration::from_millis(1100)).await;
+    // A wrong guess answered 429 shows the address is throttled right now (a guess let through by a refill,
+    // on a machine that stalled the test for a second, is one more 401), and the right token right after it
+    // is admitted.
+    let (mut wrong, mut throttled) = (wrong, throttled);
+    loop {
+        let e = ws_from(guesser, addr, Some("guess-again"))
+            .await
+            .unwrap_err();
+        match refusal(&e) {
+            429 => {
+                throttled += 1;
+                break;
+            }
+            401 => wrong += 1,
+            other => panic!("a wrong guess answered {other}"),
+        }
+    }
     let (_, hello) = ws_from(guesser, addr, Some(TOKEN)).await.unwrap();
     assert_eq!(hello["can_command"], true);
     let stats = lab.dash.stats();
     assert_eq!(stats.token_failures, wrong as u64, "{stats:?}");
-    assert_eq!(stats.token_throttled, throttled as u64 + 1, "{stats:?}");
+    assert_eq!(stats.token_throttled, throttled as u64, "{stats:?}");
     let (_, metrics) = http_get_from(loopback(1), addr, "/metrics").await;
     assert!(
-        metrics.contains(&format!(
-            "pavlov_ws_token_throttled_total {}",
-            throttled + 1
-        )),
+        metrics.contains(&format!("pavlov_ws_token_throttled_total {throttled}")),
         "{metrics}"
     );
     lab.stop().await;

@@ -4,12 +4,11 @@
 //! origin/token/client-count checks, the size cap, a stalled client, the static files and shut-down.
 
 use std::net::SocketAddr;
-use std::path::PathBuf;
 use std::time::Duration;
 
 use futures_util::{SinkExt, StreamExt};
 use pavlov::config::Config;
-use pavlov_actors::dashboard::Dashboard;
+use pavlov_actors::dashboard::{Dashboard, WebAssets};
 use pavlov_actors::server::{RobotTarget, Server};
 use serde_json::{Value, json};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -29,7 +28,6 @@ const WAIT: Duration = Duration::from_secs(5);
 struct Lab {
     server: Server,
     dash: Dashboard,
-    _web: tempdir::TempDir,
 }
 
 mod tempdir {
@@ -61,20 +59,6 @@ mod tempdir {
     }
 }
 
-/// A web dir with a stand-in uPlot, so the static-file tests do not depend on `npm ci`.
-fn fake_web_dir() -> tempdir::TempDir {
-    let d = tempdir::TempDir::new("web");
-    let dist = d.path().join("node_modules/uplot/dist");
-    std::fs::create_dir_all(&dist).unwrap();
-    std::fs::write(
-        dist.join("uPlot.iife.min.js"),
-        "var uPlot = function fake() {};",
-    )
-    .unwrap();
-    std::fs::write(dist.join("uPlot.min.css"), ".uplot{}").unwrap();
-    d
-}
-
 async fn start_with(edit: impl FnOnce(&mut Config)) -> Lab {
     start_from(STALL_CONFIG, edit).await
 }
@@ -88,15 +72,10 @@ async fn start_from(toml: &str, edit: impl FnOnce(&mut Config)) -> Lab {
         .start()
         .await
         .unwrap();
-    let web = fake_web_dir();
-    let dash = Dashboard::start(&server, web.path().to_path_buf())
+    let dash = Dashboard::start(&server, WebAssets::Embedded)
         .await
         .unwrap();
-    Lab {
-        server,
-        dash,
-        _web: web,
-    }
+    Lab { server, dash }
 }
 
 /// Stops the server; its own shut-down is tested elsewhere, so a slow one only warns here.
@@ -1027,10 +1006,13 @@ async fn the_page_its_assets_and_healthz_are_served() {
     assert!(body.contains("new WebSocket"));
     assert_eq!(http_get(addr, "/lib.js").await.0, 200);
     assert_eq!(http_get(addr, "/style.css").await.0, 200);
+    // uPlot, built into the binary from web/node_modules.
     let (status, _, body) = http_get(addr, "/vendor/uplot.iife.min.js").await;
-    assert_eq!(
-        (status, body.as_str()),
-        (200, "var uPlot = function fake() {};")
+    assert_eq!(status, 200);
+    assert!(
+        body.contains("uPlot") && body.len() > 20_000,
+        "{}",
+        body.len()
     );
     assert_eq!(http_get(addr, "/vendor/uplot.min.css").await.0, 200);
     assert_eq!(healthy(addr).await, (200, "ok".to_string()));
@@ -1041,22 +1023,27 @@ async fn the_page_its_assets_and_healthz_are_served() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_missing_uplot_is_reported_with_the_install_command() {
+async fn a_web_dir_without_uplot_is_reported_with_the_install_command() {
     let mut cfg = Config::from_toml(STALL_CONFIG).unwrap();
     cfg.dashboard.bind = "127.0.0.1:0".into();
     let server = Server::builder(cfg, RobotTarget::Simulated)
         .start()
         .await
         .unwrap();
-    let empty = tempdir::TempDir::new("empty");
-    let dash = Dashboard::start(&server, PathBuf::from(empty.path()))
+    // --web-dir with the page but no node_modules: the page is read from it, uPlot's absence is named.
+    let dev = tempdir::TempDir::new("dev-web");
+    std::fs::write(dev.path().join("index.html"), "<p>the page under work</p>").unwrap();
+    let dash = Dashboard::start(&server, WebAssets::Dir(dev.path().to_path_buf()))
         .await
         .unwrap();
     let (status, _, body) = http_get(dash.local_addr(), "/vendor/uplot.iife.min.js").await;
     assert_eq!(status, 503);
     assert!(body.contains("npm ci --prefix web"), "{body}");
-    // The page itself still loads.
-    assert_eq!(http_get(dash.local_addr(), "/").await.0, 200);
+    let (status, _, body) = http_get(dash.local_addr(), "/").await;
+    assert_eq!((status, body.as_str()), (200, "<p>the page under work</p>"));
+    let (status, _, body) = http_get(dash.local_addr(), "/app.js").await;
+    assert_eq!(status, 503);
+    assert!(body.contains("--web-dir"), "{body}");
     dash.shutdown().await;
     stop_server(server).await;
 }
@@ -1066,7 +1053,7 @@ async fn shutdown_closes_clients_with_going_away() {
     let lab = start().await;
     let (mut ws, _) = lab.connect().await;
     next_of(&mut ws, "tick").await;
-    let Lab { server, dash, _web } = lab;
+    let Lab { server, dash } = lab;
     dash.shutdown().await;
     let code = loop {
         match tokio::time::timeout(WAIT, ws.next())

@@ -5,12 +5,11 @@
 #![allow(dead_code)]
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use futures_util::{SinkExt, StreamExt};
 use pavlov::config::Config;
-use pavlov_actors::dashboard::Dashboard;
+use pavlov_actors::dashboard::{Dashboard, WebAssets};
 use pavlov_actors::server::{RobotTarget, Server};
 use serde_json::{Value, json};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -50,7 +49,7 @@ impl Lab {
             .start()
             .await
             .unwrap();
-        let dash = Dashboard::start(&server, PathBuf::from("web"))
+        let dash = Dashboard::start(&server, WebAssets::Embedded)
             .await
             .unwrap();
         Lab { server, dash }

@@ -13,7 +13,7 @@ use futures_util::StreamExt;
 use pavlov::config::Config;
 use pavlov::event::EventKind;
 use pavlov::record::SafetyStop;
-use pavlov_actors::dashboard::Dashboard;
+use pavlov_actors::dashboard::{Dashboard, WebAssets};
 use pavlov_actors::server::{RobotTarget, Server};
 use serde_json::Value;
 use tokio_tungstenite::tungstenite::Message;
@@ -227,7 +227,7 @@ async fn hello_tick_status() -> (Value, Value, Value) {
         .start()
         .await
         .unwrap();
-    let dash = Dashboard::start(&server, super::root().join("web"))
+    let dash = Dashboard::start(&server, WebAssets::Embedded)
         .await
         .unwrap();
     let url = format!("ws://{}/ws", dash.local_addr());

@@ -4,11 +4,10 @@
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
-use std::path::PathBuf;
 use std::time::Duration;
 
 use pavlov::config::Config;
-use pavlov_actors::dashboard::Dashboard;
+use pavlov_actors::dashboard::{Dashboard, WebAssets};
 use pavlov_actors::server::{RobotTarget, Server};
 use pavlov_actors::telemetry::prometheus_check::{Family, parse};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -60,7 +59,7 @@ async fn start(cfg: Config) -> (Server, Dashboard) {
         .start()
         .await
         .unwrap();
-    let dash = Dashboard::start(&server, PathBuf::from("web"))
+    let dash = Dashboard::start(&server, WebAssets::Embedded)
         .await
         .unwrap();
     (server, dash)
