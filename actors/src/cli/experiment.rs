@@ -72,7 +72,7 @@ pub struct InteractionArgs {
     /// --sensitivity).
     #[arg(long, value_name = "N")]
     pub runs: Option<usize>,
-    /// Minutes per run (default 10, the paper's "under 10"; 60 with --curve).
+    /// Minutes per run (default 10, the paper's "under 10"; 60 with --curve or --sensitivity).
     #[arg(long, value_name = "MIN")]
     pub minutes: Option<f64>,
     /// Length of a window of the time course, minutes (5: about 80 commands per policy per window over 3
