@@ -265,8 +265,11 @@ pub(crate) fn for_every_renderer(svg: &str) -> String {
     out
 }
 
-/// Every `<polyline ... points="x,y x,y"` as `<path ... d="Mx,y Lx,y"`: ImageMagick's reader closes a
-/// polyline back to its first point.
+/// Every `<polyline ... points="a b c"` as `<path ... d="Ma Lb Mb Lc"`: one two-point subpath per segment,
+/// with round caps where there are several (so the segments meet as round joins). ImageMagick's reader
+/// closes a polyline back to its first point, and at a density above its default (`-density 300`, how a
+/// figure is rasterised for print) also a path of three points or more: a stray straight line from a
+/// series' first point to its last, seen on `fig_curve`'s lines. A two-point subpath has nothing to close.
 fn polylines_as_paths(svg: &str) -> String {
     let mut out = String::with_capacity(svg.len());
     let mut rest = svg;
@@ -279,14 +282,21 @@ fn polylines_as_paths(svg: &str) -> String {
             let v0 = p + " points=\"".len();
             let len = tag[v0..].find('"')?;
             let pts: Vec<&str> = tag[v0..v0 + len].split_whitespace().collect();
-            let d = pts
-                .iter()
-                .enumerate()
-                .map(|(i, p)| format!("{}{p}", if i == 0 { 'M' } else { 'L' }))
-                .collect::<Vec<_>>()
-                .join(" ");
+            let d = match pts.as_slice() {
+                [only] => format!("M{only}"),
+                _ => pts
+                    .windows(2)
+                    .map(|w| format!("M{} L{}", w[0], w[1]))
+                    .collect::<Vec<_>>()
+                    .join(" "),
+            };
+            let caps = if pts.len() > 2 {
+                " stroke-linecap=\"round\""
+            } else {
+                ""
+            };
             Some(format!(
-                "<path {} d=\"{d}\"{}",
+                "<path {}{caps} d=\"{d}\"{}",
                 &tag["<polyline ".len()..p],
                 &tag[v0 + len + 1..]
             ))
@@ -404,22 +414,28 @@ pub(crate) fn panel_header<DB: DrawingBackend>(
         st.px(TITLE_PT * 1.7)
     };
     let row_px = st.px(SMALL_PT * 1.5);
-    let width = area.dim_in_pixel().0 as i32;
     let text = st.text(SMALL_PT).pos(Pos::new(HPos::Left, VPos::Center));
-    // Each entry's place: (row, x).
+    // Each entry's place: (row, x). Laid out in points, with every label measured at the PNG's scale
+    // (type does not measure exactly in proportion to its size), so that the SVG (96 px per inch) and the
+    // PNG (300) break the legend into the same rows.
+    let width_pt = f64::from(area.dim_in_pixel().0) / st.px_per_pt;
+    let measure = Style::at_dpi(PNG_DPI);
+    let measured = measure.text(SMALL_PT);
     let mut places = Vec::with_capacity(legend.len());
-    let (mut row, mut x) = (0i32, st.px(10.0));
+    let (mut row, mut x_pt) = (0i32, 10.0);
     for (label, _, _) in legend {
-        let text_w = area
-            .estimate_text_size(label, &text)
-            .map_or(label.len() as u32 * st.upx(4.0), |s| s.0) as i32;
-        let w = st.px(20.0) + text_w;
-        if x + w > width && x > st.px(10.0) {
+        let text_pt = area
+            .estimate_text_size(label, &measured)
+            .map_or(label.len() as f64 * 4.0, |s| {
+                f64::from(s.0) / measure.px_per_pt
+            });
+        let w_pt = 20.0 + text_pt;
+        if x_pt + w_pt > width_pt && x_pt > 10.0 {
             row += 1;
-            x = st.px(10.0);
+            x_pt = 10.0;
         }
-        places.push((row, x));
-        x += w + st.px(10.0);
+        places.push((row, st.px(x_pt)));
+        x_pt += w_pt + 10.0;
     }
     let rows = if legend.is_empty() { 0 } else { row + 1 };
     let (head, body) = area.split_vertically(title_px + rows * row_px);
@@ -742,12 +758,12 @@ mod tests {
     }
 
     #[test]
-    fn the_svg_has_no_opacity_and_no_relative_text_offsets() {
-        let svg = r##"<svg><polyline fill="none" opacity="1" stroke="#000" points="1,2 3,4 "/><text x="8" y="10" dy="0.76em" text-anchor="start" font-size="10" opacity="1" fill="#000">a</text><text x="1" y="20" dy="-0.5ex" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##;
+    fn the_svg_has_no_opacity_no_relative_text_offsets_and_no_path_to_close() {
+        let svg = r##"<svg><polyline fill="none" opacity="1" stroke="#000" points="1,2 3,4 "/><polyline fill="none" stroke="#000" points="1,2 3,4 5,2 "/><text x="8" y="10" dy="0.76em" text-anchor="start" font-size="10" opacity="1" fill="#000">a</text><text x="1" y="20" dy="-0.5ex" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##;
         let out = for_every_renderer(svg);
         assert_eq!(
             out,
-            r##"<svg><path fill="none" stroke="#000" d="M1,2 L3,4"/><text stroke="none" x="8" y="17.6" text-anchor="start" font-size="10" fill="#000">a</text><text stroke="none" x="1" y="17.5" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##
+            r##"<svg><path fill="none" stroke="#000" d="M1,2 L3,4"/><path fill="none" stroke="#000" stroke-linecap="round" d="M1,2 L3,4 M3,4 L5,2"/><text stroke="none" x="8" y="17.6" text-anchor="start" font-size="10" fill="#000">a</text><text stroke="none" x="1" y="17.5" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##
         );
     }
 

@@ -87,8 +87,18 @@ pub(super) fn check_figure(dir: &Path, stem: &str) {
         &o[..o.len().min(5)]
     );
     assert!(!svg.contains(" dy=\""), "{stem}.svg offsets text with dy");
-    // Lines as paths (ImageMagick closes a polyline back to its start).
+    // Lines as paths of two-point subpaths (ImageMagick closes a polyline back to its start, and at
+    // print density any path of three points or more).
     assert!(!svg.contains("<polyline"), "{stem}.svg has polylines");
+    for d in svg.split(" d=\"").skip(1) {
+        let d = d.split('"').next().unwrap_or("");
+        for sub in d.split('M').skip(1) {
+            assert!(
+                sub.matches('L').count() <= 1,
+                "{stem}.svg has a path M{sub}"
+            );
+        }
+    }
     // Text in the bundled font, named alone (ImageMagick cannot read a list of families); 8 pt ticks are
     // 10.7 CSS px, nothing smaller than 7 pt (9.3 px).
     assert!(svg.contains("font-family=\"DejaVu Sans\""), "{stem}");
