@@ -58,18 +58,21 @@ pub struct MergeArgs {
 /// `pavlov experiment interaction`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct InteractionArgs {
-    /// The time course: several seeds for an hour (defaults --runs 3 --minutes 60, no recordings); writes
-    /// curve.csv and fig_curve.svg (every study writes them; this sets the defaults for a long one).
+    /// The time course: several pairs for an hour (defaults --runs 10 --minutes 60, no recordings); writes
+    /// curve.csv and fig_curve.svg (every study writes them; this sets the defaults for a long one). Ten
+    /// pairs: the paired intervals are over pairs, and a bootstrap over fewer than 8 is too narrow.
     #[arg(long)]
     pub curve: bool,
-    /// The sensitivity table: the whole study (defaults as --curve) for each operator and learner variant,
+    /// The sensitivity table: the whole study (defaults --runs 3 --minutes 60: eleven variants, so fewer
+    /// pairs than --curve; its intervals over 3 pairs are rough) for each operator and learner variant,
     /// each labelled paper or non-paper; writes sensitivity.md and sensitivity.csv.
     #[arg(long, conflicts_with = "curve")]
     pub sensitivity: bool,
-    /// Runs per policy, each pair with its own operator (default 1, the paper; 3 with --curve).
+    /// Runs per policy, each pair with its own operator (default 1, the paper; 10 with --curve, 3 with
+    /// --sensitivity).
     #[arg(long, value_name = "N")]
     pub runs: Option<usize>,
-    /// Minutes per run (default 10, the paper's "under 10"; 60 with --curve).
+    /// Minutes per run (default 10, the paper's "under 10"; 60 with --curve or --sensitivity).
     #[arg(long, value_name = "MIN")]
     pub minutes: Option<f64>,
     /// Length of a window of the time course, minutes (5: about 80 commands per policy per window over 3
@@ -219,7 +222,13 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
         Experiment::Interaction(a) => {
             let config = load_config(a.config.as_ref(), INTERACTION_CONFIG)?;
             let long = a.curve || a.sensitivity;
-            let (runs, minutes) = if long { (3, 60.0) } else { (1, 10.0) };
+            let (runs, minutes) = if a.curve {
+                (CURVE_PAIRS, 60.0)
+            } else if a.sensitivity {
+                (SENSITIVITY_PAIRS, 60.0)
+            } else {
+                (1, 10.0)
+            };
             let name = if a.sensitivity {
                 "interaction-sensitivity"
             } else if a.curve {
@@ -285,6 +294,12 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
         }
     }
 }
+
+/// Pairs of runs of the time course (`--curve`) by default: its paired intervals resample pairs, and a
+/// percentile bootstrap over fewer than [`pavlov::analysis::bootstrap::FEW_PAIRS`] is too narrow.
+const CURVE_PAIRS: usize = 10;
+/// Pairs of runs per variant of the sensitivity table by default (eleven variants of an hour each).
+const SENSITIVITY_PAIRS: usize = 3;
 
 /// The most runs per policy a stall study takes from the command line (each is a few seconds of CPU).
 const MAX_STALL_RUNS: usize = 1000;

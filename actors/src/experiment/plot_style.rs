@@ -7,9 +7,14 @@
 //!   pt, the caption line and legends 7.5 pt at that width.
 //! - **One bundled font.** DejaVu Sans (from the `dejavu` crate; its licence is the Bitstream Vera / Arev
 //!   licence shipped in that crate) is registered for plotters' `ab_glyph` text, so PNGs never depend on
-//!   the fonts a machine has; the SVG names it first and falls back to any sans-serif.
+//!   the fonts a machine has. The SVG names that one family and no fallback list: ImageMagick's own SVG
+//!   reader cannot parse a list (`DejaVu Sans, sans-serif` in any spelling, or a `<style>` rule with
+//!   one) and draws every text in its heavy default font instead; rsvg and browsers find DejaVu Sans where
+//!   it is installed (Debian's `fonts-dejavu-core`) and use their default font where it is not.
 //! - **Renderer-proof.** Solid colours only (no opacity anywhere): light grey major grid lines, no minor
-//!   grid, light solid fills for bands and bars. Chromium, rsvg and ImageMagick then agree.
+//!   grid, light solid fills for bands and bars; no rotated text (the y axis's title is written
+//!   horizontally above the plot); lines broken where they turn back sharply (plotters' bitmap mitres
+//!   would draw spikes there). Chromium, rsvg and ImageMagick then agree with the PNG.
 //! - **Distinguishable series.** Each series has a colour and a dash pattern; reference lines (zero, 90°)
 //!   are drawn without a legend entry.
 //! - **Legends outside the data**, in a row under the panel title; a caption line under the figure says
@@ -27,7 +32,7 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 pub(crate) type Io = std::io::Result<()>;
 
 /// The family name the bundled font is registered under and written into the SVGs.
-pub(crate) const FONT: &str = "DejaVu Sans, sans-serif";
+pub(crate) const FONT: &str = "DejaVu Sans";
 
 /// Pixels per inch of the PNGs.
 pub(crate) const PNG_DPI: f64 = 300.0;
@@ -89,7 +94,7 @@ impl Dash {
         match self {
             Dash::Solid => None,
             Dash::Dashed => Some((4.0, 2.5)),
-            Dash::Dotted => Some((1.2, 1.8)),
+            Dash::Dotted => Some((1.5, 3.0)),
         }
     }
 }
@@ -234,9 +239,11 @@ pub(crate) fn save<F: Figure>(dir: &Path, stem: &str, fig: &F) -> Io {
 }
 
 /// plotters' SVG made to render the same in browsers, rsvg and ImageMagick's own SVG reader, which fills a
-/// `fill="none"` polyline black when an `opacity` attribute follows, closes polylines, and ignores a text's
-/// `dy`: every `opacity="1"` (the default) is dropped, polylines are written as paths, and each text's `dy` (in em or ex of its font size) is folded into
-/// its `y` (in its own coordinates, so a rotated label moves as before).
+/// `fill="none"` polyline black when an `opacity` attribute follows, closes polylines, ignores a text's
+/// `dy` and outlines text with a stroke (bold-looking type) unless told not to: every `opacity="1"` (the
+/// default) is dropped, polylines are written as paths, each text's `dy` (in em or ex of its font size) is
+/// folded into its `y` (in its own coordinates, so a rotated label moves as before), and every text
+/// without a stroke says `stroke="none"`.
 pub(crate) fn for_every_renderer(svg: &str) -> String {
     let svg = polylines_as_paths(&svg.replace(" opacity=\"1\"", ""));
     let mut out = String::with_capacity(svg.len());
@@ -246,15 +253,23 @@ pub(crate) fn for_every_renderer(svg: &str) -> String {
         out.push_str(before);
         let end = tag_on.find('>').map_or(tag_on.len(), |e| e + 1);
         let (tag, after) = tag_on.split_at(end);
-        out.push_str(&fold_dy(tag));
+        let tag = fold_dy(tag);
+        if tag.contains(" stroke=\"") {
+            out.push_str(&tag);
+        } else {
+            out.push_str(&tag.replacen("<text ", "<text stroke=\"none\" ", 1));
+        }
         rest = after;
     }
     out.push_str(rest);
     out
 }
 
-/// Every `<polyline ... points="x,y x,y"` as `<path ... d="Mx,y Lx,y"`: ImageMagick's reader closes a
-/// polyline back to its first point.
+/// Every `<polyline ... points="a b c"` as `<path ... d="Ma Lb Mb Lc"`: one two-point subpath per segment,
+/// with round caps where there are several (so the segments meet as round joins). ImageMagick's reader
+/// closes a polyline back to its first point, and at a density above its default (`-density 300`, how a
+/// figure is rasterised for print) also a path of three points or more: a stray straight line from a
+/// series' first point to its last, seen on `fig_curve`'s lines. A two-point subpath has nothing to close.
 fn polylines_as_paths(svg: &str) -> String {
     let mut out = String::with_capacity(svg.len());
     let mut rest = svg;
@@ -267,14 +282,21 @@ fn polylines_as_paths(svg: &str) -> String {
             let v0 = p + " points=\"".len();
             let len = tag[v0..].find('"')?;
             let pts: Vec<&str> = tag[v0..v0 + len].split_whitespace().collect();
-            let d = pts
-                .iter()
-                .enumerate()
-                .map(|(i, p)| format!("{}{p}", if i == 0 { 'M' } else { 'L' }))
-                .collect::<Vec<_>>()
-                .join(" ");
+            let d = match pts.as_slice() {
+                [only] => format!("M{only}"),
+                _ => pts
+                    .windows(2)
+                    .map(|w| format!("M{} L{}", w[0], w[1]))
+                    .collect::<Vec<_>>()
+                    .join(" "),
+            };
+            let caps = if pts.len() > 2 {
+                " stroke-linecap=\"round\""
+            } else {
+                ""
+            };
             Some(format!(
-                "<path {} d=\"{d}\"{}",
+                "<path {}{caps} d=\"{d}\"{}",
                 &tag["<polyline ".len()..p],
                 &tag[v0 + len + 1..]
             ))
@@ -392,22 +414,28 @@ pub(crate) fn panel_header<DB: DrawingBackend>(
         st.px(TITLE_PT * 1.7)
     };
     let row_px = st.px(SMALL_PT * 1.5);
-    let width = area.dim_in_pixel().0 as i32;
     let text = st.text(SMALL_PT).pos(Pos::new(HPos::Left, VPos::Center));
-    // Each entry's place: (row, x).
+    // Each entry's place: (row, x). Laid out in points, with every label measured at the PNG's scale
+    // (type does not measure exactly in proportion to its size), so that the SVG (96 px per inch) and the
+    // PNG (300) break the legend into the same rows.
+    let width_pt = f64::from(area.dim_in_pixel().0) / st.px_per_pt;
+    let measure = Style::at_dpi(PNG_DPI);
+    let measured = measure.text(SMALL_PT);
     let mut places = Vec::with_capacity(legend.len());
-    let (mut row, mut x) = (0i32, st.px(10.0));
+    let (mut row, mut x_pt) = (0i32, 10.0);
     for (label, _, _) in legend {
-        let text_w = area
-            .estimate_text_size(label, &text)
-            .map_or(label.len() as u32 * st.upx(4.0), |s| s.0) as i32;
-        let w = st.px(20.0) + text_w;
-        if x + w > width && x > st.px(10.0) {
+        let text_pt = area
+            .estimate_text_size(label, &measured)
+            .map_or(label.len() as f64 * 4.0, |s| {
+                f64::from(s.0) / measure.px_per_pt
+            });
+        let w_pt = 20.0 + text_pt;
+        if x_pt + w_pt > width_pt && x_pt > 10.0 {
             row += 1;
-            x = st.px(10.0);
+            x_pt = 10.0;
         }
-        places.push((row, x));
-        x += w + st.px(10.0);
+        places.push((row, st.px(x_pt)));
+        x_pt += w_pt + 10.0;
     }
     let rows = if legend.is_empty() { 0 } else { row + 1 };
     let (head, body) = area.split_vertically(title_px + rows * row_px);
@@ -462,8 +490,8 @@ fn legend_sample<DB: DrawingBackend>(
     Ok(())
 }
 
-/// The chart's mesh: axis titles with units, tick labels, a light major grid (none along `no_x_grid`),
-/// no minor grid.
+/// The chart's mesh: axis titles with units (the y title horizontal, [`y_title`]), tick labels, a light
+/// major grid, no minor grid.
 pub(crate) fn mesh<DB: DrawingBackend>(
     ch: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     st: &Style,
@@ -480,11 +508,39 @@ pub(crate) fn mesh<DB: DrawingBackend>(
         .x_labels(6)
         .y_labels(5)
         .x_desc(x_desc)
-        .y_desc(y_desc)
         .x_label_formatter(&tick_label)
         .y_label_formatter(&tick_label)
         .draw()
-        .map_err(err)
+        .map_err(err)?;
+    y_title(ch, st, y_desc)
+}
+
+/// Room above a chart's plot for its [`y_title`], pt.
+pub(crate) const Y_TITLE_ROOM_PT: f64 = TICK_PT * 1.6;
+
+/// The y axis's title (quantity and unit), written horizontally above the plot's top left corner, where
+/// the chart leaves [`Y_TITLE_ROOM_PT`] for it. Not rotated: ImageMagick's own SVG reader drops a text
+/// rotated about a point (`rotate(270, x, y)`, what plotters writes) and mirrors one rotated after a
+/// translation, so a rotated axis title is the one thing the three renderers cannot agree on.
+pub(crate) fn y_title<DB: DrawingBackend, X, Y>(
+    ch: &ChartContext<'_, DB, Cartesian2d<X, Y>>,
+    st: &Style,
+    text: &str,
+) -> Io
+where
+    X: plotters::coord::ranged1d::Ranged,
+    Y: plotters::coord::ranged1d::Ranged,
+{
+    if text.is_empty() {
+        return Ok(());
+    }
+    let plot = ch.plotting_area().strip_coord_spec();
+    plot.draw(&Text::new(
+        text.to_string(),
+        (-st.px(TICK_PT * 2.2), -st.px(3.0)),
+        st.text(TICK_PT).pos(Pos::new(HPos::Left, VPos::Bottom)),
+    ))
+    .map_err(err)
 }
 
 /// A chart on `area` with room for tick labels and axis titles in `st`.
@@ -495,7 +551,7 @@ pub(crate) fn chart<'a, DB: DrawingBackend>(
     y: std::ops::Range<f64>,
 ) -> Result<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>, std::io::Error> {
     ChartBuilder::on(area)
-        .margin_top(st.px(3.0))
+        .margin_top(st.px(Y_TITLE_ROOM_PT))
         .margin_right(st.px(12.0))
         .margin_left(st.px(2.0))
         .x_label_area_size(st.px(TICK_PT * 2.9))
@@ -504,7 +560,55 @@ pub(crate) fn chart<'a, DB: DrawingBackend>(
         .map_err(err)
 }
 
-/// Draws a line through `pts` in `c` with `dash`, `width_pt` wide.
+/// The largest change of direction, degrees, that a line keeps as one joined path. plotters' bitmap
+/// backend turns a wide path into a polygon with mitred joins and caps only the outer side of a join: at a
+/// near-reversal (a one-tick spike of the over-current flag, a step of a wheel command) the inner mitre
+/// point lies (w/2)/sin(θ/2) from the vertex, θ the angle between the segments, and the PNG showed
+/// stray spikes tens of pixels long above and below the panel. Breaking the path where it turns by more
+/// than 120° (θ < 60°) bounds every mitre by the stroke's width; the pieces meet end to end, so the line
+/// looks the same.
+const MAX_TURN_DEG: f64 = 120.0;
+
+/// `pts` (data coordinates) cut into pieces at every vertex where the line, in the pixel coordinates
+/// `px` of the same points, turns by more than [`MAX_TURN_DEG`]; each piece ends at the vertex the next
+/// one starts from. Points at the same pixel as the one before are kept (plotters skips them) and do not
+/// count as a direction.
+pub(crate) fn pieces_without_sharp_turns(
+    pts: &[(f64, f64)],
+    px: &[(i32, i32)],
+) -> Vec<Vec<(f64, f64)>> {
+    let cos_max = MAX_TURN_DEG.to_radians().cos();
+    let mut out = Vec::new();
+    let mut piece: Vec<(f64, f64)> = Vec::new();
+    // The last pixel seen and the direction that led to it.
+    let mut last: Option<(i32, i32)> = None;
+    let mut dir: Option<(f64, f64)> = None;
+    for (&p, &q) in pts.iter().zip(px) {
+        if let Some(l) = last
+            && l != q
+        {
+            let d = (f64::from(q.0 - l.0), f64::from(q.1 - l.1));
+            if let Some(prev) = dir {
+                let cos = (prev.0 * d.0 + prev.1 * d.1) / (prev.0.hypot(prev.1) * d.0.hypot(d.1));
+                if cos < cos_max
+                    && let Some(&vertex) = piece.last()
+                {
+                    out.push(std::mem::replace(&mut piece, vec![vertex]));
+                }
+            }
+            dir = Some(d);
+        }
+        last = Some(q);
+        piece.push(p);
+    }
+    if piece.len() > 1 {
+        out.push(piece);
+    }
+    out
+}
+
+/// Draws a line through `pts` in `c` with `dash`, `width_pt` wide, as one path or, where it turns
+/// sharply, several ([`pieces_without_sharp_turns`]).
 pub(crate) fn line<DB: DrawingBackend>(
     ch: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     st: &Style,
@@ -518,19 +622,22 @@ pub(crate) fn line<DB: DrawingBackend>(
         .copied()
         .filter(|p| p.0.is_finite() && p.1.is_finite())
         .collect();
-    match dash.pattern_pt() {
-        None => {
-            ch.draw_series(LineSeries::new(pts, st.line(c, width_pt)))
+    let px: Vec<(i32, i32)> = pts.iter().map(|p| ch.backend_coord(p)).collect();
+    for piece in pieces_without_sharp_turns(&pts, &px) {
+        match dash.pattern_pt() {
+            None => {
+                ch.draw_series(LineSeries::new(piece, st.line(c, width_pt)))
+                    .map_err(err)?;
+            }
+            Some((d, g)) => {
+                ch.draw_series(DashedLineSeries::new(
+                    piece,
+                    st.px(d),
+                    st.px(g),
+                    st.line(c, width_pt),
+                ))
                 .map_err(err)?;
-        }
-        Some((d, g)) => {
-            ch.draw_series(DashedLineSeries::new(
-                pts,
-                st.px(d),
-                st.px(g),
-                st.line(c, width_pt),
-            ))
-            .map_err(err)?;
+            }
         }
     }
     Ok(())
@@ -588,8 +695,7 @@ pub(crate) fn band<DB: DrawingBackend>(
         pts.iter().map(|p| (p.0, p.1)).collect::<Vec<_>>(),
         pts.iter().map(|p| (p.0, p.2)).collect(),
     ] {
-        ch.draw_series(LineSeries::new(edge, st.line(tint(c, 0.55), 0.5)))
-            .map_err(err)?;
+        line(ch, st, &edge, tint(c, 0.55), Dash::Solid, 0.5)?;
     }
     Ok(())
 }
@@ -652,13 +758,44 @@ mod tests {
     }
 
     #[test]
-    fn the_svg_has_no_opacity_and_no_relative_text_offsets() {
-        let svg = r##"<svg><polyline fill="none" opacity="1" stroke="#000" points="1,2 3,4 "/><text x="8" y="10" dy="0.76em" text-anchor="start" font-size="10" opacity="1" fill="#000">a</text><text x="1" y="20" dy="-0.5ex" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##;
+    fn the_svg_has_no_opacity_no_relative_text_offsets_and_no_path_to_close() {
+        let svg = r##"<svg><polyline fill="none" opacity="1" stroke="#000" points="1,2 3,4 "/><polyline fill="none" stroke="#000" points="1,2 3,4 5,2 "/><text x="8" y="10" dy="0.76em" text-anchor="start" font-size="10" opacity="1" fill="#000">a</text><text x="1" y="20" dy="-0.5ex" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##;
         let out = for_every_renderer(svg);
         assert_eq!(
             out,
-            r##"<svg><path fill="none" stroke="#000" d="M1,2 L3,4"/><text x="8" y="17.6" text-anchor="start" font-size="10" fill="#000">a</text><text x="1" y="17.5" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##
+            r##"<svg><path fill="none" stroke="#000" d="M1,2 L3,4"/><path fill="none" stroke="#000" stroke-linecap="round" d="M1,2 L3,4 M3,4 L5,2"/><text stroke="none" x="8" y="17.6" text-anchor="start" font-size="10" fill="#000">a</text><text stroke="none" x="1" y="17.5" font-size="10" transform="rotate(270, 1, 20)">b</text></svg>"##
         );
+    }
+
+    #[test]
+    fn a_line_is_cut_where_it_turns_back_and_only_there() {
+        // A one-tick spike (0 → 1 → 0 three pixels apart, 100 pixels high) and a right-angle step.
+        let pts = [(0.0, 0.0), (1.0, 0.0), (2.0, 1.0), (3.0, 0.0), (4.0, 0.0)];
+        let px = [(0, 100), (3, 100), (6, 0), (9, 100), (12, 100)];
+        let pieces = pieces_without_sharp_turns(&pts, &px);
+        assert_eq!(
+            pieces,
+            vec![
+                vec![(0.0, 0.0), (1.0, 0.0), (2.0, 1.0)],
+                vec![(2.0, 1.0), (3.0, 0.0), (4.0, 0.0)],
+            ],
+            "cut at the spike's tip, nowhere else"
+        );
+        // A step (90° turns) and a gentle curve stay one path; a repeated pixel is no direction.
+        let step = [(0, 0), (0, 0), (10, 0), (10, 10), (20, 10), (30, 14)];
+        let pts: Vec<(f64, f64)> = step
+            .iter()
+            .map(|&(x, y)| (f64::from(x), f64::from(y)))
+            .collect();
+        assert_eq!(pieces_without_sharp_turns(&pts, &step), vec![pts.clone()]);
+        // An exact reversal along one line is cut too.
+        let back = [(0, 0), (0, 50), (0, 10)];
+        let pts: Vec<(f64, f64)> = back
+            .iter()
+            .map(|&(x, y)| (f64::from(x), f64::from(y)))
+            .collect();
+        assert_eq!(pieces_without_sharp_turns(&pts, &back).len(), 2);
+        assert!(pieces_without_sharp_turns(&pts[..1], &back[..1]).is_empty());
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! What every figure a study writes must be: an SVG and a 300-dpi PNG of the same printed size, one or two
-//! columns of a paper wide, with no opacity anywhere and no relative text offsets (so ImageMagick renders it
-//! as browsers and rsvg do), and every printed table beside them as Markdown and CSV.
+//! columns of a paper wide, with no opacity anywhere, no relative text offsets, no rotated text and one
+//! font family (so ImageMagick renders it as browsers and rsvg do), and every printed table beside them as
+//! Markdown and CSV.
 
 use std::path::Path;
 
@@ -86,12 +87,32 @@ pub(super) fn check_figure(dir: &Path, stem: &str) {
         &o[..o.len().min(5)]
     );
     assert!(!svg.contains(" dy=\""), "{stem}.svg offsets text with dy");
-    // Lines as paths (ImageMagick closes a polyline back to its start).
+    // Lines as paths of two-point subpaths (ImageMagick closes a polyline back to its start, and at
+    // print density any path of three points or more).
     assert!(!svg.contains("<polyline"), "{stem}.svg has polylines");
-    // Text in the bundled font first; 8 pt ticks are 10.7 CSS px, nothing smaller than 7 pt (9.3 px).
+    for d in svg.split(" d=\"").skip(1) {
+        let d = d.split('"').next().unwrap_or("");
+        for sub in d.split('M').skip(1) {
+            assert!(
+                sub.matches('L').count() <= 1,
+                "{stem}.svg has a path M{sub}"
+            );
+        }
+    }
+    // Text in the bundled font, named alone (ImageMagick cannot read a list of families); 8 pt ticks are
+    // 10.7 CSS px, nothing smaller than 7 pt (9.3 px).
+    assert!(svg.contains("font-family=\"DejaVu Sans\""), "{stem}");
     assert!(
-        svg.contains("font-family=\"DejaVu Sans, sans-serif\""),
-        "{stem}"
+        !svg.contains("sans-serif"),
+        "{stem}.svg names a list of fonts"
+    );
+    // No rotated text: ImageMagick drops a text rotated about a point and mirrors one rotated otherwise;
+    // and no text outlined (ImageMagick strokes text unless told not to).
+    assert!(!svg.contains("rotate("), "{stem}.svg rotates text");
+    assert_eq!(
+        svg.matches("<text ").count(),
+        svg.matches("<text stroke=\"none\" ").count(),
+        "{stem}.svg has text without stroke=\"none\""
     );
     for part in svg.split("font-size=\"").skip(1) {
         let size: f64 = part.split('"').next().and_then(|v| v.parse().ok()).unwrap();

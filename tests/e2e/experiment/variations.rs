@@ -1,5 +1,5 @@
 //! Issue 24, item 1: the robustness study through the real binary, tiny (`--runs 1 --minutes 0.1`): it
-//! writes its table (Markdown, CSV, JSON) and forest plot into a new results folder, one row per
+//! writes its table (Markdown, CSV, JSON) and forest plot (SVG and PNG) into a new results folder, one row per
 //! variation, each variation named with its source or marked an estimate; one run per policy prints no
 //! interval; the flag refuses the options it cannot take.
 
@@ -32,6 +32,7 @@ fn a_tiny_robustness_study_writes_one_row_per_variation_and_a_forest_plot() {
         "variations.csv",
         "variations.json",
         "fig_variations.svg",
+        "fig_variations.png",
     ] {
         let len = std::fs::metadata(folder.join(f)).map_or(0, |m| m.len());
         assert!(len > 0, "{f} written");
@@ -72,7 +73,9 @@ fn a_tiny_robustness_study_writes_one_row_per_variation_and_a_forest_plot() {
         );
     }
 
-    // The forest plot: an SVG naming every variation, both panels.
+    // The forest plot: an SVG and a 300-dpi PNG in the print style of every figure, naming every
+    // variation, both panels.
+    super::figures::check_figure(&folder, "fig_variations");
     let svg = std::fs::read_to_string(folder.join("fig_variations.svg")).unwrap();
     assert!(svg.starts_with("<svg") || svg.contains("<svg"));
     assert!(svg.contains("over-current observations") && svg.contains("efficiency (m/kJ)"));

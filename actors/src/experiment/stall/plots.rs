@@ -188,7 +188,7 @@ fn bar_panel<DB: DrawingBackend>(
         .max(1e-9)
         * 1.1;
     let mut ch = ChartBuilder::on(body)
-        .margin_top(st.px(3.0))
+        .margin_top(st.px(ps::Y_TITLE_ROOM_PT))
         .margin_left(st.px(3.0))
         .margin_right(st.px(6.0))
         .x_label_area_size(st.px(4.0))
@@ -204,11 +204,11 @@ fn bar_panel<DB: DrawingBackend>(
         .label_style(st.text(8.0))
         .axis_desc_style(st.text(8.0))
         .y_labels(5)
-        .y_desc(y_desc)
         .y_label_formatter(&ps::tick_label)
         .x_labels(0)
         .draw()
         .map_err(err)?;
+    ps::y_title(&ch, st, y_desc)?;
     for (i, ((mean, se), c)) in bars.iter().zip([REACTIVE, PAVLOVIAN]).enumerate() {
         let x = i as f64;
         if !mean.is_finite() {

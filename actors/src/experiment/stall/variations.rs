@@ -13,7 +13,7 @@
 //! of all variations go through the one pool (`crate::experiment::runner::run_all`), interleaved across
 //! variations (run 0 of every variation, then run 1, …); each variation is analysed with the stall
 //! study's own statistics (`super::analyse`). The study writes `variations.md`, `variations.csv`,
-//! `variations.json` and the forest plot `fig_variations.svg` (`super::variations_forest`).
+//! `variations.json` and the forest plot `fig_variations.{svg,png}` (`super::variations_forest`).
 
 use std::path::Path;
 use std::time::Instant;
@@ -86,8 +86,19 @@ fn drive_speed(c: &mut Config, mm_s: i16) {
     };
 }
 
+/// The whole stall cycle at another speed: straight at `mm_s`, the in-place turns at half of it per wheel,
+/// the ratio of the default cycle (200 and 100 mm/s; `pavlov::control::StallDefaultPolicy::new`). The turns
+/// last 3 s as before, so they turn through a different angle (≈ 67° at 100 mm/s, ≈ 200° at 300 mm/s
+/// instead of ≈ 133°): the legs no longer head back across the enclosure the same way.
+fn cycle_speed(c: &mut Config, mm_s: i16) {
+    c.control.default_policy = Policy::StallCycle {
+        drive_mm_s: mm_s,
+        turn_mm_s: mm_s / 2,
+    };
+}
+
 /// Every variation of the study, the unchanged configuration first.
-pub const VARIATIONS: [Variation; 25] = [
+pub const VARIATIONS: [Variation; 27] = [
     Variation {
         name: "baseline",
         group: "baseline",
@@ -253,9 +264,9 @@ pub const VARIATIONS: [Variation; 25] = [
         apply: |c| c.sim.params.overcurrent_scale_a = Some(0.24),
     },
     Variation {
-        name: "speed 100 mm/s",
+        name: "straight 100 mm/s",
         group: "policy",
-        change: "default_policy = stall_cycle, drive_mm_s = 100 (turns unchanged)",
+        change: "default_policy = stall_cycle, drive_mm_s = 100, turn_mm_s = 100 (turns unchanged)",
         basis: Basis::Estimate(
             "[paper] gives no speed; 200 mm/s was chosen from the geometry (src/control/policy.rs); 100 \
              mm/s still reaches a wall within a 7 s leg (0.7 m)",
@@ -263,13 +274,33 @@ pub const VARIATIONS: [Variation; 25] = [
         apply: |c| drive_speed(c, 100),
     },
     Variation {
-        name: "speed 300 mm/s",
+        name: "straight 300 mm/s",
         group: "policy",
-        change: "default_policy = stall_cycle, drive_mm_s = 300 (turns unchanged)",
+        change: "default_policy = stall_cycle, drive_mm_s = 300, turn_mm_s = 100 (turns unchanged)",
         basis: Basis::Estimate(
             "[paper] gives no speed; 300 mm/s, within the 500 mm/s Drive Direct limit [C1 p9]",
         ),
         apply: |c| drive_speed(c, 300),
+    },
+    Variation {
+        name: "cycle 100 mm/s",
+        group: "policy",
+        change: "default_policy = stall_cycle, drive_mm_s = 100, turn_mm_s = 50 (turns slowed too)",
+        basis: Basis::Estimate(
+            "[paper] gives no speed for the straights or the turns; the whole cycle at half speed, turns \
+             at half the straight speed as in the default (≈ 67° per 3 s turn instead of ≈ 133°)",
+        ),
+        apply: |c| cycle_speed(c, 100),
+    },
+    Variation {
+        name: "cycle 300 mm/s",
+        group: "policy",
+        change: "default_policy = stall_cycle, drive_mm_s = 300, turn_mm_s = 150 (turns sped up too)",
+        basis: Basis::Estimate(
+            "[paper] gives no speed; the whole cycle at 1.5× speed, turns at half the straight speed as in \
+             the default (≈ 200° per 3 s turn), within the 500 mm/s Drive Direct limit [C1 p9]",
+        ),
+        apply: |c| cycle_speed(c, 300),
     },
     Variation {
         name: "link delay 30 ms",
@@ -604,7 +635,7 @@ pub fn csv(study: &VariationsStudy) -> String {
     s
 }
 
-/// Writes `variations.md`, `variations.csv`, `variations.json` and `fig_variations.svg` into `dir`.
+/// Writes `variations.md`, `variations.csv`, `variations.json` and `fig_variations.{svg,png}` into `dir`.
 pub fn write_all(dir: &Path, study: &VariationsStudy) -> anyhow::Result<()> {
     use anyhow::Context;
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -615,8 +646,7 @@ pub fn write_all(dir: &Path, study: &VariationsStudy) -> anyhow::Result<()> {
     write("variations.md", table(study))?;
     write("variations.csv", csv(study))?;
     write("variations.json", serde_json::to_string_pretty(study)?)?;
-    super::variations_forest::forest(&dir.join("fig_variations.svg"), study)
-        .context("cannot draw fig_variations.svg")?;
+    super::variations_forest::forest(dir, study).context("cannot draw fig_variations")?;
     Ok(())
 }
 
@@ -676,6 +706,34 @@ mod tests {
         for g in groups {
             assert!(VARIATIONS.iter().any(|v| v.group == g), "{g}");
         }
+    }
+
+    #[test]
+    fn the_speed_variations_slow_the_straights_alone_or_the_whole_cycle() {
+        let base = base();
+        let policy = |name: &str| {
+            VARIATIONS
+                .iter()
+                .find(|v| v.name == name)
+                .map(|v| v.config(&base).control.default_policy)
+                .unwrap_or_else(|| panic!("no variation {name}"))
+        };
+        let cycle = |drive_mm_s, turn_mm_s| Policy::StallCycle {
+            drive_mm_s,
+            turn_mm_s,
+        };
+        assert_eq!(policy("straight 100 mm/s"), cycle(100, 100));
+        assert_eq!(policy("straight 300 mm/s"), cycle(300, 100));
+        assert_eq!(policy("cycle 100 mm/s"), cycle(100, 50));
+        assert_eq!(policy("cycle 300 mm/s"), cycle(300, 150));
+        // The cycle variations keep the default's ratio of turn to straight speed.
+        assert_eq!(
+            base.control.default_policy,
+            cycle(
+                pavlov::control::policy::STALL_DRIVE_MM_S,
+                pavlov::control::policy::STALL_TURN_MM_S
+            )
+        );
     }
 
     #[test]
