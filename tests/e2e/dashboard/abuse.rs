@@ -568,6 +568,21 @@ async fn a_client_over_the_rate_limit_is_told_and_served_again_once_tokens_retur
     let _ = tokio::time::timeout(Duration::from_secs(5), server.shutdown()).await;
 }
 
+/// Connections refused or evicted so far: each made room in a full pending pool.
+fn made_room(dash: &Dashboard) -> u64 {
+    let stats = dash.stats();
+    stats.tcp_refused + stats.closed_evicted
+}
+
+/// Waits until `what` connections have made room (a failure timeout of 30 s, not a bound).
+async fn room_made(dash: &Dashboard, what: u64) {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while made_room(dash) < what {
+        assert!(Instant::now() < deadline, "{:?}", dash.stats());
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn idle_tcp_connections_are_bounded_and_closed_while_a_websocket_keeps_streaming() {
     use pavlov_actors::dashboard::guard::{GRACE, PRE_UPGRADE_LIMIT};
@@ -587,41 +602,48 @@ async fn idle_tcp_connections_are_bounded_and_closed_while_a_websocket_keeps_str
     let addr = dash.local_addr();
     let mut feed = server.feed().subscribe();
     let mut ws = abuse::connect(addr).await.unwrap();
-    // Fill the pending pool (the websocket is not in it) and try ten more at once, sending nothing: the
-    // ten are closed on arrival, since the twenty before them may still be handshakes in flight.
+    // Fill the pending pool (the websocket is not in it) and open ten more at once, sending nothing. Each
+    // of the ten makes room at once: it evicts the oldest connection the server has found silent, or,
+    // if none is known silent yet, it is itself refused (within its grace the twenty may still be
+    // handshakes in flight). Either way the pool stays at its size. The counters say which rule closed
+    // a connection (refused, evicted, out of time), so the waits are failure timeouts only. What this test
+    // cannot tell apart, on a machine that holds it for longer than the pre-upgrade limit, is an eviction
+    // from a timeout: then (and only then, as it observes) it checks the totals alone.
+    let filled = Instant::now();
     let mut idle = Vec::new();
-    let mut refused = Vec::new();
-    for i in 0..PENDING + EXTRA {
-        let s = tokio::net::TcpStream::connect(addr).await.unwrap();
-        if i < PENDING {
-            idle.push(s)
-        } else {
-            refused.push(s)
-        }
+    for _ in 0..PENDING + EXTRA {
+        idle.push(tokio::net::TcpStream::connect(addr).await.unwrap());
     }
-    let closed_at_once = |mut s: tokio::net::TcpStream| async move {
-        let mut buf = [0u8; 16];
-        let n = tokio::time::timeout(Duration::from_secs(1), s.read(&mut buf))
-            .await
-            .expect("closed long before the deadline")
-            .unwrap_or(0);
-        assert_eq!(n, 0);
-    };
-    for s in refused {
-        closed_at_once(s).await;
+    room_made(&dash, EXTRA as u64).await;
+    let refused_at_first = dash.stats().tcp_refused;
+    if filled.elapsed() < PRE_UPGRADE_LIMIT {
+        // No idle connection can have run out of time yet.
+        assert_eq!(made_room(&dash), EXTRA as u64, "{:?}", dash.stats());
+        assert_eq!(dash.stats().pending, PENDING);
     }
-    assert_eq!(dash.stats().tcp_refused, EXTRA as u64);
-    assert_eq!(dash.stats().pending, PENDING);
-    // Once they have had their grace, ten newcomers evict the ten oldest.
+    // Once they have had their grace, ten newcomers are never refused: each evicts a silent or the oldest
+    // connection of the address.
     tokio::time::sleep(GRACE).await;
     for _ in 0..EXTRA {
         idle.push(tokio::net::TcpStream::connect(addr).await.unwrap());
     }
-    for s in idle.drain(..EXTRA) {
-        closed_at_once(s).await;
+    room_made(&dash, 2 * EXTRA as u64).await;
+    let stalled = filled.elapsed() >= PRE_UPGRADE_LIMIT;
+    if stalled {
+        eprintln!(
+            "the machine held this test for {:?} (the pre-upgrade limit is {PRE_UPGRADE_LIMIT:?}): evictions and timeouts are checked together",
+            filled.elapsed()
+        );
+    } else {
+        assert_eq!(
+            dash.stats().tcp_refused,
+            refused_at_first,
+            "{:?}",
+            dash.stats()
+        );
+        assert_eq!(made_room(&dash), 2 * EXTRA as u64, "{:?}", dash.stats());
+        assert_eq!(dash.stats().pending, PENDING);
     }
-    assert_eq!(dash.stats().closed_evicted, EXTRA as u64);
-    assert_eq!(dash.stats().pending, PENDING);
     // (Generous: the server closes them after the limit, when its timer gets the CPU.)
     let deadline = Instant::now() + PRE_UPGRADE_LIMIT + Duration::from_secs(30);
     let mut seqs = Vec::new();
@@ -661,9 +683,15 @@ async fn idle_tcp_connections_are_bounded_and_closed_while_a_websocket_keeps_str
         made.len()
     );
     let stats = dash.stats();
-    assert_eq!(stats.tcp_refused, EXTRA as u64, "{stats:?}");
-    assert_eq!(stats.closed_evicted, EXTRA as u64, "{stats:?}");
-    assert_eq!(stats.closed_no_upgrade, PENDING as u64, "{stats:?}");
+    // Every connection the test opened was closed by one rule or another, and each counted once.
+    assert_eq!(
+        stats.tcp_refused + stats.closed_evicted + stats.closed_no_upgrade,
+        (PENDING + 2 * EXTRA) as u64,
+        "{stats:?}"
+    );
+    if !stalled {
+        assert_eq!(stats.closed_no_upgrade, PENDING as u64, "{stats:?}");
+    }
     assert_eq!(stats.pending, 0, "{stats:?}");
     // Every idle connection has been closed by the server.
     for mut s in idle {
