@@ -137,6 +137,10 @@ async fn a_release_sent_before_an_estop_that_overtook_it_does_not_undo_it() {
     let mut estop_first = None;
     while release.is_none() {
         let v = next_json(&mut op).await;
+        // Replies only: events carry an `id` of their own.
+        if v["type"] != "ack" && v["type"] != "error" {
+            continue;
+        }
         match v["id"].as_u64() {
             Some(12) => estop_first = Some(release.is_none()),
             Some(11) => release = Some(v),
@@ -144,14 +148,27 @@ async fn a_release_sent_before_an_estop_that_overtook_it_does_not_undo_it() {
         }
     }
     let release = release.unwrap_or_default();
-    if estop_first == Some(true) {
-        // The e-stop overtook the release: the release is refused and the latch holds.
-        assert_eq!(release["code"], "superseded", "{release}");
-        assert!(lab.server.estop().latched());
-    } else {
-        // Only on a machine so stalled that the reader read the e-stop after the worker took the release.
-        assert_eq!(release["type"], "ack", "{release}");
+    // Whatever the order the machine gave them, the e-stop was sent last, so it holds: a release that
+    // reached the latch first was undone by it (acked), one the e-stop overtook is refused (superseded).
+    // (Which reply comes first says little: the e-stop is acked by the reader at once, the release only
+    // when the router has answered, so an applied release may be answered after the e-stop.)
+    assert!(
+        lab.server.estop().latched(),
+        "the e-stop does not hold: {release}"
+    );
+    match release["type"].as_str() {
+        Some("ack") => {}
+        Some("error") => assert_eq!(release["code"], "superseded", "{release}"),
+        _ => panic!("the release got neither an ack nor an error: {release}"),
     }
+    eprintln!(
+        "release before an e-stop: e-stop answered first: {estop_first:?}; release answered {}",
+        if release["type"] == "ack" {
+            "ack (applied before the e-stop)"
+        } else {
+            "superseded"
+        }
+    );
     lab.stop().await;
     let _ = std::fs::remove_dir_all(&weights);
 }
@@ -206,33 +223,43 @@ async fn an_idle_flood_from_the_operators_own_address_leaves_it_and_healthz_a_wa
     assert!(stats.closed_evicted > 0, "{stats:?}");
     // From the same address: /healthz answers (a probe is a fresh connection; on a machine as busy as
     // this flood makes it, one that was cut is tried again, as a monitor or a browser would, at most twice)…
+    // What the guard guarantees is that the flood cannot starve them: each gets in while the flood goes
+    // on, within a failure deadline; how many tries that takes depends on the machine, and is printed.
     let mut first_try = 0;
+    let mut most_tries = 0;
     for i in 0..20 {
-        let mut answer = None;
-        for attempt in 0..3 {
+        let started = Instant::now();
+        let mut attempt = 0;
+        loop {
             let probe = tokio::spawn(async move { http_get_from(local, addr, "/healthz").await });
             if let Ok((200, body)) = probe.await {
                 assert_eq!(body, "ok");
-                answer = Some(attempt);
                 break;
             }
+            attempt += 1;
+            assert!(
+                started.elapsed() < WAIT,
+                "probe {i} got no answer in {attempt} tries"
+            );
         }
-        let attempt = answer.unwrap_or_else(|| panic!("probe {i} got no answer in 3 tries"));
         first_try += usize::from(attempt == 0);
+        most_tries = most_tries.max(attempt + 1);
     }
     // …and the operator's handshakes succeed (likewise), and its e-stop latches.
     for i in 0..10 {
-        let mut handshake = Err(String::new());
-        for _ in 0..3 {
-            handshake = ws_from(local, addr, Some(TOKEN))
-                .await
-                .map_err(|e| e.to_string());
-            if handshake.is_ok() {
-                break;
+        let started = Instant::now();
+        let mut tries = 0;
+        let (mut op, hello) = loop {
+            tries += 1;
+            match ws_from(local, addr, Some(TOKEN)).await {
+                Ok(connected) => break connected,
+                Err(e) => assert!(
+                    started.elapsed() < WAIT,
+                    "operator handshake {i}: no way in after {tries} tries: {e}"
+                ),
             }
-        }
-        let (mut op, hello) =
-            handshake.unwrap_or_else(|e| panic!("operator handshake {i} in 3 tries: {e}"));
+        };
+        most_tries = most_tries.max(tries);
         assert_eq!(hello["can_command"], true);
         if i == 9 {
             op.send(Message::text(json!({"cmd": "estop", "id": 1}).to_string()))
@@ -240,7 +267,7 @@ async fn an_idle_flood_from_the_operators_own_address_leaves_it_and_healthz_a_wa
                 .unwrap();
             loop {
                 let v = next_json(&mut op).await;
-                if v["id"] == 1 {
+                if v["id"] == 1 && v["type"] == "ack" {
                     assert_eq!(v["result"]["estop"], true, "{v}");
                     break;
                 }
@@ -250,7 +277,8 @@ async fn an_idle_flood_from_the_operators_own_address_leaves_it_and_healthz_a_wa
     let stats = lab.dash.stats();
     eprintln!(
         "same-address idle flood: {} sockets opened in {:.1} s, {} evicted, {} refused at once; \
-         20 /healthz ({first_try} at the first try) and 10 operator handshakes from 127.0.0.1 served",
+         20 /healthz ({first_try} at the first try) and 10 operator handshakes from 127.0.0.1 served \
+         (at most {most_tries} tries for one)",
         opened.load(Ordering::Relaxed),
         t0.elapsed().as_secs_f64(),
         stats.closed_evicted,
