@@ -14,7 +14,7 @@
 
 import { readFileSync } from 'node:fs';
 
-import { harness, launch, openDashboard } from './browser.mjs';
+import { harness, launch, openDashboard, patient } from './browser.mjs';
 
 const { screenshot, url, fail, until } = harness('analysis.e2e');
 const disconnectedShot = screenshot.replace(/\.png$/, '-disconnected.png');
@@ -31,17 +31,17 @@ try {
   }, i);
 
   // History on connect: the server has been running for seconds; the page shows them all.
-  await page.waitForFunction(() => window.pavlov && window.pavlov.historyDone && window.pavlov.ticks >= 20, null, { timeout: 20000 });
+  await page.waitForFunction(() => window.pavlov && window.pavlov.historyDone && window.pavlov.ticks >= 20, null, { timeout: patient(20000) });
   const firstLive = ticks[0].seq;
   const earliest = await pavlov(() => window.pavlov.timeline.samples[0].seq);
   if (firstLive < 150) fail(`the page opened only ${firstLive} ticks into the run`);
   if (earliest > 5) fail(`the page's data begins at tick ${earliest}, not at the run's start (first live tick ${firstLive})`);
-  await page.waitForFunction(() => window.pavlov.charts[0].u.data[0][0] <= 0.2, null, { timeout: 5000 });
+  await page.waitForFunction(() => window.pavlov.charts[0].u.data[0][0] <= 0.2, null, { timeout: patient(5000) });
   summary.history = { earliest_seq: earliest, first_live_seq: firstLive };
 
   // Pause: the charts freeze while ticks keep arriving; Resume moves them on.
   await page.click('#pause');
-  await page.waitForFunction(() => window.pavlov.view.paused, null, { timeout: 2000 });
+  await page.waitForFunction(() => window.pavlov.view.paused, null, { timeout: patient(2000) });
   await page.waitForTimeout(100);
   const frozen = await pavlov(() => window.pavlov.charts.map((c) => [c.u.data[0].length, c.u.data[0][c.u.data[0].length - 1]]));
   const ticksAtPause = await pavlov(() => window.pavlov.ticks);
@@ -58,7 +58,7 @@ try {
   await page.waitForFunction((t) => {
     const d = window.pavlov.charts[0].u.data[0];
     return !window.pavlov.view.paused && d[d.length - 1] > t + 0.5;
-  }, frozen[0][1], { timeout: 3000 });
+  }, frozen[0][1], { timeout: patient(3000) });
   summary.pause = { ticks_while_paused: ticksLater - ticksAtPause };
 
   // Drag-to-zoom on the predictions chart: every chart shows the dragged span, and the view pauses.
@@ -70,7 +70,7 @@ try {
   await page.mouse.move(over.x + over.width * 0.5, y, { steps: 8 });
   await page.mouse.move(over.x + over.width * 0.6, y, { steps: 4 });
   await page.mouse.up();
-  await page.waitForFunction(() => window.pavlov.view.zoom !== null, null, { timeout: 2000 });
+  await page.waitForFunction(() => window.pavlov.view.zoom !== null, null, { timeout: patient(2000) });
   const zoomed = await xRange();
   const width = (r) => r.max - r.min;
   if (!(width(zoomed) < width(before) * 0.45 && width(zoomed) > width(before) * 0.15)) {
@@ -91,7 +91,7 @@ try {
   summary.zoom = { before, zoomed, readout };
   // Double-click: back to the whole window, and live again.
   await page.mouse.dblclick(over.x + over.width * 0.5, y);
-  await page.waitForFunction(() => window.pavlov.view.zoom === null && !window.pavlov.view.paused, null, { timeout: 2000 });
+  await page.waitForFunction(() => window.pavlov.view.zoom === null && !window.pavlov.view.paused, null, { timeout: patient(2000) });
   await page.waitForTimeout(200);
   const back = await xRange();
   if (Math.abs(width(back) - 30) > 0.01) fail(`after the double-click the window is ${width(back)} s, not 30 s`);
@@ -101,7 +101,7 @@ try {
   await page.waitForTimeout(200);
   const ten = await xRange();
   if (Math.abs(width(ten) - 10) > 0.01) fail(`the 10 s window shows ${width(ten)} s`);
-  const [download] = await Promise.all([page.waitForEvent('download', { timeout: 5000 }), page.click('#csv')]);
+  const [download] = await Promise.all([page.waitForEvent('download', { timeout: patient(5000) }), page.click('#csv')]);
   const csv = readFileSync(await download.path(), 'utf8').trimEnd().split('\n');
   if (!csv[0].startsWith('seq,t_s,mode,stall,stall_threshold,')) fail(`CSV header: ${csv[0]}`);
   if (csv.length < 300 || csv.length > 520) fail(`CSV of a 10 s view has ${csv.length - 1} rows`);
@@ -119,12 +119,12 @@ try {
     ws.onerror = () => reject(new Error('the second client could not connect'));
   }));
   if (ack.type !== 'ack') fail(`set_params was not acked: ${JSON.stringify(ack)}`);
-  await page.waitForFunction(() => window.pavlov.charts[0].drawnMarkers.includes('α=0.01'), null, { timeout: 5000 });
+  await page.waitForFunction(() => window.pavlov.charts[0].drawnMarkers.includes('α=0.01'), null, { timeout: patient(5000) });
   const everyChart = await pavlov(() => window.pavlov.charts.every((c) => c.drawnMarkers.includes('α=0.01')));
   if (!everyChart) fail('the marker is not on every chart');
-  await page.waitForFunction(() => document.getElementById('inforce-body').textContent.includes('0.01'), null, { timeout: 3000 });
+  await page.waitForFunction(() => document.getElementById('inforce-body').textContent.includes('0.01'), null, { timeout: patient(3000) });
   await page.click('#mode-reactive');
-  await page.waitForFunction(() => window.pavlov.charts[0].drawnMarkers.includes('mode→reactive'), null, { timeout: 5000 });
+  await page.waitForFunction(() => window.pavlov.charts[0].drawnMarkers.includes('mode→reactive'), null, { timeout: patient(5000) });
   summary.markers = await pavlov(() => window.pavlov.charts[0].drawnMarkers);
   await page.click('.window[data-seconds="30"]');
   await page.waitForTimeout(1500);
@@ -134,7 +134,7 @@ try {
   // browser reports each failed reconnection attempt on its console: those are expected.)
   if (problems.length) fail(problems.join('; '));
   step('stop-server');
-  await page.waitForFunction(() => document.body.classList.contains('disconnected'), null, { timeout: 15000 });
+  await page.waitForFunction(() => document.body.classList.contains('disconnected'), null, { timeout: patient(15000) });
   const grey = await pavlov(() => ({
     estop_disabled: document.getElementById('estop').disabled,
     estop_text: document.getElementById('estop').textContent,
@@ -157,7 +157,7 @@ try {
   const oldRun = await pavlov(() => window.pavlov.run);
   step('restart-server');
   await page.waitForFunction((old) => window.pavlov.live && window.pavlov.run !== old && window.pavlov.historyDone
-    && !document.body.classList.contains('disconnected') && !document.getElementById('estop').disabled, oldRun, { timeout: 30000 });
+    && !document.body.classList.contains('disconnected') && !document.getElementById('estop').disabled, oldRun, { timeout: patient(30000) });
   const after = await pavlov(() => ({ first: window.pavlov.timeline.samples[0].seq, events: window.pavlov.timeline.events.length }));
   if (after.first > 5) fail(`after reconnecting the data begins at tick ${after.first}`);
   summary.reconnected = after;

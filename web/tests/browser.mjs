@@ -10,13 +10,26 @@ const ARGS = [
   '--disable-background-networking', '--disable-component-update', '--disable-sync',
 ];
 
+/**
+ * Failure timeouts are stretched this many times: a wait returns as soon as its condition holds, so a generous
+ * deadline costs nothing when things work, and a busy machine (the suite runs beside other work) must not turn
+ * a slow-but-correct page into a failure. The numbers written in the scripts are what an idle machine needs.
+ */
+export const PATIENCE = 6;
+
+/** A script's failure timeout for `ms` of an idle machine's patience. */
+export function patient(ms) {
+  return ms * PATIENCE;
+}
+
 /** A script's harness: `fail` exits non-zero with the script's name, `until` polls a predicate. */
 export function harness(name) {
   function fail(message) {
     console.error(`${name}: FAIL: ${message}`);
     process.exit(1);
   }
-  async function until(what, predicate, timeoutMs) {
+  async function until(what, predicate, idleMs) {
+    const timeoutMs = patient(idleMs);
     const end = Date.now() + timeoutMs;
     while (Date.now() < end) {
       if (predicate()) return;

@@ -7,7 +7,7 @@
 // (e-stop latched, wheel command 0/0, safety stop "e_stop"). Saves a screenshot, prints a JSON summary
 // on stdout, exits non-zero on any failure (see browser.mjs for the browser).
 
-import { harness, launch, openDashboard } from './browser.mjs';
+import { harness, launch, openDashboard, patient } from './browser.mjs';
 
 const { screenshot, url, fail, until } = harness('dashboard.e2e');
 const browser = await launch(fail);
@@ -16,7 +16,7 @@ try {
   const { page, problems, ticks, acks, sent } = await openDashboard(browser, url);
 
   // Live ticks arrive and every chart grows.
-  await page.waitForFunction(() => window.pavlov && window.pavlov.ticks >= 60, null, { timeout: 20000 });
+  await page.waitForFunction(() => window.pavlov && window.pavlov.ticks >= 60, null, { timeout: patient(20000) });
   // The four strip charts, and the learning view's two (value vs return, δ).
   const charts = await page.locator('.chart-card:not(.learn-card):not(.horde-card) .uplot').count();
   if (charts !== 4) fail(`expected 4 strip charts, found ${charts}`);
@@ -27,10 +27,10 @@ try {
   const after = await page.evaluate(() => window.pavlov.charts.map((c) => c.u.data[0].length));
   if (!after.every((n, i) => n > before[i])) fail(`charts did not update: ${before} → ${after}`);
   summary.chart_points = after;
-  await page.waitForFunction(() => document.getElementById('h-lateness').textContent.includes('µs'), null, { timeout: 5000 });
-  await page.waitForFunction(() => document.getElementById('conn').dataset.state === 'live', null, { timeout: 5000 });
+  await page.waitForFunction(() => document.getElementById('h-lateness').textContent.includes('µs'), null, { timeout: patient(5000) });
+  await page.waitForFunction(() => document.getElementById('conn').dataset.state === 'live', null, { timeout: patient(5000) });
   // The robot link's state and OI mode, from the tick stream.
-  await page.waitForFunction(() => document.getElementById('h-mode').textContent === 'Safe', null, { timeout: 5000 });
+  await page.waitForFunction(() => document.getElementById('h-mode').textContent === 'Safe', null, { timeout: patient(5000) });
   const linkText = await page.locator('#h-link').textContent();
   if (!linkText.startsWith('up')) fail(`link shown as "${linkText}"`);
   if (!(await page.locator('#trip-banner').isHidden())) fail('the trip banner shows on a healthy link');
@@ -44,7 +44,7 @@ try {
   let from = tickCount();
   await page.click('#mode-manual');
   await until('ticks in manual mode', () => ticks.slice(from).some((t) => t.mode === 'manual'), 3000);
-  await page.waitForSelector('#mode-manual.active', { timeout: 3000 });
+  await page.waitForSelector('#mode-manual.active', { timeout: patient(3000) });
   from = tickCount();
   await page.keyboard.down('ArrowUp');
   await until('the teleop command in the tick stream', () => ticks.slice(from).some((t) => t.command.left === 200 && t.command.right === 200), 3000);
@@ -71,7 +71,7 @@ try {
   const firstStopped = afterStop.findIndex(stopped);
   const relapsed = afterStop.slice(firstStopped).some((t) => !stopped(t));
   if (relapsed) fail('a tick after the e-stop was not stopped (the latch did not hold)');
-  await page.waitForSelector('#estop-banner:not([hidden])', { timeout: 3000 });
+  await page.waitForSelector('#estop-banner:not([hidden])', { timeout: patient(3000) });
   summary.ticks_until_stopped = firstStopped;
 
   // Let the charts show a few seconds after the stop, then take the picture.

@@ -11,7 +11,7 @@
 
 import { spawn } from 'node:child_process';
 
-import { harness, launch, openDashboard } from './browser.mjs';
+import { harness, launch, openDashboard, patient } from './browser.mjs';
 
 const { screenshot, url, fail, until } = harness('elbow.e2e');
 const bin = process.env.PAVLOV_BIN;
@@ -24,10 +24,10 @@ try {
   const { page, problems, ticks } = await openDashboard(browser, url);
 
   // No skeleton yet: the chart is there, the status says none, and after a second the banner warns.
-  await page.waitForSelector('#elbow-card:not([hidden])', { timeout: 15000 });
+  await page.waitForSelector('#elbow-card:not([hidden])', { timeout: patient(15000) });
   if ((await page.locator('#chart-elbow .uplot').count()) !== 1) fail('no elbow chart');
-  await page.waitForFunction(() => document.getElementById('now-skeleton').textContent === 'none', null, { timeout: 5000 });
-  await page.waitForSelector('#skeleton-banner:not([hidden])', { timeout: 5000 });
+  await page.waitForFunction(() => document.getElementById('now-skeleton').textContent === 'none', null, { timeout: patient(5000) });
+  await page.waitForSelector('#skeleton-banner:not([hidden])', { timeout: patient(5000) });
   const warning = await page.locator('#skeleton-banner').textContent();
   if (!warning.includes('No skeleton')) fail(`banner says "${warning}"`);
   summary.warned_without_skeleton = true;
@@ -36,14 +36,14 @@ try {
   // The operator starts: tracked, no warning, angles in the chart.
   human = spawn(bin, ['human', '--to', to, '--seed', '3'], { stdio: ['ignore', 'ignore', 'pipe'] });
   human.on('exit', (code) => { if (code !== null && code !== 0) fail(`pavlov human exited with ${code}`); });
-  await page.waitForFunction(() => document.getElementById('now-skeleton').textContent === 'tracked', null, { timeout: 10000 });
-  await page.waitForFunction(() => document.getElementById('skeleton-banner').hidden, null, { timeout: 5000 });
+  await page.waitForFunction(() => document.getElementById('now-skeleton').textContent === 'tracked', null, { timeout: patient(10000) });
+  await page.waitForFunction(() => document.getElementById('skeleton-banner').hidden, null, { timeout: patient(5000) });
   await page.waitForFunction(() => {
     const d = window.pavlov.elbow.data();
     if (!d) return false;
     const seen = (k) => d[k].filter((v) => v !== null).length;
     return seen(1) > 20 && seen(2) > 20 && seen(3) > 20 && seen(4) > 20;
-  }, null, { timeout: 10000 });
+  }, null, { timeout: patient(10000) });
   summary.elbow_points = await page.evaluate(() => window.pavlov.elbow.data().slice(1).map((c) => c.filter((v) => v !== null).length));
 
   // Commands: the page's debounced count rises, and never exceeds the raw rising edges of the stimulus.

@@ -9,7 +9,7 @@
 // the typed token that changes alpha's mode in the table, and show the refusal of a wrong token (alpha's
 // e-stop stays off). Saves a screenshot, prints a JSON summary, exits non-zero on any failure.
 
-import { harness, launch } from './browser.mjs';
+import { harness, launch, patient } from './browser.mjs';
 
 const { screenshot, url, fail } = harness('fleet.e2e');
 const token = process.env.FLEET_TOKEN;
@@ -73,7 +73,7 @@ try {
   await page.selectOption('#cmd', '{"cmd":"set_mode","mode":"reactive"}');
   await page.fill('#token', token);
   await page.click('#command button');
-  await page.waitForFunction(() => document.getElementById('answer').textContent.length > 0, null, { timeout: 15000 });
+  await page.waitForFunction(() => document.getElementById('answer').textContent.length > 0, null, { timeout: patient(15000) });
   const applied = await page.locator('#answer').textContent();
   if (!applied.startsWith('200 ') || !applied.includes('"reactive"')) fail(`the command's answer: ${applied}`);
   await waitRow('alpha reactive in the table', 'alpha', (r) => r[1] === 'reactive');
@@ -84,7 +84,7 @@ try {
   await page.selectOption('#cmd', '{"cmd":"estop"}');
   await page.fill('#token', 'not-the-token');
   await page.click('#command button');
-  await page.waitForFunction(() => document.getElementById('answer').textContent.length > 0, null, { timeout: 15000 });
+  await page.waitForFunction(() => document.getElementById('answer').textContent.length > 0, null, { timeout: patient(15000) });
   const refused = await page.locator('#answer').textContent();
   if (!refused.startsWith('403 ') || !refused.includes('the token is wrong')) fail(`the wrong token's answer: ${refused}`);
   await page.waitForTimeout(600);

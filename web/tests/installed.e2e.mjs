@@ -7,14 +7,14 @@
 // that the four strip charts are uPlot instances that grow with live ticks, and that their canvases have
 // drawn pixels; saves a screenshot and prints a JSON summary (see browser.mjs for the browser).
 
-import { harness, launch, openDashboard } from './browser.mjs';
+import { harness, launch, openDashboard, patient } from './browser.mjs';
 
 const { screenshot, url, fail } = harness('installed.e2e');
 const browser = await launch(fail);
 const summary = {};
 try {
   const { page, problems, ticks } = await openDashboard(browser, url);
-  await page.waitForFunction(() => window.pavlov && window.pavlov.ticks >= 60, null, { timeout: 30000 });
+  await page.waitForFunction(() => window.pavlov && window.pavlov.ticks >= 60, null, { timeout: patient(30000) });
   summary.uplot = await page.evaluate(() => typeof window.uPlot === 'function');
   if (!summary.uplot) fail('uPlot did not load');
   if (!(await page.locator('#vendor-banner').isHidden())) fail('the page says its chart library is missing');

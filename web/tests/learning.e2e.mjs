@@ -10,7 +10,7 @@
 // click on a cell charts that prediction over time; without one, the view says so and the page never asked.
 // Saves `<screenshot>` (the whole page), prints a JSON summary, exits non-zero on any failure.
 
-import { harness, launch, openDashboard } from './browser.mjs';
+import { harness, launch, openDashboard, patient } from './browser.mjs';
 
 const { screenshot, url, fail } = harness('learning.e2e');
 const expect = process.argv[4] || 'horde';
@@ -23,12 +23,12 @@ try {
 
   // The learning view: the stall prediction's values and, a horizon (113 ticks, 2.26 s) later, its returns.
   await page.waitForFunction(() => window.pavlov && window.pavlov.learning && window.pavlov.learning.selected === 'stall',
-    null, { timeout: 20000 });
+    null, { timeout: patient(20000) });
   await page.waitForFunction(() => {
     const d = window.pavlov.learning.charts.ret.data;
     const both = d[0].filter((_, i) => d[1][i] != null && d[2][i] != null).length;
     return both >= 50 && d[0].length >= 200;
-  }, null, { timeout: 40000 });
+  }, null, { timeout: patient(40000) });
   const learn = await pavlov(() => {
     const v = window.pavlov.learning;
     const u = v.charts.ret;
@@ -66,7 +66,7 @@ try {
     await page.waitForFunction(() => {
       const h = window.pavlov.horde;
       return h.values && h.values.length === 132 && h.names.every((n) => n) && h.layout && h.messages >= 3;
-    }, null, { timeout: 20000 });
+    }, null, { timeout: patient(20000) });
     if (!sent.some((f) => JSON.parse(f).cmd === 'horde_watch')) fail('the page did not ask for the Horde');
     const watchAck = acks.find((a) => a.cmd === 'horde_watch');
     if (!watchAck || watchAck.type !== 'ack') fail(`horde_watch was not acknowledged: ${JSON.stringify(watchAck)}`);
@@ -97,7 +97,7 @@ try {
     await page.waitForFunction((i) => {
       const h = window.pavlov.horde;
       return h.series.picked.includes(i) && h.chart.data[0].length >= 4;
-    }, index, { timeout: 10000 });
+    }, index, { timeout: patient(10000) });
     // A second cell too: two series on the chart.
     const x2 = box.x + ((index + 7) % cols) * cell + cell / 2;
     const y2 = box.y + Math.floor((index + 7) / cols) * cell + cell / 2;

@@ -12,7 +12,7 @@
 import { closeSync, ftruncateSync, fstatSync, openSync, unlinkSync, writeSync } from 'node:fs';
 import { join } from 'node:path';
 
-import { harness, launch, openDashboard } from './browser.mjs';
+import { harness, launch, openDashboard, patient } from './browser.mjs';
 
 const { screenshot, url, fail, until } = harness('storage.e2e');
 const dir = process.env.FILL_DIR;
@@ -39,11 +39,11 @@ try {
   const text = (id) => page.locator(`#${id}`).textContent();
   const visible = (id) => page.locator(`#${id}`).isVisible();
 
-  await page.waitForFunction(() => document.getElementById('rec-state').textContent === 'on', null, { timeout: 60000 });
+  await page.waitForFunction(() => document.getElementById('rec-state').textContent === 'on', null, { timeout: patient(60000) });
   fill(16 * 1024);
 
   // The recording stops, and the page says why.
-  await page.waitForFunction(() => document.getElementById('rec-state').textContent === 'stopped', null, { timeout: 120000 });
+  await page.waitForFunction(() => document.getElementById('rec-state').textContent === 'stopped', null, { timeout: patient(120000) });
   if (!(await visible('rec-error'))) fail('the reason is not shown');
   const reason = await text('rec-error');
   if (!reason.includes('No space left on device')) fail(`the reason shown is "${reason}"`);
@@ -52,7 +52,7 @@ try {
 
   // A save the disk has no room for: the page says why.
   await page.click('#save-weights');
-  await page.waitForSelector('#weights-error:not([hidden])', { timeout: 60000 });
+  await page.waitForSelector('#weights-error:not([hidden])', { timeout: patient(60000) });
   const weights = await text('weights-error');
   if (!weights.includes('No space left on device')) fail(`the checkpoint failure shown is "${weights}"`);
   summary.checkpoint = weights;
@@ -63,7 +63,7 @@ try {
   const at = acks.length;
   await page.click('#rec-start');
   await until('the start_recording ack', () => acks.slice(at).some((a) => a.type === 'ack' && a.cmd === 'start_recording'), 60000);
-  await page.waitForFunction(() => document.getElementById('rec-state').textContent === 'on', null, { timeout: 60000 });
+  await page.waitForFunction(() => document.getElementById('rec-state').textContent === 'on', null, { timeout: patient(60000) });
   if (await visible('rec-error')) fail('the failure is still shown while recording again');
   summary.resumed = true;
   if (problems.length) fail(problems.join('; '));

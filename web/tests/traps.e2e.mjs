@@ -15,7 +15,7 @@
 // `<screenshot>` (operator), `<screenshot>-watcher.png`, `<screenshot>-5min.png`. Prints a JSON summary,
 // exits non-zero on any failure. Every wait is for a condition; the deadlines are failure timeouts only.
 
-import { harness, launch, openDashboard } from './browser.mjs';
+import { harness, launch, openDashboard, patient } from './browser.mjs';
 
 const { screenshot, url, fail, until } = harness('traps.e2e');
 const token = process.env.TOKEN;
@@ -34,8 +34,8 @@ try {
   const { page } = op;
   const pavlov = (f, arg) => page.evaluate(f, arg);
   await page.waitForFunction(() => window.pavlov && window.pavlov.historyDone && window.pavlov.canCommand
-    && window.pavlov.ticks >= 25, null, { timeout: 30000 });
-  await page.waitForSelector('#elbow-card:not([hidden]) #chart-elbow .uplot', { timeout: 15000 });
+    && window.pavlov.ticks >= 25, null, { timeout: patient(30000) });
+  await page.waitForSelector('#elbow-card:not([hidden]) #chart-elbow .uplot', { timeout: patient(15000) });
   await until('a live tick', () => op.ticks.length > 0, 15000);
   const firstLive = op.ticks[0].t;
   summary.first_live_t = firstLive;
@@ -69,7 +69,7 @@ try {
       // Live, so the window moves on: the charts may be a redraw apart (≤ 1 s at the widest window).
       return us.every((u) => Math.abs(u.scales.x.max - u.scales.x.min - s) < 1e-6)
         && Math.max(...maxes) - Math.min(...maxes) <= 1.5;
-    }, seconds, { timeout: 15000 });
+    }, seconds, { timeout: patient(15000) });
     summary.windows[seconds] = (await spans()).charts.map(([id, min, max]) => [id, Number(min.toFixed(2)), Number(max.toFixed(2))]);
   }
 
@@ -82,7 +82,7 @@ try {
     const elbow = p.elbow.data();
     return elbow && before(elbow, 1) && before(p.learning.charts.ret.data, 1)
       && before(p.learning.charts.ret.data, 2) && before(p.learning.charts.td.data, 1);
-  }, firstLive, { timeout: 20000 }).catch(async () => {
+  }, firstLive, { timeout: patient(20000) }).catch(async () => {
     const d = await pavlov(() => ({
       elbow: window.pavlov.elbow.data() && window.pavlov.elbow.data()[0].slice(0, 3),
       learn: window.pavlov.learning.charts.ret.data[0].slice(0, 3),
@@ -112,7 +112,7 @@ try {
   const refused = op.acks.slice(acked).filter((a) => a.type === 'error');
   if (refused.length) fail(`commands of the burst refused: ${JSON.stringify(refused.slice(0, 3))}`);
   await page.click('.window[data-seconds="600"]');
-  await page.waitForFunction((n) => window.pavlov.charts[0].drawnMarkers.length >= n, burst.length, { timeout: 15000 });
+  await page.waitForFunction((n) => window.pavlov.charts[0].drawnMarkers.length >= n, burst.length, { timeout: patient(15000) });
 
   // No two labels overlap, at the 10- and the 5-minute window; each has hover text saying what it means.
   summary.labels = {};
@@ -121,7 +121,7 @@ try {
     await page.waitForFunction((s) => {
       const u = window.pavlov.charts[0].u;
       return Math.abs(u.scales.x.max - u.scales.x.min - s) < 1e-6 && document.querySelectorAll('#chart-pred .marker-label').length > 0;
-    }, seconds, { timeout: 15000 });
+    }, seconds, { timeout: patient(15000) });
     const labels = await pavlov(() => [...document.querySelectorAll('.marker-label')].map((el) => {
       const r = el.getBoundingClientRect();
       const plot = el.closest('.u-over').getBoundingClientRect();
@@ -170,14 +170,14 @@ try {
   }));
   if (opButtons.estop || opButtons.rearm) fail(`the operator's E-STOP or Re-arm is disabled: ${JSON.stringify(opButtons)}`);
   await page.click('.window[data-seconds="30"]');
-  await page.waitForFunction(() => Math.abs(window.pavlov.charts[0].u.scales.x.max - window.pavlov.charts[0].u.scales.x.min - 30) < 1e-6, null, { timeout: 15000 });
+  await page.waitForFunction(() => Math.abs(window.pavlov.charts[0].u.scales.x.max - window.pavlov.charts[0].u.scales.x.min - 30) < 1e-6, null, { timeout: patient(15000) });
   await page.screenshot({ path: screenshot, fullPage: true });
 
   // The first-run note goes when dismissed, and stays gone on the next visit.
   await page.click('#first-run-close');
   if (!(await page.locator('#first-run').isHidden())) fail('the first-run note did not go');
   await page.reload({ waitUntil: 'load' });
-  await page.waitForFunction(() => window.pavlov && window.pavlov.ticks > 0, null, { timeout: 20000 });
+  await page.waitForFunction(() => window.pavlov && window.pavlov.ticks > 0, null, { timeout: patient(20000) });
   if (!(await page.locator('#first-run').isHidden())) fail('the first-run note came back after a reload');
   summary.first_run_note_remembered = true;
   if (op.problems.length) fail(op.problems.join('; '));
@@ -185,7 +185,7 @@ try {
   // ---------------------------------------------------------------- a watcher
   const w = await openDashboard(browser, url);
   await w.page.waitForFunction(() => window.pavlov && window.pavlov.historyDone && window.pavlov.ticks >= 10
-    && window.pavlov.hello && !window.pavlov.hello.can_command, null, { timeout: 30000 });
+    && window.pavlov.hello && !window.pavlov.hello.can_command, null, { timeout: patient(30000) });
   const watcher = await w.page.evaluate(() => {
     const b = (id) => {
       const el = document.getElementById(id);

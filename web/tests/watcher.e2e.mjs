@@ -8,7 +8,7 @@
 // the watch-only banner, and a disabled E-STOP that says it needs the operator's token; an e-stop sent anyway
 // is refused by the server (the tick stream shows nothing latched). Saves a screenshot, prints a JSON summary, exits non-zero on any failure.
 
-import { harness, launch, openDashboard } from './browser.mjs';
+import { harness, launch, openDashboard, patient } from './browser.mjs';
 
 const { screenshot, url, fail, until } = harness('watcher.e2e');
 const browser = await launch(fail);
@@ -16,8 +16,8 @@ const summary = {};
 try {
   const { page, problems, ticks, acks } = await openDashboard(browser, url);
 
-  await page.waitForFunction(() => window.pavlov && window.pavlov.ticks >= 60, null, { timeout: 20000 });
-  await page.waitForSelector('#watch-banner:not([hidden])', { timeout: 3000 });
+  await page.waitForFunction(() => window.pavlov && window.pavlov.ticks >= 60, null, { timeout: patient(20000) });
+  await page.waitForSelector('#watch-banner:not([hidden])', { timeout: patient(3000) });
   const name = await page.locator('#robot-name').textContent();
   if (!name.includes('create1') || !name.includes('20 ms ticks')) fail(`robot shown as "${name}"`);
   summary.robot_name = name;
