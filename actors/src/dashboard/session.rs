@@ -360,9 +360,22 @@ impl Session {
             match waiting.try_send(turn) {
                 Ok(()) => {}
                 Err(mpsc::error::TrySendError::Full(turn)) => {
-                    let id = match &turn {
-                        Turn::Request { request: Ok(r), .. } => r.id.clone(),
-                        _ => None,
+                    // Every reply carries the id of the message it answers, a refusal too.
+                    let id = match turn {
+                        Turn::Request { request: Ok(r), .. } => r.id,
+                        Turn::Request {
+                            request: Err(r), ..
+                        } => r.id,
+                        Turn::Reply(ready) => {
+                            // Already an answer (a refusal with its id): it goes out as it is.
+                            if !self.reply(queue, ready).await {
+                                return Ended::Unread;
+                            }
+                            if over_limit {
+                                pace.over_limit().await;
+                            }
+                            continue;
+                        }
                     };
                     let busy = self.error(
                         &id,
