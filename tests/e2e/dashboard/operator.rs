@@ -130,8 +130,9 @@ async fn a_hundred_watchers_leave_the_operator_a_seat_and_the_estop_latches_at_o
     lab.stop().await;
 }
 
-/// Holds one idle socket from `source` open, and opens a new one as soon as the server closes it.
-async fn idle_socket(
+/// Holds one idle socket from `source` open, and opens a new one as soon as the server closes it (the
+/// flood tests here and in `operator_first.rs`).
+pub(super) async fn idle_socket(
     source: std::net::IpAddr,
     addr: std::net::SocketAddr,
     opened: Arc<AtomicU64>,

@@ -9,10 +9,10 @@ use std::time::{Duration, Instant};
 
 use futures_util::SinkExt;
 use serde_json::json;
-use tokio::io::AsyncReadExt;
 use tokio_tungstenite::tungstenite::Message;
 
-use super::rig::{Lab, TOKEN, WAIT, http_get_from, loopback, next_json, tcp_from, ws_from};
+use super::operator::idle_socket;
+use super::rig::{Lab, TOKEN, WAIT, http_get_from, loopback, next_json, ws_from};
 
 /// `save_weights` sent back to back before the `estop` (within the rate limit's burst of 40).
 const SAVES: u64 = 30;
@@ -171,29 +171,6 @@ async fn a_release_sent_before_an_estop_that_overtook_it_does_not_undo_it() {
     );
     lab.stop().await;
     let _ = std::fs::remove_dir_all(&weights);
-}
-
-/// Holds one idle socket from `source` open, and opens a new one as soon as the server closes it.
-async fn idle_socket(
-    source: std::net::IpAddr,
-    addr: std::net::SocketAddr,
-    opened: Arc<AtomicU64>,
-    stop: Arc<AtomicBool>,
-) {
-    while !stop.load(Ordering::Relaxed) {
-        match tcp_from(source, addr).await {
-            Ok(mut s) => {
-                opened.fetch_add(1, Ordering::Relaxed);
-                let mut buf = [0u8; 64];
-                while let Ok(n) = s.read(&mut buf).await {
-                    if n == 0 {
-                        break;
-                    }
-                }
-            }
-            Err(_) => tokio::time::sleep(Duration::from_millis(5)).await,
-        }
-    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
