@@ -240,7 +240,8 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     #[cfg(feature = "zenoh")]
     if let Some(z) = &zenoh {
         say!(
-            "zenoh: publishing on pavlov/{}/{{tick,event,status}}; commands over Zenoh {}",
+            "zenoh: publishing on pavlov/v1/{}/{{tick,event,status}} (liveliness token pavlov/v1/{}/alive); commands over Zenoh {}",
+            z.robot(),
             z.robot(),
             if server.config().zenoh.commands {
                 "on (with the token)"
