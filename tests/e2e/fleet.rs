@@ -393,7 +393,9 @@ fn hostile_peer(fleet_config: &Path, dir: &Path) -> HostilePeer {
         let stop = stop.clone();
         move || {
             while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-                let _ = session.put("pavlov/v1/mallory/status", status.clone()).wait();
+                let _ = session
+                    .put("pavlov/v1/mallory/status", status.clone())
+                    .wait();
                 std::thread::sleep(Duration::from_millis(500));
             }
             let _ = session.close().wait();

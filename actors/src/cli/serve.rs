@@ -49,7 +49,7 @@ pub struct ServeArgs {
         default_missing_value = foxglove::DEFAULT_ADDR
     )]
     foxglove: Option<String>,
-    /// Also publish every tick, event and a status on Zenoh under pavlov/<robot>/… ([zenoh] robot) and
+    /// Also publish every tick, event and a status on Zenoh under pavlov/v1/<robot>/… ([zenoh] robot) and
     /// answer queries for the configuration, the newest checkpoint and (with [zenoh] commands = true and a
     /// token) commands. CONFIG is a Zenoh configuration file (JSON5: mode, listen/connect endpoints,
     /// scouting); without it, Zenoh's defaults (a peer found by multicast scouting).
@@ -57,7 +57,7 @@ pub struct ServeArgs {
         not(feature = "zenoh"),
         arg(
             help = "(needs the zenoh feature: cargo install --path actors --features zenoh) Also \
-                    publish the run on Zenoh under pavlov/<robot>/…"
+                    publish the run on Zenoh under pavlov/v1/<robot>/…"
         )
     )]
     #[arg(long, value_name = "CONFIG", num_args = 0..=1)]
