@@ -296,7 +296,8 @@ class ZenohWire(unittest.TestCase):
             (self.row(t, n) or {}).get("presence") == "alive" for t in [self.robots()] for n in ("alpha", "beta")))
         status = json.dumps({"robot": "fake", "ok": True, "health": "ok", "dashboard_url": "http://fake/"})
         for i in range(300):
-            self.session.put(f"pavlov/v1/fake{i:03}/status", status, encoding="application/json")
+            self.session.put(f"pavlov/v1/fake{i:03}/status", status, encoding="application/json",
+                             congestion_control=zenoh.CongestionControl.BLOCK)
         # The flood has arrived when the fleet has refused most of it.
         table = until("the flood refused", lambda: (lambda t: t if t["unknown_names_refused"] >= 250 else None)(
             self.robots()))
