@@ -5,7 +5,7 @@
 //! counters, when it was last seen, and a link to its own dashboard (`http`).
 //!
 //! Its session gets [`wire::harden`]: HLC timestamps on, and no message over
-//! [`table::MAX_SAMPLE_BYTES`] reassembled.
+//! 256 KiB (`table::MAX_SAMPLE_BYTES`) reassembled.
 //!
 //! Commands typed on the fleet page are forwarded as Zenoh queries to `pavlov/v1/<robot>/command` with the
 //! token the user gives; the fleet holds no token of its own, so each robot decides (see
