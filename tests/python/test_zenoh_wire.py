@@ -234,6 +234,7 @@ class ZenohWire(unittest.TestCase):
         self.assertEqual(keys, ["pavlov/v1/alpha/config", "pavlov/v1/beta/config"], replies)
         for r in replies:
             self.assertEqual(str(r.ok.encoding), "application/json")
+            self.assertIsNotNone(r.ok.timestamp)
             body = json.loads(r.ok.payload.to_bytes())
             self.assertEqual(str(r.ok.key_expr), f"pavlov/v1/{body['config']['zenoh']['robot']}/config")
         print(f"pavlov/v1/*/config: {len(replies)} replies: {keys}")

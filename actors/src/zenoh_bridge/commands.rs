@@ -86,6 +86,8 @@ pub(crate) async fn declare(session: Session, robot: String) -> Result<Queryable
 /// What the queryables answer with.
 pub(crate) struct Answers {
     robot: String,
+    /// The session, for its clock: replies are stamped with its HLC.
+    clock: Session,
     config: Vec<u8>,
     run_dir: Option<PathBuf>,
     token: Option<String>,
@@ -133,8 +135,8 @@ pub(crate) async fn newest_checkpoint(dir: Option<&Path>) -> Result<Vec<u8>, Str
 struct Refusal(&'static str, String);
 
 impl Answers {
-    /// The answers for `server`.
-    pub(crate) fn new(server: &Server, counters: Arc<ZenohCounters>) -> Answers {
+    /// The answers for `server`, stamped with `session`'s clock.
+    pub(crate) fn new(server: &Server, session: Session, counters: Arc<ZenohCounters>) -> Answers {
         let config = server.config().redacted();
         let message = json!({
             "program": crate::provenance::BUILD.program(),
@@ -143,6 +145,7 @@ impl Answers {
         });
         Answers {
             robot: server.config().zenoh.robot.clone(),
+            clock: session,
             config: serde_json::to_vec(&message).unwrap_or_default(),
             run_dir: server.checkpoints().run_dir.clone(),
             token: server.config().dashboard.token.clone(),
@@ -208,12 +211,13 @@ impl Answers {
         }
     }
 
-    /// Replies `bytes` to `query` under this robot's key `leaf`, declaring JSON.
+    /// Replies `bytes` to `query` under this robot's key `leaf`, declaring JSON, with a timestamp.
     async fn reply(&self, query: &Query, leaf: &str, bytes: impl Into<zenoh::bytes::ZBytes>) {
         let k = key(&self.robot, leaf);
         if let Err(e) = query
             .reply(k.clone(), bytes)
             .encoding(wire::json_encoding())
+            .timestamp(self.clock.new_timestamp())
             .await
         {
             tracing::debug!("zenoh: reply on {k} failed: {e}");
@@ -404,10 +408,11 @@ mod tests {
     }
 
     /// The answers of robot `robot` with commands off.
-    fn answers_of(robot: &str) -> Answers {
+    fn answers_of(robot: &str, session: &Session) -> Answers {
         let (tx, _) = mpsc::channel::<ControlRequest>(1);
         Answers {
             robot: robot.into(),
+            clock: session.clone(),
             config: format!(r#"{{"robot": "{robot}"}}"#).into_bytes(),
             run_dir: None,
             token: None,
@@ -425,7 +430,7 @@ mod tests {
             let q = declare(session.clone(), robot.into())
                 .await
                 .expect("declare");
-            tokio::spawn(answers_of(robot).run(q, cancel.clone()));
+            tokio::spawn(answers_of(robot, &session).run(q, cancel.clone()));
         }
         // Zenoh's default consolidation: replies under one key would be merged into one.
         let replies = session
@@ -437,6 +442,7 @@ mod tests {
         while let Ok(reply) = replies.recv_async().await {
             let sample = reply.result().expect("a reply, not an error");
             assert_eq!(sample.encoding(), &wire::json_encoding());
+            assert!(sample.timestamp().is_some(), "a stamped reply");
             keys.push(sample.key_expr().as_str().to_string());
         }
         keys.sort();
@@ -483,6 +489,7 @@ mod tests {
         let (tx, mut owner) = mpsc::channel::<ControlRequest>(8);
         let answers = Answers {
             robot: "t".into(),
+            clock: session.clone(),
             config: Vec::new(),
             run_dir: None,
             token: Some("the-right-token-0123".into()),

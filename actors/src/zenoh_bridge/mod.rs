@@ -5,7 +5,7 @@
 //! wire format's version (the conventions, encodings and settings are in [`wire`]):
 //! - `pavlov/v1/<robot>/tick`: every [`TickRecord`](pavlov::record::TickRecord) as JSON (put, dropped by
 //!   Zenoh under congestion rather than queued; the attachment numbers the puts, so a gap is visible);
-//! - `pavlov/v1/<robot>/event`: every [`Event`](pavlov::event::Event) as JSON (congestion: block);
+//! - `pavlov/v1/<robot>/event`: every [`Event`](pavlov::event::Event) as JSON;
 //! - `pavlov/v1/<robot>/status`: every `[zenoh] status_every_ms`, the fleet's row (`status`): mode, link,
 //!   tick health, key counters, the dashboard's URL;
 //! - `pavlov/v1/<robot>/alive`: a liveliness token, held while the bridge runs (presence);
@@ -182,7 +182,7 @@ impl ZenohBridge {
             .await
             .map_err(|e| ZenohError::Open(e.to_string()))??;
         let status = status::StatusSource::new(server, dashboard_url, counters.clone());
-        let answers = commands::Answers::new(server, counters.clone());
+        let answers = commands::Answers::new(server, session.clone(), counters.clone());
         let queryables = runtime
             .spawn(commands::declare(session.clone(), settings.robot.clone()))
             .await

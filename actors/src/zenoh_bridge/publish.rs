@@ -14,11 +14,13 @@
 //! oldest entry when the publisher falls behind, so it can never delay the tick; what it loses is counted
 //! (`pavlov_zenoh_missed_total`).
 //!
-//! **Congestion.** Ticks and status use congestion control *drop* (a tick is worth nothing late and the
-//! next one replaces it); events use *block* (rare, and each says something the next does not). Zenoh
-//! gives a publisher no word of a dropped put, so the drops are made visible where they can be seen: at
-//! the subscriber, as a gap in the publication numbers (the fleet counts them per robot), and here, as
-//! failed puts (`pavlov_zenoh_put_errors_total`).
+//! **Congestion.** Every put uses congestion control *drop*: a tick is worth nothing late and the next
+//! one replaces it, and a *block* put would hold the bridge's one thread, on which the command queryable
+//! (an e-stop) is answered too, for as long as a slow subscriber's link stays full. Queries and their
+//! replies (commands) use Zenoh's default for requests, *block*. Zenoh gives a publisher no word of a
+//! dropped put, so the drops are made visible where they can be seen: at the subscriber, as a gap in the
+//! publication numbers (the fleet counts them per robot), and here, as failed puts
+//! (`pavlov_zenoh_put_errors_total`).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -142,7 +144,7 @@ impl Publisher {
         };
         Ok(Publisher {
             tick: declare("tick", CongestionControl::Drop).await?,
-            event: declare("event", CongestionControl::Block).await?,
+            event: declare("event", CongestionControl::Drop).await?,
             status: declare("status", CongestionControl::Drop).await?,
             session,
             counters,
