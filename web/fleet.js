@@ -43,7 +43,8 @@ function draw(data) {
     cell(tr, t.ticks_skipped);
     cell(tr, us(t.lateness));
     cell(tr, us(t.tick_to_command));
-    cell(tr, (z.ticks_missed || 0) + (z.events_missed || 0));
+    // Missed by the robot's publisher, then lost in transit (gaps in the puts' publication numbers).
+    cell(tr, (z.ticks_missed || 0) + (z.events_missed || 0) + " · " + (r.samples_lost || 0));
     cell(tr, presence + " · " + (r.last_seen_ms_ago / 1000).toFixed(1) + " s ago", presence === "alive" ? "" : "bad");
     const link = cell(tr, "");
     // The fleet server keeps only http(s) URLs; checked again here, as anyone on Zenoh can publish a status.
