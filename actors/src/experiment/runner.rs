@@ -110,8 +110,11 @@ pub(crate) fn run_paused<C: Collect>(
         }
         None => None,
     };
+    // The time driver only: a run touches no socket (the simulated robot is an in-process stream, the
+    // skeleton ingest is off), and without the I/O driver each advance of the paused clock parks
+    // without a system call (with it, every advance is an `epoll_wait`).
     let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
+        .enable_time()
         .start_paused(true)
         .build()
         .map_err(RunError::Runtime)?;
