@@ -247,7 +247,7 @@ mod tests {
             ..TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Pavlovian)
         };
         r.sensors.battery_current_ma = (seq % 7 != 0).then_some(-(seq as i32));
-        r.sensors.angle_deg = (seq % 5) as i16;
+        r.sensors.angle_deg = (seq % 5) as i32;
         r
     }
 
