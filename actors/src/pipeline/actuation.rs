@@ -191,10 +191,13 @@ pub(crate) async fn run(
         events,
         followed,
     } = channels;
+    // One wait for the cancellation, polled again on every pass (not a new one per pass).
+    let cancelled = cancel.cancelled();
+    tokio::pin!(cancelled);
     loop {
         tokio::select! {
             biased;
-            _ = cancel.cancelled() => break,
+            _ = &mut cancelled => break,
             d = decisions.recv() => {
                 let Some(d) = d else { break };
                 let latched = *estop.borrow();

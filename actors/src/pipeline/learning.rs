@@ -389,10 +389,13 @@ pub(crate) async fn run(
     }
     learning.events = Some(events);
     let mut seq = 0;
+    // One wait for the cancellation, polled again on every pass (not a new one per pass).
+    let cancelled = cancel.cancelled();
+    tokio::pin!(cancelled);
     loop {
         tokio::select! {
             biased;
-            _ = cancel.cancelled() => break,
+            _ = &mut cancelled => break,
             Some(Envelope { command, reply }) = commands.recv() => {
                 learning.command(command, seq, reply);
             }
