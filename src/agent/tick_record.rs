@@ -65,6 +65,7 @@ pub fn assemble(
         default_action: gate.default_action,
         command: actuated.command,
         safety_stop: actuated.safety_stop,
+        behaviour_prob: 1.0,
         estop: actuated.estop,
         lateness_us: sensed.lateness_us,
         link: sensed.link,
@@ -72,6 +73,7 @@ pub fn assemble(
             values: sensed.values,
             forced_stimulus,
             previous_followed_default: learned.previous_followed_default,
+            previous_behaviour_prob: 1.0,
         }),
     }
 }

@@ -13,6 +13,7 @@ use prost::encoding::{self, WireType, encode_key, encode_varint};
 
 use super::tick_pb::{
     PbMode, PbSafetyStop, mode_to_pb, skeleton_to_pb, state_to_pb, stop_to_pb, trip_to_pb,
+    uncertain,
 };
 
 /// Reusable buffers, so that encoding allocates nothing once warm.
@@ -163,6 +164,7 @@ impl TickEncoder {
                 }
                 bool_field(scratch, 2, inputs.forced_stimulus);
                 bool_field(scratch, 3, inputs.previous_followed_default);
+                opt_double(scratch, 4, uncertain(inputs.previous_behaviour_prob));
                 nested(buf, 16, scratch);
             }
             // 17: the observation, when there are no inputs to recompute it from.
@@ -176,6 +178,8 @@ impl TickEncoder {
         if let Some(rule) = &r.rule {
             encoding::string::encode(18, rule, buf);
         }
+        // 19: the behaviour probability, when it is not 1.
+        opt_double(buf, 19, uncertain(r.behaviour_prob));
         buf
     }
 }

@@ -187,6 +187,7 @@ pub(crate) fn fill(msg: &mut Tick, r: &TickRecord) {
     }
     msg.gate = r.gate;
     msg.rule.clone_from(&r.rule);
+    msg.behaviour_prob = uncertain(r.behaviour_prob);
     msg.default_action = Some(wheels(r.default_action));
     msg.command = Some(wheels(r.command));
     msg.safety_stop = stop_to_pb(r.safety_stop) as i32;
@@ -213,12 +214,19 @@ pub(crate) fn fill(msg: &mut Tick, r: &TickRecord) {
             let out = msg.inputs.get_or_insert_with(Inputs::default);
             out.forced_stimulus = i.forced_stimulus;
             out.previous_followed_default = i.previous_followed_default;
+            out.previous_behaviour_prob = uncertain(i.previous_behaviour_prob);
             match &i.values {
                 None => out.values = None,
                 Some(v) => fill_raw(out.values.get_or_insert_with(RawSensors::default), v),
             }
         }
     }
+}
+
+/// A behaviour probability as written: absent when it is 1 (bit for bit), so that a deterministic run's
+/// records are as long as before.
+pub(crate) fn uncertain(b: f64) -> Option<f64> {
+    (b.to_bits() != 1.0f64.to_bits()).then_some(b)
 }
 
 fn bad(field: &'static str, value: impl Into<i64>) -> TickDecodeError {
@@ -296,6 +304,7 @@ pub(crate) fn to_record(
             values: i.values.as_ref().map(values_from).transpose()?,
             forced_stimulus: i.forced_stimulus,
             previous_followed_default: i.previous_followed_default,
+            previous_behaviour_prob: i.previous_behaviour_prob.unwrap_or(1.0),
         }),
     };
     let obs = match inputs.as_ref().and_then(|i| i.values.as_ref()) {
@@ -356,6 +365,7 @@ pub(crate) fn to_record(
         default_action: action(msg.default_action, "default_action")?,
         command: action(msg.command, "command")?,
         safety_stop,
+        behaviour_prob: msg.behaviour_prob.unwrap_or(1.0),
         estop: msg.estop,
         lateness_us: msg.lateness_us,
         link: LinkStatus {
@@ -494,6 +504,7 @@ pub(crate) mod tests {
                     default_action: Action::new(-500 + i as i16, 500),
                     command: Action::new(i16::MIN, i16::MAX),
                     safety_stop: stops[k % 5],
+                    behaviour_prob: [0.5, 1.0, 0.2][(k + 1) % 3],
                     estop: i % 6 == 0,
                     lateness_us: i as u32 * 1_000,
                     link: LinkStatus {
@@ -511,6 +522,7 @@ pub(crate) mod tests {
                         values: vals.clone(),
                         forced_stimulus: i % 2 == 0,
                         previous_followed_default: i % 3 == 0,
+                        previous_behaviour_prob: [1.0, 0.35, 0.65][k % 3],
                     }),
                 }
             })
