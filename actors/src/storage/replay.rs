@@ -342,13 +342,14 @@ fn fmt_action(a: Action) -> String {
 /// The report as text for the terminal.
 pub fn describe(report: &ReplayReport) -> String {
     let mut s = format!(
-        "replayed {} ticks and {} events ({} applied to learning or gating): {} prediction values, {} safety stops and {} commands compared, {} seq gaps: ",
+        "replayed {} ticks and {} events ({} applied to learning or gating): {} prediction values, {} safety stops, {} commands and {} behaviour probabilities compared, {} seq gaps: ",
         report.ticks,
         report.events,
         report.events_applied,
         report.predictions_compared,
         report.stops_compared,
         report.commands_compared,
+        report.behaviour_compared,
         report.seq_gaps
     );
     if report.exact() {
