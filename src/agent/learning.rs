@@ -398,7 +398,11 @@ impl LearningStage {
             Some(n) => self.set.specs().find(|s| s.name == n),
             None => self.set.specs().nth(self.gate_index),
         }?;
-        let bounds = self.set.bounds(&spec.name)?;
+        let mut bounds = self.set.bounds(&spec.name)?;
+        if self.about_default.contains(&spec.name) {
+            // α·ρ_max·‖x‖² ≤ 1 under a stochastic gate (`crate::config::gate`).
+            bounds.max_alpha /= self.rho_max;
+        }
         Some(ParamsInForce {
             prediction: spec.name.clone(),
             alpha: spec.alpha,

@@ -238,7 +238,12 @@ mod tests {
             .set_params(Some("stall_pi"), Some(1.0 / 44.0), None, None)
             .unwrap_err();
         assert!(e.to_string().contains("α·ρ_max·‖x‖² ≤ 1"), "{e}");
-        assert_eq!(stage.params(Some("stall_pi")).unwrap().alpha, 0.5 / 44.0);
+        let p = stage.params(Some("stall_pi")).unwrap();
+        assert_eq!((p.alpha, p.bounds.max_alpha), (0.5 / 44.0, 0.5 / 44.0));
+        assert_eq!(
+            stage.params(Some("stall")).unwrap().bounds.max_alpha,
+            1.0 / 44.0
+        );
         stage
             .set_params(Some("stall_pi"), Some(0.25 / 44.0), None, None)
             .unwrap();
