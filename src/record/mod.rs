@@ -155,9 +155,15 @@ wire_message! { LinkStatus, "Link", blank LinkStatus::default();
     9 => stale_events,
 }
 
+/// The probability 1 of an action a deterministic behaviour takes: what a record made before the
+/// stochastic gate (or by any deterministic gate) reads as its `behaviour_prob`.
+pub fn certain() -> f64 {
+    1.0
+}
+
 /// The learning stage's exact inputs on a tick, so that a recording can be replayed bit for bit (the
 /// scaled `obs` vector is `f32` and would not reproduce the tile boundaries exactly).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TickInputs {
     /// The raw sensor snapshot learning saw (`None` before the first frame).
     pub values: Option<SensorValues>,
@@ -167,6 +173,22 @@ pub struct TickInputs {
     /// ρ = 1 for an off-policy prediction about π; else 0): see `crate::agent::learning`.
     #[serde(default)]
     pub previous_followed_default: bool,
+    /// The behaviour probability b(A|S) of the previous tick's command (its record's `behaviour_prob`):
+    /// with `previous_followed_default`, the ratio is ρ = 1/b (1 unless a stochastic gate drew π's
+    /// action); 1 in recordings made before the stochastic gate.
+    #[serde(default = "certain")]
+    pub previous_behaviour_prob: f64,
+}
+
+impl Default for TickInputs {
+    fn default() -> Self {
+        TickInputs {
+            values: None,
+            forced_stimulus: false,
+            previous_followed_default: false,
+            previous_behaviour_prob: certain(),
+        }
+    }
 }
 
 // `values` is the message `RawSensors` (see `wire_parts`).
@@ -174,6 +196,9 @@ wire_message! { TickInputs, "Inputs", blank TickInputs::default();
     1 => values,
     2 => forced_stimulus,
     3 => previous_followed_default,
+    // Written only when not 1 (a stochastic gate's draw), so that deterministic runs keep their bytes;
+    // absent reads as 1.
+    4 => previous_behaviour_prob if (|i: &TickInputs| i.previous_behaviour_prob != certain()),
 }
 
 /// Everything that happened on one tick.
@@ -212,6 +237,11 @@ pub struct TickRecord {
     pub command: Action,
     /// Set when actuation overrode the gate's action.
     pub safety_stop: Option<SafetyStop>,
+    /// The behaviour probability b(A|S) of the command written: 1 for a deterministic choice (the
+    /// paper's gate, the stimulus, teleop, a safety stop), ε or 1 − ε where a stochastic gate drew π's
+    /// action or the response (`[control] gate = "stochastic"`); 1 in older recordings.
+    #[serde(default = "certain")]
+    pub behaviour_prob: f64,
     /// Whether the e-stop is latched.
     pub estop: bool,
     /// How late the tick fired, µs.
@@ -245,6 +275,8 @@ wire_message! { TickRecord, "Tick", blank TickRecord::default();
     16 => inputs,
     17 => obs if (|r: &TickRecord| r.inputs.is_none()),
     18 => rule,
+    // Written only when not 1, like `inputs.previous_behaviour_prob`.
+    19 => behaviour_prob if (|r: &TickRecord| r.behaviour_prob != certain()),
 }
 
 /// Serde for `Vec<f32>` with NaN as `null` both ways (JSON has no NaN; serde_json writes it as `null` but
@@ -282,6 +314,7 @@ impl Default for TickRecord {
             default_action: Action::STOP,
             command: Action::STOP,
             safety_stop: None,
+            behaviour_prob: 1.0,
             estop: false,
             lateness_us: 0,
             link: LinkStatus::default(),

@@ -33,10 +33,12 @@ fn random_record(rng: &mut Rng) -> TickRecord {
         }
         v
     });
+    let probability = |rng: &mut Rng| [1.0, 0.5, 0.35, 0.65][rng.below(4) as usize];
     let inputs = rng.chance(0.8).then(|| TickInputs {
         values,
         forced_stimulus: b(rng),
         previous_followed_default: b(rng),
+        previous_behaviour_prob: probability(rng),
     });
     let obs: Vec<f32> = (0..rng.below(50))
         .map(|_| match rng.below(5) {
@@ -99,6 +101,7 @@ fn random_record(rng: &mut Rng) -> TickRecord {
             Some(SafetyStop::LinkDown),
             Some(SafetyStop::RobotTripped),
         ][rng.below(5) as usize],
+        behaviour_prob: probability(rng),
         estop: b(rng),
         lateness_us: rng.next_u64() as u32 >> rng.below(32),
         link: LinkStatus {

@@ -222,17 +222,19 @@ mod tests {
 
     use super::*;
 
-    /// Hashes every record as the recording's JSON Lines form would write it.
-    struct Hash(Sha256, u64);
+    /// Hashes every record as a recording writes it (its `pavlov.Tick` protobuf message).
+    struct Hash(
+        Sha256,
+        u64,
+        crate::storage::recording::bench_support::TickEncoder,
+    );
 
     impl Collect for Hash {
         type Output = (String, u64);
 
         fn record(&mut self, record: Arc<TickRecord>) {
-            if let Ok(line) = serde_json::to_vec(&*record) {
-                self.0.update(&line);
-                self.1 += 1;
-            }
+            self.0.update(self.2.encode(&record));
+            self.1 += 1;
         }
 
         async fn finish(self) -> Result<Self::Output, RunError> {
@@ -243,8 +245,9 @@ mod tests {
 
     /// The ticks of a short Pavlovian stall run, pinned: a change to how the actors are driven under the
     /// paused clock (batching, stepping, buffers) must not change one bit of what a run records. The hash
-    /// is that of the first 1500 tick lines of run 1 of `experiment stall --runs 2 --minutes 1 --seed 1`
-    /// recorded by the code before the virtual-time work (issue 26), converted to JSON Lines.
+    /// is that of the protobuf messages of the first 1500 ticks of run 1 of `experiment stall --runs 2
+    /// --minutes 1 --seed 1`, the bytes its recording holds, as the code before the virtual-time work
+    /// (issue 26) and before the stochastic gate wrote them (checked on that code with this test).
     #[test]
     fn a_short_run_records_exactly_the_pinned_ticks() {
         let mut config =
@@ -256,12 +259,12 @@ mod tests {
             ticks: 1500,
             record: None,
         };
-        let done = run_paused(request, Hash(Sha256::new(), 0)).expect("run");
+        let done = run_paused(request, Hash(Sha256::new(), 0, Default::default())).expect("run");
         let (hash, n) = done.output;
         assert_eq!(n, 1500);
         assert_eq!(done.lagged, 0);
         assert_eq!(
-            hash, "a0ef4bbb64417e352ed1faf29ecfe9371465b5e408d13912bdcf1277811e7739",
+            hash, "f088f22c495f9aeb81a8a01c0a92214ba34d49c4260f03e2458203e35b5383f3",
             "the run's ticks changed"
         );
     }

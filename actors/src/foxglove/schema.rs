@@ -387,6 +387,7 @@ pub(crate) mod tests {
                 values: Some(values),
                 forced_stimulus: true,
                 previous_followed_default: true,
+                previous_behaviour_prob: 0.5,
             }),
             sensors: pavlov::record::SensorReadings {
                 battery_current_ma: Some(-250),

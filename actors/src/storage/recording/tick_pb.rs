@@ -196,6 +196,8 @@ pub(crate) mod tests {
                         values: vals.clone(),
                         forced_stimulus: i % 2 == 0,
                         previous_followed_default: i % 3 == 0,
+                        // Certain, as every record of the golden file was (see the core's tests for b).
+                        previous_behaviour_prob: 1.0,
                     }),
                     ..TickRecord::default()
                 }
