@@ -12,10 +12,11 @@
 //!
 //! - `run`: one run; `analysis`: the statistics; [`report`]: files and the terminal table;
 //!   `plots`: the Figure 3 and Figure 4 analogues and the time course; [`sensitivity`]: the study over
-//!   operator and learner variants; [`sharded`]: one slice of the study (`--shard I/N`), and merging the
+//!   operator and learner variants; [`learners`]: the named learners side by side (`--learners`); [`sharded`]: one slice of the study (`--shard I/N`), and merging the
 //!   slices back (`assemble` makes the study from its runs, whoever ran them).
 
 pub(crate) mod analysis;
+pub mod learners;
 pub(crate) mod plots;
 pub mod report;
 pub(crate) mod run;
@@ -57,6 +58,10 @@ pub struct InteractionOptions {
     pub window_min: f64,
     /// The simulated operator.
     pub human: HumanParams,
+    /// Keep no tick records, only each run's timeline and response timing (the learners study,
+    /// [`learners`]); not written into summary.json.
+    #[serde(default, skip)]
+    pub lean: bool,
 }
 
 impl InteractionOptions {
@@ -73,6 +78,7 @@ impl InteractionOptions {
             out,
             window_min: 5.0,
             human: HumanParams::default(),
+            lean: false,
         }
     }
 }
@@ -162,6 +168,7 @@ pub(crate) fn run_runs(
                 // The Figure 3 analogue draws the first run of each policy.
                 keep_records: i < 2,
                 human: o.human.clone(),
+                lean: o.lean,
             },
         )
     };

@@ -16,7 +16,9 @@ use std::sync::Arc;
 use pavlov::analysis::interaction::curve::{CommandResult, RunTimeline};
 use pavlov::analysis::interaction::debounce::{self, COMMAND};
 use pavlov::analysis::interaction::live_physical::physical_sample;
-use pavlov::analysis::interaction::physical::{PhysicalLatency, PhysicalParams, measure_physical};
+use pavlov::analysis::interaction::physical::{
+    PhysicalLatency, PhysicalParams, PhysicalSample, measure_physical,
+};
 use pavlov::analysis::interaction::{
     CommandOutcome, CommandWindow, MatchParams, ResponseSample, ResponseTiming, measure,
 };
@@ -84,16 +86,28 @@ pub(crate) fn run_seeds(seed: u64, index: usize) -> (u64, u64) {
     (robot, operator)
 }
 
-/// What an interaction run keeps: every record, and the simulated operator driving the pose channel.
+/// What an interaction run keeps: each tick reduced to its response and physical samples as it arrives,
+/// every record too unless the run is lean, and the simulated operator driving the pose channel.
 struct InteractionCollector {
     human: Option<SimHuman>,
     driver: Option<tokio::task::JoinHandle<SimHuman>>,
     cancel: CancellationToken,
     records: Vec<Arc<TickRecord>>,
+    keep_records: bool,
+    samples: Vec<ResponseSample>,
+    physical: Vec<PhysicalSample>,
 }
 
+/// What the collector hands back: the records (empty for a lean run), the samples, the commands.
+type Collected = (
+    Vec<Arc<TickRecord>>,
+    Vec<ResponseSample>,
+    Vec<PhysicalSample>,
+    Vec<CommandWindow>,
+);
+
 impl Collect for InteractionCollector {
-    type Output = (Vec<Arc<TickRecord>>, Vec<CommandWindow>);
+    type Output = Collected;
 
     fn start(&mut self, server: &Server) {
         if let Some(human) = self.human.take() {
@@ -107,7 +121,14 @@ impl Collect for InteractionCollector {
     }
 
     fn record(&mut self, record: Arc<TickRecord>) {
-        self.records.push(record);
+        self.samples.push(ResponseSample {
+            t_ms: record.t_ms,
+            responding: record.gate,
+        });
+        self.physical.push(physical_sample(&record));
+        if self.keep_records {
+            self.records.push(record);
+        }
     }
 
     async fn finish(self) -> Result<Self::Output, RunError> {
@@ -123,7 +144,7 @@ impl Collect for InteractionCollector {
             },
             None => Vec::new(),
         };
-        Ok((self.records, commands))
+        Ok((self.records, self.samples, self.physical, commands))
     }
 }
 
@@ -145,6 +166,9 @@ pub(crate) struct RunPlan {
     pub(crate) keep_records: bool,
     /// The simulated operator.
     pub(crate) human: HumanParams,
+    /// Keep no tick record (only the response and physical samples, tens of bytes a tick): no aligned
+    /// windows and no records, for studies that need the timeline only.
+    pub(crate) lean: bool,
 }
 
 /// Runs one interaction run.
@@ -158,6 +182,7 @@ pub(crate) fn run(base: &Config, plan: RunPlan) -> Result<InteractionRun, RunErr
         record_dir,
         keep_records,
         human,
+        lean,
     } = plan;
     let (robot_seed, human_seed) = run_seeds(seed, index);
     let mut config = base.clone();
@@ -173,24 +198,19 @@ pub(crate) fn run(base: &Config, plan: RunPlan) -> Result<InteractionRun, RunErr
         human: Some(SimHuman::new(human, human_seed)),
         driver: None,
         cancel: CancellationToken::new(),
-        records: Vec::with_capacity(ticks),
+        records: Vec::with_capacity(if lean { 0 } else { ticks }),
+        keep_records: !lean,
+        samples: Vec::with_capacity(ticks),
+        physical: Vec::with_capacity(ticks),
     };
     let done = run_paused(request, collector)?;
-    let (records, commands) = done.output;
-    let samples: Vec<ResponseSample> = records
-        .iter()
-        .map(|r| ResponseSample {
-            t_ms: r.t_ms,
-            responding: r.gate,
-        })
-        .collect();
-    let end_ms = records.last().map_or(0.0, |r| r.t_ms);
+    let (records, samples, physical_samples, commands) = done.output;
+    let end_ms = samples.last().map_or(0.0, |r| r.t_ms);
     let commands: Vec<CommandWindow> = commands
         .into_iter()
         .filter(|c| c.onset_ms <= end_ms)
         .collect();
     let metrics = measure(&samples, &commands, &MatchParams::default());
-    let physical_samples: Vec<_> = records.iter().map(|r| physical_sample(r)).collect();
     let physical = measure_physical(
         &physical_samples,
         &commands,
@@ -209,7 +229,7 @@ pub(crate) fn run(base: &Config, plan: RunPlan) -> Result<InteractionRun, RunErr
         .collect();
     let timeline = RunTimeline {
         pavlovian: mode == Mode::Pavlovian,
-        duration_ms: records.len() as f64 * base.tick.period_ms.max(1) as f64,
+        duration_ms: samples.len() as f64 * base.tick.period_ms.max(1) as f64,
         commands: commands
             .iter()
             .zip(&metrics.outcomes)
@@ -239,7 +259,11 @@ pub(crate) fn run(base: &Config, plan: RunPlan) -> Result<InteractionRun, RunErr
         timeline,
         recording: done.recording,
         wall_s: done.wall_s,
-        records: if keep_records { records } else { Vec::new() },
+        records: if keep_records && !lean {
+            records
+        } else {
+            Vec::new()
+        },
     })
 }
 
