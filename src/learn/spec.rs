@@ -69,7 +69,7 @@ pub enum LearnerKind {
 }
 
 impl LearnerKind {
-    fn is_td(&self) -> bool {
+    pub(crate) fn is_td(&self) -> bool {
         *self == LearnerKind::Td
     }
 

@@ -24,8 +24,11 @@ use pavlov::analysis::interaction::curve::{CommandResult, RunTimeline, pair_lead
 use pavlov::rng::Rng;
 use serde::Serialize;
 
-/// Commands per block of the rule "anticipation holds" and of the figure's points.
+/// Commands per block of the rule "anticipation holds".
 pub const BLOCK: usize = 20;
+
+/// Commands per point of the figure (`by_command`).
+pub const FIG_BLOCK: usize = 10;
 
 /// The moments, minutes, at which the leads are given (those within the runs).
 pub const LEAD_AT_MIN: [f64; 4] = [3.0, 10.0, 30.0, 60.0];
@@ -143,7 +146,7 @@ pub struct LearnerRow {
     /// False starts over the whole run.
     pub false_starts: FalseStarts,
     /// For the figure: (block's last command number, mean over pairs of the block's decision lead, of its
-    /// current lead), ms, per block of [`BLOCK`] commands.
+    /// current lead), ms, per block of [`FIG_BLOCK`] commands.
     pub by_command: Vec<(usize, f64, f64)>,
 }
 
@@ -178,7 +181,13 @@ pub fn first_anticipated(r: &RunTimeline, p: &RunTimeline) -> Option<(usize, f64
 pub fn holds_from(r: &RunTimeline, p: &RunTimeline) -> Option<(usize, f64)> {
     let leads: Vec<(usize, f64, f64)> = matched(r, p)
         .enumerate()
-        .filter_map(|(i, (a, b))| Some((i + 1, b.onset_ms / 60_000.0, a.decision_ms? - b.decision_ms?)))
+        .filter_map(|(i, (a, b))| {
+            Some((
+                i + 1,
+                b.onset_ms / 60_000.0,
+                a.decision_ms? - b.decision_ms?,
+            ))
+        })
         .collect();
     if leads.len() < BLOCK {
         return None;
@@ -199,7 +208,12 @@ fn in_window(c: &CommandResult, from_min: f64, to_min: f64) -> bool {
 }
 
 /// Per pair, the Pavlovian minus the reactive fraction of commands in [from, to) decided before the onset.
-fn anticipated_excess(runs: &[RunTimeline], from: f64, to: f64, seed: u64) -> Option<MeanDifference> {
+fn anticipated_excess(
+    runs: &[RunTimeline],
+    from: f64,
+    to: f64,
+    seed: u64,
+) -> Option<MeanDifference> {
     let early = |c: &CommandResult| {
         in_window(c, from, to).then(|| f64::from(u8::from(c.decision_ms.is_some_and(|d| d < 0.0))))
     };
@@ -210,7 +224,11 @@ fn anticipated_excess(runs: &[RunTimeline], from: f64, to: f64, seed: u64) -> Op
 fn false_starts(runs: &[RunTimeline], to_min: f64, seed: u64) -> FalseStarts {
     let rate = |r: &RunTimeline| {
         let minutes = to_min.min(r.duration_ms / 60_000.0).max(1e-9);
-        r.false_starts_ms.iter().filter(|&&t| t < to_min * 60_000.0).count() as f64 / minutes
+        r.false_starts_ms
+            .iter()
+            .filter(|&&t| t < to_min * 60_000.0)
+            .count() as f64
+            / minutes
     };
     let pav: Vec<f64> = pairs(runs).map(|(_, p)| rate(p)).collect();
     let excess: Vec<f64> = pairs(runs).map(|(r, p)| rate(p) - rate(r)).collect();
@@ -240,29 +258,34 @@ fn by_command(runs: &[RunTimeline]) -> Vec<(usize, f64, f64)> {
             xs.iter().sum::<f64>() / xs.len() as f64
         }
     };
-    (0..shortest / BLOCK)
+    (0..shortest / FIG_BLOCK)
         .map(|b| {
             let block = |pick: fn(&(Option<f64>, Option<f64>)) -> Option<f64>| {
                 mean(
                     per_pair
                         .iter()
                         .filter_map(|pp| {
-                            let xs: Vec<f64> =
-                                pp[b * BLOCK..(b + 1) * BLOCK].iter().filter_map(pick).collect();
+                            let xs: Vec<f64> = pp[b * FIG_BLOCK..(b + 1) * FIG_BLOCK]
+                                .iter()
+                                .filter_map(pick)
+                                .collect();
                             (!xs.is_empty()).then(|| mean(xs))
                         })
                         .collect(),
                 )
             };
-            ((b + 1) * BLOCK, block(|x| x.0), block(|x| x.1))
+            ((b + 1) * FIG_BLOCK, block(|x| x.0), block(|x| x.1))
         })
         .collect()
 }
 
 /// The row of learner `learner` from its runs (planned order), with bootstrap seeds from `seed`.
 pub fn row(learner: &str, runs: &[RunTimeline], seed: u64) -> LearnerRow {
-    let never = |x: Option<(usize, f64)>| x.map_or((f64::INFINITY, f64::INFINITY), |(k, m)| (k as f64, m));
-    let first: Vec<(f64, f64)> = pairs(runs).map(|(r, p)| never(first_anticipated(r, p))).collect();
+    let never =
+        |x: Option<(usize, f64)>| x.map_or((f64::INFINITY, f64::INFINITY), |(k, m)| (k as f64, m));
+    let first: Vec<(f64, f64)> = pairs(runs)
+        .map(|(r, p)| never(first_anticipated(r, p)))
+        .collect();
     let holds: Vec<(f64, f64)> = pairs(runs).map(|(r, p)| never(holds_from(r, p))).collect();
     let col = |v: &[(f64, f64)], k: usize| -> Vec<f64> {
         v.iter().map(|x| if k == 0 { x.0 } else { x.1 }).collect()
@@ -337,7 +360,11 @@ mod tests {
                     }
                 })
                 .collect(),
-            false_starts_ms: if pavlovian { false_starts.clone() } else { vec![] },
+            false_starts_ms: if pavlovian {
+                false_starts.clone()
+            } else {
+                vec![]
+            },
         };
         [run(false), run(true)]
     }
@@ -358,7 +385,11 @@ mod tests {
     #[test]
     fn anticipation_holds_only_when_every_later_block_leads() {
         // Leads of 140 ms from command 30 on, but 40 commands at the end with no lead: never holds.
-        let lapse = pair(100, |k| if (30..60).contains(&k) { -100.0 } else { 40.0 }, vec![]);
+        let lapse = pair(
+            100,
+            |k| if (30..60).contains(&k) { -100.0 } else { 40.0 },
+            vec![],
+        );
         assert_eq!(holds_from(&lapse[0], &lapse[1]), None);
         // Leads from command 30 to the end (30 itself is noise: no lead): the first block with a positive
         // mean is commands 12–31, and every later one leads too.
@@ -371,7 +402,11 @@ mod tests {
         // Three pairs anticipating from commands 11, 21 and never (60 commands = 10 min each).
         let mut runs = Vec::new();
         for from in [11, 21, usize::MAX] {
-            runs.extend(pair(60, move |k| if k >= from { -100.0 } else { 40.0 }, vec![30_000.0]));
+            runs.extend(pair(
+                60,
+                move |k| if k >= from { -100.0 } else { 40.0 },
+                vec![30_000.0],
+            ));
         }
         let row = row("x", &runs, 1);
         assert_eq!(row.pairs, 3);
@@ -384,15 +419,21 @@ mod tests {
         // pair 1 leads, by 140 ms on commands 11–17 except 15 (noise): 6 of its 17 commands.
         assert_eq!(row.leads.len(), 2);
         let d3 = row.leads[0].decision.unwrap();
-        assert!((d3.difference - 140.0 * 6.0 / 17.0 / 3.0).abs() < 1e-9, "{d3:?}");
+        assert!(
+            (d3.difference - 140.0 * 6.0 / 17.0 / 3.0).abs() < 1e-9,
+            "{d3:?}"
+        );
         assert_eq!(row.leads[0].current.unwrap().difference, d3.difference);
         // One false start in the first minute of every Pavlovian run: 1/3 a minute over 0–3 min.
         assert!((row.false_starts_first.pavlovian_per_min - 1.0 / 3.0).abs() < 1e-12);
         let fs = row.false_starts_first.excess.unwrap();
         assert!((fs.lo - 1.0 / 3.0).abs() < 1e-12 && (fs.hi - 1.0 / 3.0).abs() < 1e-12);
         assert!((row.false_starts.pavlovian_per_min - 0.1).abs() < 1e-12);
-        assert_eq!(row.by_command.len(), 3);
-        assert_eq!(row.by_command[0].0, BLOCK);
+        assert_eq!(row.by_command.len(), 6);
+        assert_eq!(row.by_command[0].0, FIG_BLOCK);
+        // Block 2 (commands 11–20) of pair 1 leads by 140 ms on 8 of its 10 commands (15 and 20 are
+        // noise); the other pairs' by 0.
+        assert!((row.by_command[1].1 - 140.0 * 0.8 / 3.0).abs() < 1e-9);
     }
 
     #[test]

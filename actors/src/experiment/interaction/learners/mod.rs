@@ -158,25 +158,35 @@ mod tests {
             vec![LearnerKind::Td, LearnerKind::Xent]
         );
         assert!(parse_learners("paper,paper").is_err());
-        assert!(parse_learners("gtd").is_err(), "off-policy is not a learner here");
+        assert!(
+            parse_learners("gtd").is_err(),
+            "off-policy is not a learner here"
+        );
         assert!(parse_learners("").is_err());
         let base =
             Config::from_toml(include_str!("../../../../../config/interaction.toml")).unwrap();
-        let linear_file =
-            Config::from_toml(include_str!("../../../../../config/interaction-linear.toml"))
-                .unwrap();
+        let linear_file = Config::from_toml(include_str!(
+            "../../../../../config/interaction-linear.toml"
+        ))
+        .unwrap();
         assert_eq!(variant(&base, LearnerKind::Td), base);
         for kind in DEFAULT_LEARNERS {
             let v = variant(&base, kind);
             v.validate().unwrap();
             let (p, b) = (&v.predictions[0], &base.predictions[0]);
             assert_eq!(p.learner, kind);
-            assert_eq!((p.alpha, p.lambda, &p.features), (b.alpha, b.lambda, &b.features));
+            assert_eq!(
+                (p.alpha, p.lambda, &p.features),
+                (b.alpha, b.lambda, &b.features)
+            );
             assert_eq!(v.control, base.control);
         }
         let linear = &variant(&base, LearnerKind::Linear).predictions[0];
         let file = &linear_file.predictions[0];
-        assert_eq!((linear.sigma, linear.initial_weight), (file.sigma, file.initial_weight));
+        assert_eq!(
+            (linear.sigma, linear.initial_weight),
+            (file.sigma, file.initial_weight)
+        );
         let xent = &variant(&base, LearnerKind::Xent).predictions[0];
         assert_eq!(
             (xent.sigma, xent.initial_weight),

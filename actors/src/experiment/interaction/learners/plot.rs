@@ -1,13 +1,13 @@
 //! `fig_learners.{svg,png}`: the decision lead and the battery current's lead (reactive − Pavlovian onset,
 //! ms) against commands given, one line per learner, each point the mean over pairs of a block of
-//! [`BLOCK`] commands (drawn at the block's last command).
+//! [`FIG_BLOCK`] commands (drawn at the block's last command).
 
 use std::path::Path;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::metrics::{BLOCK, LearnerRow};
+use super::metrics::{FIG_BLOCK, LearnerRow};
 use crate::experiment::interaction::plots::{GREEN, Series, lines_panel};
 use crate::experiment::plot_style::{
     self as ps, DARK, Dash, Figure, Io, ONE_COLUMN_IN, PAVLOVIAN, REACTIVE, Style,
@@ -44,7 +44,7 @@ impl Figure for FigLearners<'_> {
             .iter()
             .flat_map(|r| r.by_command.last().map(|b| b.0))
             .max()
-            .unwrap_or(BLOCK) as f64;
+            .unwrap_or(FIG_BLOCK) as f64;
         let series = |pick: fn(&(usize, f64, f64)) -> f64| -> Vec<Series> {
             self.rows
                 .iter()
@@ -87,7 +87,7 @@ impl Figure for FigLearners<'_> {
 /// Writes `fig_learners.{svg,png}` into `dir`; `pairs` and `minutes` go into the caption.
 pub(crate) fn fig_learners(dir: &Path, rows: &[LearnerRow], pairs: usize, minutes: f64) -> Io {
     let caption = format!(
-        "Mean over {pairs} operators (pairs of runs, {minutes} min each) of each block of {BLOCK} commands' \
+        "Mean over {pairs} operators (pairs of runs, {minutes} min each) of each block of {FIG_BLOCK} commands' \
          mean lead, drawn at the block's last command; positive = the Pavlovian run earlier."
     );
     ps::save(dir, "fig_learners", &FigLearners { rows, caption })

@@ -164,10 +164,7 @@ pub fn csv(rows: &[LearnerRow]) -> String {
          holds_command,lo,hi,never,holds_min,lo,hi,never",
     );
     for t in &moments {
-        let _ = write!(
-            c,
-            ",decision_lead_{t}min,lo,hi,current_lead_{t}min,lo,hi"
-        );
+        let _ = write!(c, ",decision_lead_{t}min,lo,hi,current_lead_{t}min,lo,hi");
     }
     c.push_str(
         ",anticipated_excess_first,lo,hi,anticipated_excess,lo,hi,false_starts_first,excess,lo,hi,\
