@@ -103,6 +103,9 @@ impl TrueOnlineTd {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One transition: x_t, γ_t, R_{t+1}, γ_{t+1}, x_{t+1}.
+    type Step<'a> = (&'a [usize], f64, f64, f64, &'a [usize]);
     use crate::learn::{Sigma, TdLambda};
 
     fn params(lambda: f64) -> TdParams {
@@ -146,7 +149,7 @@ mod tests {
     fn with_lambda_zero_it_is_td_zero() {
         let mut t = TrueOnlineTd::new(3, params(0.0));
         let mut td = TdLambda::new(3, params(0.0)).unwrap();
-        let steps: [(&[usize], f64, f64, f64, &[usize]); 4] = [
+        let steps: [Step; 4] = [
             (&[0, 1], 0.9, 0.0, 0.9, &[1, 2]),
             (&[1, 2], 0.9, 1.0, 0.0, &[0]),
             (&[0], 0.0, 0.0, 0.9, &[2]),

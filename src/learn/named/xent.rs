@@ -95,6 +95,9 @@ impl XentTd {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One transition: x_t, γ_t, R_{t+1}, γ_{t+1}, x_{t+1}.
+    type Step<'a> = (&'a [usize], f64, f64, f64, &'a [usize]);
     use crate::learn::TdLambda;
 
     fn logistic(y: f64) -> f64 {
@@ -143,7 +146,7 @@ mod tests {
     fn with_an_identity_output_it_is_the_papers_linear_td() {
         let mut x = XentTd::new(3, params(Sigma::Identity, 0.0));
         let mut td = TdLambda::new(3, params(Sigma::Identity, 0.0)).unwrap();
-        let steps: [(&[usize], f64, f64, f64, &[usize]); 3] = [
+        let steps: [Step; 3] = [
             (&[0, 1], 0.9, 0.0, 0.9, &[1, 2]),
             (&[1, 2], 0.9, 1.0, 0.0, &[0]),
             (&[0], 0.0, 0.0, 0.9, &[2]),

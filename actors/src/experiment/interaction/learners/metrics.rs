@@ -238,8 +238,11 @@ fn false_starts(runs: &[RunTimeline], to_min: f64, seed: u64) -> FalseStarts {
     }
 }
 
+/// One command's decision and current leads within its pair.
+type Leads = (Option<f64>, Option<f64>);
+
 fn by_command(runs: &[RunTimeline]) -> Vec<(usize, f64, f64)> {
-    let per_pair: Vec<Vec<(Option<f64>, Option<f64>)>> = pairs(runs)
+    let per_pair: Vec<Vec<Leads>> = pairs(runs)
         .map(|(r, p)| {
             matched(r, p)
                 .map(|(a, b)| {
@@ -260,7 +263,7 @@ fn by_command(runs: &[RunTimeline]) -> Vec<(usize, f64, f64)> {
     };
     (0..shortest / FIG_BLOCK)
         .map(|b| {
-            let block = |pick: fn(&(Option<f64>, Option<f64>)) -> Option<f64>| {
+            let block = |pick: fn(&Leads) -> Option<f64>| {
                 mean(
                     per_pair
                         .iter()
