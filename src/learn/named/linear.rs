@@ -1,6 +1,6 @@
 //! `learner = "linear"`: the paper's TD(λ) ([`super::super::td`]) with the identity output, `v = wᵀx`
 //! (config/interaction-linear.toml; the paper's stall prediction is one). It runs on the same engine as
-//! `learner = "paper"` (the set's dense or deferred [`super::super::TdLearner`]); the name only says, and
+//! `learner = "paper"` (the set's dense or deferred [`super::super::set::TdLearner`]); the name only says, and
 //! the configuration checks, that σ is the identity:
 //!
 //! ```text

@@ -2,7 +2,7 @@
 //!
 //! | `learner` | what | file |
 //! |---|---|---|
-//! | `"paper"` (default; also `"td"`) | the paper's TD(λ), σ′ in the trace | [`super::td`] (reference), run by [`super::TdLearner`] |
+//! | `"paper"` (default; also `"td"`) | the paper's TD(λ), σ′ in the trace | [`super::td`] (reference), run by [`super::set::TdLearner`] |
 //! | `"xent"` | the cross-entropy (log-loss) gradient of the logistic output: the paper's update without σ′ in the trace | [`xent`] |
 //! | `"linear"` | the paper's TD(λ) with σ = identity | [`linear`] |
 //! | `"true_online"` | true online TD(λ) with dutch traces (van Seijen & Sutton 2014), linear | [`true_online`] |

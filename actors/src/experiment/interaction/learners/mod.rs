@@ -10,7 +10,7 @@
 //! timelines (a few hundred commands a run), whatever the number of learners.
 //!
 //! [`metrics`] reduces each learner's runs to its row (what the row's figures are, and the rule for
-//! "anticipation holds", are stated there), [`table`] writes the tables, [`plot`] the figure of the lead
+//! "anticipation holds", are stated there), [`table`] writes the tables, `plot` the figure of the lead
 //! against commands.
 
 pub mod metrics;
