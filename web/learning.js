@@ -145,6 +145,7 @@ export class LearningView {
       `λ ${fmtParam(p.lambda)}`,
       `θ ${fmtParam(p.threshold)}`,
       `τ ${info ? fmt(info.tau, 1) : '—'}`,
+      `learner ${info && info.learner ? info.learner : '—'}`,
     ];
     this.els.params.textContent = parts.join(' · ');
     const e = info ? info.error : {};

@@ -71,6 +71,7 @@ export class LearningStore {
       }
       e.info = {
         tau: p.tau,
+        learner: typeof p.learner === 'string' ? p.learner : null,
         horizon: p.horizon,
         tailBound: p.tail_bound,
         error: p.error || {},

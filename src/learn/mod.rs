@@ -8,6 +8,8 @@
 //! - [`horde`]: [`Horde`], thousands of general predictions (GVFs) in families, grouped by shared trace.
 //! - [`gtd`]: [`Gtd`], off-policy GTD(λ) (Maei 2011) with importance sampling ratios, for predictions about
 //!   a target policy other than the behaviour run (`learner = "gtd"`).
+//! - [`named`]: the learners beyond the paper's, chosen per prediction with `learner = "…"`: `xent` (the
+//!   cross-entropy gradient), `linear`, `true_online` (dutch traces), `autostep` (step sizes per weight).
 //! - [`group`]: [`TraceGroup`], the same update for predictions sharing a trace, deferred so that a tick
 //!   costs the active features only: what the Horde runs.
 //! - [`dense`]: [`DenseTd`], one prediction's update in one vectorized pass over its few hundred
@@ -27,6 +29,7 @@ pub mod group;
 pub mod gtd;
 pub mod horde;
 pub mod inputs;
+pub mod named;
 pub mod set;
 pub mod sigma;
 pub mod snapshot;
@@ -43,9 +46,10 @@ pub use group::{Column, GroupState, TraceGroup};
 pub use gtd::{Gtd, GtdParams};
 pub use horde::{FamilySpec, Horde, HordeSnapshot, HordeState, TickSignals};
 pub use inputs::{FeatureInputs, SignalNames};
+pub use named::{Named, NamedChain};
 pub use set::{PredictionOut, PredictionSet};
 pub use sigma::Sigma;
 pub use snapshot::{PredictionSnapshot, PreviousStep, SetSnapshot};
-pub use spec::{Cumulant, FeatureSpec, PairSpec, PredictionSpec, Threshold};
+pub use spec::{Cumulant, FeatureSpec, LearnerKind, PairSpec, PredictionSpec, Threshold};
 pub use td::{TdLambda, TdParams, UpdateRefused};
 pub use tiles::{TileCoder, TileSpec};

@@ -18,7 +18,9 @@
 //!
 //! Each on-policy prediction is a [`TdLearner`] in `f64`: dense ([`super::DenseTd`]) or a deferred
 //! group of one ([`super::TraceGroup`]), whichever its shape makes faster; both match the dense
-//! reference [`super::TdLambda`] to rounding (about 1e-12 over a stall run).
+//! reference [`super::TdLambda`] to rounding (about 1e-12 over a stall run). That is `learner = "paper"`
+//! (the default) and `"linear"`; `"xent"`, `"true_online"` and `"autostep"` run their own dense learners
+//! ([`super::named`]), `"gtd"` GTD(λ).
 //!
 //! # Divergence
 //!
@@ -40,6 +42,7 @@ use super::bounds::{ParamBounds, check_lambda, check_set_size};
 use super::group::Column;
 use super::gtd::{Gtd, GtdChain};
 use super::inputs::{FeatureInputs, SignalNames, resolve};
+use super::named::{AutostepTd, Named, NamedChain, TrueOnlineTd, XentTd};
 use super::spec::check_threshold;
 use super::spec::{Cumulant, LearnerKind, PredictionSpec, Threshold};
 use super::tiles::TileCoder;
@@ -79,6 +82,8 @@ pub(crate) enum Engine {
     Td(TdLearner),
     /// Off-policy GTD(λ) ([`super::gtd`]).
     Gtd(Box<GtdChain>),
+    /// A named learner with its own state: `xent`, `true_online`, `autostep` ([`super::named`]).
+    Named(Box<NamedChain>),
 }
 
 /// One prediction and its learner.
@@ -109,10 +114,22 @@ impl Learner {
         let stimulus = match &spec.cumulant {
             Cumulant::Stimulus(s) => names.resolve_stimulus(&spec.name, s)?,
         };
+        let features = resolved.coder.num_features();
+        let named = |n: Named| Engine::Named(Box::new(NamedChain::new(n)));
         let engine = match spec.gtd_params() {
-            Some(params) if spec.learner == LearnerKind::Gtd => Engine::Gtd(Box::new(
-                GtdChain::new(Gtd::new(resolved.coder.num_features(), params)?),
+            Some(params) if spec.learner == LearnerKind::Gtd => {
+                Engine::Gtd(Box::new(GtdChain::new(Gtd::new(features, params)?)))
+            }
+            _ if spec.learner == LearnerKind::Xent => {
+                named(Named::Xent(XentTd::new(features, spec.td_params())))
+            }
+            _ if spec.learner == LearnerKind::TrueOnline => named(Named::TrueOnline(
+                TrueOnlineTd::new(features, spec.td_params()),
             )),
+            _ if spec.learner == LearnerKind::Autostep => {
+                named(Named::Autostep(AutostepTd::new(features, spec.td_params())))
+            }
+            // "paper" and "linear" (σ = identity, checked by the spec): the paper's engine.
             _ => Engine::Td(TdLearner::new(
                 resolved.coder.num_features(),
                 resolved.coder.num_tilings(),
@@ -144,6 +161,7 @@ impl Learner {
         match &self.engine {
             Engine::Td(g) => g.diverged(),
             Engine::Gtd(c) => c.diverged(),
+            Engine::Named(c) => c.diverged(),
         }
     }
 
@@ -158,6 +176,7 @@ impl Learner {
         let value = match &mut self.engine {
             Engine::Td(g) => g.predict_value(&self.x_now),
             Engine::Gtd(c) => self.spec.sigma.value(c.predict(&self.x_now)),
+            Engine::Named(c) => c.predict(&self.x_now),
         };
         self.fresh = true;
         PredictionOut {
@@ -180,6 +199,7 @@ impl Learner {
         match &mut self.engine {
             Engine::Td(g) => g.learn(gamma, reward),
             Engine::Gtd(c) => c.learn(gamma, reward, rho_prev),
+            Engine::Named(c) => c.learn(gamma, reward),
         }
     }
 
@@ -189,6 +209,7 @@ impl Learner {
         match &mut self.engine {
             Engine::Td(g) => g.clear_pending(),
             Engine::Gtd(c) => c.clear_pending(),
+            Engine::Named(c) => c.clear_pending(),
         }
     }
 
@@ -197,6 +218,7 @@ impl Learner {
         match &mut self.engine {
             Engine::Td(g) => g.break_chain(),
             Engine::Gtd(c) => c.break_chain(),
+            Engine::Named(c) => c.break_chain(),
         }
     }
 
@@ -206,6 +228,7 @@ impl Learner {
         match &mut self.engine {
             Engine::Td(g) => g.reset(),
             Engine::Gtd(c) => c.reset(),
+            Engine::Named(c) => c.reset(),
         }
     }
 
@@ -230,6 +253,7 @@ impl Learner {
             match &mut self.engine {
                 Engine::Td(g) => g.set_alpha(a)?,
                 Engine::Gtd(c) => c.gtd_mut().set_alpha(a)?,
+                Engine::Named(c) => c.set_alpha(a)?,
             }
             self.spec.alpha = a;
         }
@@ -237,6 +261,7 @@ impl Learner {
             match &mut self.engine {
                 Engine::Td(g) => g.set_lambda(l)?,
                 Engine::Gtd(c) => c.gtd_mut().set_lambda(l)?,
+                Engine::Named(c) => c.set_lambda(l)?,
             }
             self.spec.lambda = l;
         }
@@ -391,7 +416,18 @@ impl PredictionSet {
             .find(|l| l.spec.name == name)
             .and_then(|l| match &l.engine {
                 Engine::Td(g) => Some(g),
-                Engine::Gtd(_) => None,
+                Engine::Gtd(_) | Engine::Named(_) => None,
+            })
+    }
+
+    /// The named learner (`xent`, `true_online`, `autostep`) of prediction `name`.
+    pub fn named_learner(&self, name: &str) -> Option<&Named> {
+        self.learners
+            .iter()
+            .find(|l| l.spec.name == name)
+            .and_then(|l| match &l.engine {
+                Engine::Named(c) => Some(c.learner()),
+                _ => None,
             })
     }
 
@@ -402,7 +438,7 @@ impl PredictionSet {
             .find(|l| l.spec.name == name)
             .and_then(|l| match &l.engine {
                 Engine::Gtd(c) => Some(c.gtd()),
-                Engine::Td(_) => None,
+                Engine::Td(_) | Engine::Named(_) => None,
             })
     }
 
@@ -457,3 +493,6 @@ mod tests;
 
 #[cfg(test)]
 mod gtd_tests;
+
+#[cfg(test)]
+mod named_tests;

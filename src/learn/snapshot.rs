@@ -44,6 +44,10 @@ pub struct PredictionSnapshot {
     /// An off-policy prediction's secondary step size β; absent for on-policy ones.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub beta: Option<f64>,
+    /// A named learner's state beyond weights and trace (`learner = "true_online"`: `[V_old]`;
+    /// `"autostep"`: the step sizes, h and v; [`super::named::Named::aux`]); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aux: Option<Vec<f64>>,
 }
 
 /// The previous tick, which the next `learn` learns from.
@@ -83,6 +87,7 @@ impl PredictionSet {
                         state: group.group_state(),
                         secondary: None,
                         beta: None,
+                        aux: None,
                     },
                     Engine::Gtd(chain) => PredictionSnapshot {
                         name: l.spec.name.clone(),
@@ -98,6 +103,23 @@ impl PredictionSet {
                         state: None,
                         secondary: Some(chain.gtd().secondary().to_vec()),
                         beta: Some(chain.gtd().params().beta),
+                        aux: None,
+                    },
+                    Engine::Named(chain) => PredictionSnapshot {
+                        name: l.spec.name.clone(),
+                        alpha: l.spec.alpha,
+                        lambda: l.spec.lambda,
+                        threshold: l.spec.threshold,
+                        weights: chain.learner().weights().to_vec(),
+                        traces: chain.learner().traces().to_vec(),
+                        previous: chain.previous().map(|(active, gamma)| PreviousStep {
+                            active: active.to_vec(),
+                            gamma,
+                        }),
+                        state: None,
+                        secondary: None,
+                        beta: None,
+                        aux: chain.learner().aux(),
                     },
                 })
                 .collect(),
@@ -171,6 +193,13 @@ fn apply(l: &mut super::set::Learner, s: &PredictionSnapshot) -> Result<(), Lear
     // The runtime parameters go through the same bounds as `set_params` (α·‖x‖² ≤ 1). Both calls
     // check before they write; `restore` runs this on a copy first, so the set never half-changes.
     l.set_params(Some(s.alpha), Some(s.lambda), Some(s.threshold))?;
+    if s.aux.is_some() && !matches!(l.engine, Engine::Named(_)) {
+        return Err(LearnError::BadGroupState {
+            name: name.clone(),
+            what: "has a named learner's state (`aux`), but the prediction's learner keeps none"
+                .into(),
+        });
+    }
     let group = match &mut l.engine {
         Engine::Td(group) => {
             if s.secondary.is_some() || s.beta.is_some() {
@@ -202,6 +231,20 @@ fn apply(l: &mut super::set::Learner, s: &PredictionSnapshot) -> Result<(), Lear
             chain.gtd_mut().set_beta(beta)?;
             chain.restore(name, &s.weights, secondary, &s.traces, previous)?;
             l.spec.beta = Some(beta);
+            l.clear_pending();
+            return Ok(());
+        }
+        Engine::Named(chain) => {
+            if s.state.is_some() || s.secondary.is_some() || s.beta.is_some() {
+                return Err(LearnError::BadGroupState {
+                    name: name.clone(),
+                    what: format!(
+                        "has a TD(λ) group state or secondary weights, but the prediction's learner is \"{}\"",
+                        l.spec.learner.name()
+                    ),
+                });
+            }
+            chain.restore(name, &s.weights, &s.traces, s.aux.as_deref(), previous)?;
             l.clear_pending();
             return Ok(());
         }

@@ -49,17 +49,59 @@ pub enum Threshold {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LearnerKind {
-    /// The paper's on-policy TD(λ) ([`super::td`]): the prediction is about the behaviour actually run.
+    /// The paper's on-policy TD(λ) ([`super::td`]): the prediction is about the behaviour actually run
+    /// (`learner = "paper"`, or `"td"`).
     #[default]
+    #[serde(alias = "paper")]
     Td,
     /// Off-policy GTD(λ) ([`super::gtd`]): the prediction is about the declared `target_policy`,
     /// learned from the behaviour actually run with importance sampling ratios.
     Gtd,
+    /// The cross-entropy gradient of the logistic output: the paper's update without σ′ in the trace
+    /// ([`super::named::xent`]).
+    Xent,
+    /// The paper's TD(λ) with σ = identity ([`super::named::linear`]).
+    Linear,
+    /// True online TD(λ) with dutch traces, linear ([`super::named::true_online`]).
+    TrueOnline,
+    /// Autostep step sizes per weight on the `xent` update ([`super::named::autostep`]).
+    Autostep,
 }
 
 impl LearnerKind {
-    fn is_td(&self) -> bool {
+    pub(crate) fn is_td(&self) -> bool {
         *self == LearnerKind::Td
+    }
+
+    /// Every learner, in the order the tables list them.
+    pub const ALL: [LearnerKind; 6] = [
+        LearnerKind::Td,
+        LearnerKind::Xent,
+        LearnerKind::Linear,
+        LearnerKind::TrueOnline,
+        LearnerKind::Autostep,
+        LearnerKind::Gtd,
+    ];
+
+    /// The learner's name as the configuration, the tables and the dashboard show it (`"paper"` for the
+    /// paper's TD(λ)).
+    pub fn name(self) -> &'static str {
+        match self {
+            LearnerKind::Td => "paper",
+            LearnerKind::Gtd => "gtd",
+            LearnerKind::Xent => "xent",
+            LearnerKind::Linear => "linear",
+            LearnerKind::TrueOnline => "true_online",
+            LearnerKind::Autostep => "autostep",
+        }
+    }
+
+    /// The learner named `name` (as in the configuration: `"paper"` or `"td"`, `"xent"`, …).
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "td" => Some(LearnerKind::Td),
+            _ => Self::ALL.into_iter().find(|k| k.name() == name),
+        }
     }
 }
 
@@ -202,8 +244,9 @@ impl PredictionSpec {
         self.check_learner()
     }
 
-    /// The off-policy keys: `learner = "gtd"` needs `target_policy` and `beta` (> 0) and σ = identity
-    /// (only linear GTD(λ) is implemented, [`super::gtd`]); `learner = "td"` takes neither key.
+    /// The learner's keys: `learner = "gtd"` needs `target_policy` and `beta` (> 0) and σ = identity
+    /// (only linear GTD(λ) is implemented, [`super::gtd`]); `"linear"` and `"true_online"` need σ =
+    /// identity; the on-policy learners take neither off-policy key.
     fn check_learner(&self) -> Result<(), LearnError> {
         let name = self.name.as_str();
         let refuse = |field: &str, value: String, bound: &str| LearnError::OutOfBounds {
@@ -213,23 +256,11 @@ impl PredictionSpec {
             bound: bound.to_string(),
         };
         match self.learner {
-            LearnerKind::Td => {
-                if let Some(t) = self.target_policy {
-                    return Err(refuse(
-                        "target_policy",
-                        format!("{t:?}").to_lowercase(),
-                        "is only for learner = \"gtd\" (an on-policy TD(λ) prediction is about the behaviour run)",
-                    ));
-                }
-                if let Some(b) = self.beta {
-                    return Err(refuse(
-                        "beta",
-                        format!("{b:?}"),
-                        "is only for learner = \"gtd\" (TD(λ) has no secondary weights)",
-                    ));
-                }
-                Ok(())
+            LearnerKind::Linear | LearnerKind::TrueOnline => {
+                super::named::linear::check_identity(name, self.learner.name(), self.sigma)?;
+                self.check_on_policy()
             }
+            LearnerKind::Td | LearnerKind::Xent | LearnerKind::Autostep => self.check_on_policy(),
             LearnerKind::Gtd => {
                 if self.target_policy.is_none() {
                     return Err(refuse(
@@ -257,6 +288,31 @@ impl PredictionSpec {
                 Ok(())
             }
         }
+    }
+
+    /// An on-policy learner takes neither `target_policy` nor `beta`.
+    fn check_on_policy(&self) -> Result<(), LearnError> {
+        let refuse = |field: &str, value: String, bound: &str| LearnError::OutOfBounds {
+            name: self.name.clone(),
+            field: field.to_string(),
+            value,
+            bound: bound.to_string(),
+        };
+        if let Some(t) = self.target_policy {
+            return Err(refuse(
+                "target_policy",
+                format!("{t:?}").to_lowercase(),
+                "is only for learner = \"gtd\" (an on-policy TD(λ) prediction is about the behaviour run)",
+            ));
+        }
+        if let Some(b) = self.beta {
+            return Err(refuse(
+                "beta",
+                format!("{b:?}"),
+                "is only for learner = \"gtd\" (TD(λ) has no secondary weights)",
+            ));
+        }
+        Ok(())
     }
 
     /// The GTD(λ) parameters, for a `learner = "gtd"` prediction.

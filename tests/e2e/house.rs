@@ -100,7 +100,7 @@ fn markdown_targets(text: &str) -> Vec<String> {
 
 /// Documents named in backquotes: `` `docs/SOURCES.md` ``.
 /// Markdown files the studies write into their results folder (not documents of the repository).
-const WRITTEN_BY_STUDIES: &[&str] = &["table.md", "variations.md"];
+const WRITTEN_BY_STUDIES: &[&str] = &["table.md", "variations.md", "learners.md"];
 
 fn quoted_documents(text: &str) -> Vec<String> {
     text.split('`')

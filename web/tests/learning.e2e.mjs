@@ -56,7 +56,7 @@ try {
   // The newest values have no return yet: the return trails the value.
   if (!(learn.newest_return < learn.newest_value)) fail(`the return does not trail the value: ${JSON.stringify(learn)}`);
   if (learn.td < 100 || learn.rmse < 5) fail(`too few TD errors or RMSE points: ${JSON.stringify(learn)}`);
-  if (!/α 0\.0227/.test(learn.params) || !/λ 0\.5/.test(learn.params) || !/θ 0\.5/.test(learn.params) || !/τ 25/.test(learn.params)) {
+  if (!/α 0\.0227/.test(learn.params) || !/λ 0\.5/.test(learn.params) || !/θ 0\.5/.test(learn.params) || !/τ 25/.test(learn.params) || !/learner paper/.test(learn.params)) {
     fail(`the parameters in force are not shown: ${learn.params}`);
   }
   if (learn.rmse_text === '—') fail('no running error shown');

@@ -13,7 +13,7 @@ test('the store pairs tick values with TD errors and returns that arrive later',
     type: 'learning',
     seq: 10,
     predictions: [{
-      name: 'stall', tau: 25, horizon: 113, tail_bound: 0.0099,
+      name: 'stall', learner: 'xent', tau: 25, horizon: 113, tail_bound: 0.0099,
       td: [[9, -0.02], [10, null]],
       realised: [[2, 0.2, 0.9216, 1], [3, 0.3, 0.96, 1]],
       error: { pairs: 2, rmse: 0.7, mean_abs: 0.69, bias: -0.69 },
@@ -22,6 +22,7 @@ test('the store pairs tick values with TD errors and returns that arrive later',
   });
   assert.deepEqual(s.names(), ['stall']);
   assert.equal(s.info('stall').horizon, 113);
+  assert.equal(s.info('stall').learner, 'xent');
   const c = s.series('stall', 0.02);
   assert.equal(c.t.length, 11);
   assert.ok(Math.abs(c.t[10] - 0.2) < 1e-12);

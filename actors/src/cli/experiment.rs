@@ -68,6 +68,11 @@ pub struct InteractionArgs {
     /// each labelled paper or non-paper; writes sensitivity.md and sensitivity.csv.
     #[arg(long, conflicts_with = "curve")]
     pub sensitivity: bool,
+    /// The named learners side by side (`paper,xent,linear,true_online,autostep`, or `all`): the whole study
+    /// for each, on the same operators (defaults --runs 10 --minutes 60); writes learners.md, learners.csv,
+    /// learners.json and fig_learners.{svg,png}.
+    #[arg(long, value_name = "LIST", conflicts_with_all = ["curve", "sensitivity", "shard"])]
+    pub learners: Option<String>,
     /// Runs per policy, each pair with its own operator (default 1, the paper; 10 with --curve, 3 with
     /// --sensitivity).
     #[arg(long, value_name = "N")]
@@ -232,15 +237,23 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
         }
         Experiment::Interaction(a) => {
             let config = load_config(a.config.as_ref(), INTERACTION_CONFIG)?;
-            let long = a.curve || a.sensitivity;
-            let (runs, minutes) = if a.curve {
+            let learners = a
+                .learners
+                .as_deref()
+                .map(interaction::learners::parse_learners)
+                .transpose()
+                .map_err(|e| anyhow::anyhow!("--learners: {e}"))?;
+            let long = a.curve || a.sensitivity || learners.is_some();
+            let (runs, minutes) = if a.curve || learners.is_some() {
                 (CURVE_PAIRS, 60.0)
             } else if a.sensitivity {
                 (SENSITIVITY_PAIRS, 60.0)
             } else {
                 (1, 10.0)
             };
-            let name = if a.sensitivity {
+            let name = if learners.is_some() {
+                "interaction-learners"
+            } else if a.sensitivity {
                 "interaction-sensitivity"
             } else if a.curve {
                 "interaction-curve"
@@ -276,6 +289,21 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
             }
             let folder = place.study(name, a.seed)?;
             opts.out = folder.path.clone();
+            if let Some(learners) = learners {
+                let wall = std::time::Instant::now();
+                let rows = interaction::learners::run_and_report(&config, &opts, &learners, true)?;
+                say!(
+                    "{}",
+                    interaction::learners::table::onset_table(&rows, &opts).trim_end()
+                );
+                say!(
+                    "results: {} ({:.0} s wall)",
+                    opts.out.display(),
+                    wall.elapsed().as_secs_f64()
+                );
+                say_latest(&folder);
+                return Ok(());
+            }
             if a.sensitivity {
                 let wall = std::time::Instant::now();
                 let rows = interaction::sensitivity::run_sensitivity(&config, &opts, true)?;

@@ -44,6 +44,8 @@ struct LearningMessage<'a> {
 #[derive(Serialize)]
 struct PredictionFigures<'a> {
     name: &'a str,
+    /// The learner's name (`learner` in `[[predictions]]`).
+    learner: &'static str,
     tau: f64,
     horizon: u32,
     tail_bound: f32,
@@ -133,6 +135,7 @@ impl LearningTracks {
                 let thinned = t.realised.len().div_ceil(MAX_PAIRS_PER_MESSAGE).max(1);
                 PredictionFigures {
                     name: &t.spec.name,
+                    learner: t.spec.learner.name(),
                     tau: t.spec.tau,
                     horizon: t.tracker.horizon(),
                     tail_bound: t.tracker.tail_bound() as f32,

@@ -46,6 +46,9 @@ pub struct TraceGroup<W> {
     rows: DeferredRows<W>,
     lambda: f64,
     sigma: Sigma,
+    /// The trace takes x instead of σ′(wᵀx)·x (`learner = "xent"`, the log-loss gradient; only a logistic
+    /// group differs).
+    unit_gradient: bool,
     columns: Vec<Column>,
     diverged: Vec<bool>,
     chain: Chain,
@@ -99,6 +102,7 @@ impl<W: Weight> TraceGroup<W> {
             rows: DeferredRows::new(features, &initial),
             lambda,
             sigma,
+            unit_gradient: false,
             diverged: vec![false; cols],
             columns,
             chain: Chain {
@@ -147,6 +151,13 @@ impl<W: Weight> TraceGroup<W> {
     /// σ.
     pub fn sigma(&self) -> Sigma {
         self.sigma
+    }
+
+    /// The same group with the trace of the log-loss gradient, x instead of σ′(wᵀx)·x, when `on`
+    /// (`learner = "xent"`, [`crate::learn::named::xent`]); a linear group is the same either way.
+    pub fn with_unit_gradient(mut self, on: bool) -> Self {
+        self.unit_gradient = on;
+        self
     }
 
     /// The predictions' step sizes and initial weights.
@@ -218,7 +229,7 @@ impl<W: Weight> TraceGroup<W> {
                 if self.diverged[i] {
                     continue;
                 }
-                if sigma == Sigma::Logistic {
+                if sigma == Sigma::Logistic && !self.unit_gradient {
                     grad = sigma.derivative(y_prev);
                 }
                 let r = cumulants[i];

@@ -365,3 +365,44 @@ fn a_snapshot_copied_while_learning_is_the_state_when_it_began() {
     state.w0 = weights.iter().map(|&w| f64::from(w)).collect();
     assert_eq!(state, before);
 }
+
+/// A logistic group with the log-loss trace (`learner = "xent"` in the Horde) against the dense
+/// [`crate::learn::named::XentTd`], step by step.
+#[test]
+fn a_unit_gradient_group_matches_the_cross_entropy_learner() {
+    use crate::learn::named::XentTd;
+    let params = TdParams {
+        alpha: 0.1,
+        lambda: 0.8,
+        sigma: Sigma::Logistic,
+        initial_weight: -1.0,
+    };
+    let mut group: TraceGroup<f64> = TraceGroup::new(
+        8,
+        0.8,
+        Sigma::Logistic,
+        vec![Column {
+            alpha: 0.1,
+            initial_weight: -1.0,
+        }],
+    )
+    .unwrap()
+    .with_unit_gradient(true);
+    let mut dense = XentTd::new(8, params);
+    let mut rng = crate::rng::Rng::new(4);
+    let mut prev: Option<(Vec<usize>, f64)> = None;
+    let mut delta = [f64::NAN];
+    for _ in 0..400 {
+        let x = vec![rng.below(4) as usize, 4 + rng.below(4) as usize];
+        let e = rng.chance(0.2);
+        let (r, g) = (f64::from(u8::from(e)), if e { 0.0 } else { 0.96 });
+        let y = group.predict(&x)[0];
+        assert!((Sigma::Logistic.value(y) - dense.predict(&x)).abs() < 1e-12);
+        group.learn(g, &[r], &mut delta).unwrap();
+        if let Some((xp, gp)) = &prev {
+            let d = dense.try_update(xp, *gp, r, g, &x).unwrap();
+            assert!((d - delta[0]).abs() < 1e-12);
+        }
+        prev = Some((x, g));
+    }
+}

@@ -4,6 +4,7 @@
 
 use super::super::group::{Column, TraceGroup, Weight};
 use super::super::inputs::{SignalNames, resolve};
+use super::super::spec::LearnerKind;
 use super::super::{LearnError, ParamBounds, Sigma};
 use super::{
     Bank, FamilySpec, Horde, HordeShape, MAX_HORDE_PREDICTIONS, MAX_HORDE_WEIGHTS, PredictionInfo,
@@ -84,7 +85,8 @@ impl<W: Weight> Horde<W> {
                 bank: key.bank,
                 continuation: 1.0 - 1.0 / f64::from_bits(key.tau),
                 terminate: key.terminate,
-                group: TraceGroup::new(features, first.lambda, first.sigma, plan.columns)?,
+                group: TraceGroup::new(features, first.lambda, first.sigma, plan.columns)?
+                    .with_unit_gradient(first.learner == LearnerKind::Xent),
                 sources: plan.sources,
                 predictions: plan.predictions,
                 cumulants: vec![0.0; cols],

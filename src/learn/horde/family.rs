@@ -24,7 +24,7 @@ use super::super::bounds::{
     ParamBounds, check_alpha_positive, check_initial_value, check_initial_weight, check_lambda,
     check_tau,
 };
-use super::super::spec::feature_bounds;
+use super::super::spec::{LearnerKind, feature_bounds};
 use super::super::{FeatureSpec, LearnError, Sigma};
 
 /// `[[horde.families]]`: see the module documentation.
@@ -52,6 +52,11 @@ pub struct FamilySpec {
     pub terminate_on: Option<String>,
     /// The features every prediction of the family learns from (built once per tick for all).
     pub features: FeatureSpec,
+    /// The learner (default `"paper"`): `"paper"`, `"xent"` (the log-loss gradient, no σ′ in the trace) or
+    /// `"linear"` (σ = identity); the learners with state per weight (`"true_online"`, `"autostep"`) and
+    /// off-policy `"gtd"` are refused, as the Horde's deferred groups do not run them.
+    #[serde(default, skip_serializing_if = "LearnerKind::is_td")]
+    pub learner: LearnerKind,
 }
 
 fn identity() -> Sigma {
@@ -87,6 +92,22 @@ impl FamilySpec {
         check_lambda(name, self.lambda)?;
         check_alpha_positive(name, self.alpha)?;
         check_initial_weight(name, self.initial_weight)?;
+        match self.learner {
+            LearnerKind::Td | LearnerKind::Xent => {}
+            LearnerKind::Linear => {
+                crate::learn::named::linear::check_identity(name, "linear", self.sigma)?
+            }
+            other => {
+                return Err(LearnError::OutOfBounds {
+                    name: name.to_string(),
+                    field: "learner".into(),
+                    value: format!("\"{}\"", other.name()),
+                    bound: "is not available in the Horde (its deferred groups run \"paper\", \"xent\" \
+                            and \"linear\")"
+                        .into(),
+                });
+            }
+        }
         let bounds = feature_bounds(name, &self.features, obs_dims)?;
         bounds.check_alpha(name, self.alpha)?;
         check_initial_value(name, self.initial_weight, bounds.active_features)?;
@@ -142,5 +163,36 @@ mod tests {
         assert!(refuse(&|f| f.name = "a/b".into()).contains("a/b"));
         assert!(refuse(&|f| f.taus = vec![2.0; 65]).contains("taus"));
         assert!(toml::from_str::<FamilySpec>(&NEXTING.replace("taus", "tau")).is_err());
+    }
+
+    #[test]
+    fn a_family_names_its_learner_and_the_horde_refuses_the_ones_it_cannot_run() {
+        let with = |learner: &str, sigma: &str| {
+            toml::from_str::<FamilySpec>(&format!(
+                "{NEXTING}\nlearner = \"{learner}\"\nsigma = \"{sigma}\"\n"
+            ))
+            .unwrap()
+        };
+        assert_eq!(with("xent", "logistic").learner, LearnerKind::Xent);
+        with("xent", "logistic").bounds(44).unwrap();
+        with("paper", "logistic").bounds(44).unwrap();
+        with("linear", "identity").bounds(44).unwrap();
+        assert!(
+            with("linear", "logistic")
+                .bounds(44)
+                .unwrap_err()
+                .to_string()
+                .contains("sigma")
+        );
+        for refused in ["true_online", "autostep", "gtd"] {
+            let e = with(refused, "identity")
+                .bounds(44)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("learner") && e.contains(refused), "{e}");
+        }
+        // The default is not written (older readers keep working).
+        let text = toml::to_string(&with("paper", "identity")).unwrap();
+        assert!(!text.contains("learner"), "{text}");
     }
 }

@@ -107,6 +107,10 @@ fn check_learning(ticks: &BTreeMap<u64, Value>, learning: &[Value]) -> (usize, u
         assert_eq!(p["tau"], 25.0);
         assert_eq!(p["horizon"], HORIZON);
         assert!(p["tail_bound"].as_f64().unwrap() < 0.01);
+        assert_eq!(
+            p["learner"], "paper",
+            "the learner by name, for the Learning card"
+        );
         // The message comes on every tenth tick and carries the TD errors up to it.
         let seq = m["seq"].as_u64().unwrap();
         assert_eq!(seq % 10, 0, "{m}");

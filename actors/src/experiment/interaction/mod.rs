@@ -13,10 +13,11 @@
 //! - `run`: one run, its ticks reduced as they arrive (`reduce`: the run keeps a few dozen bytes a
 //!   tick, never its records); `analysis`: the statistics; [`report`]: files and the terminal table;
 //!   `plots`: the Figure 3 and Figure 4 analogues and the time course; [`sensitivity`]: the study over
-//!   operator and learner variants; [`sharded`]: one slice of the study (`--shard I/N`), and merging the
+//!   operator and learner variants; [`learners`]: the named learners side by side (`--learners`); [`sharded`]: one slice of the study (`--shard I/N`), and merging the
 //!   slices back (`assemble` makes the study from its runs, whoever ran them).
 
 pub(crate) mod analysis;
+pub mod learners;
 pub(crate) mod plots;
 pub(crate) mod reduce;
 pub mod report;
@@ -59,6 +60,10 @@ pub struct InteractionOptions {
     pub window_min: f64,
     /// The simulated operator.
     pub human: HumanParams,
+    /// Keep no tick records, only each run's timeline and response timing (the learners study,
+    /// [`learners`]); not written into summary.json.
+    #[serde(default, skip)]
+    pub lean: bool,
 }
 
 impl InteractionOptions {
@@ -75,6 +80,7 @@ impl InteractionOptions {
             out,
             window_min: 5.0,
             human: HumanParams::default(),
+            lean: false,
         }
     }
 }
@@ -164,6 +170,7 @@ pub(crate) fn run_runs(
                 // The Figure 3 analogue draws the first run of each policy.
                 keep_figure3: i < 2,
                 human: o.human.clone(),
+                lean: o.lean,
             },
         )
     };

@@ -27,10 +27,10 @@ use super::run::{self as interaction, InteractionRun};
 type PolicyBand = (RGBColor, Dash, Vec<(f64, f64, f64)>);
 
 /// A series: legend label, colour, dash, points.
-type Series = (String, RGBColor, Dash, Vec<(f64, f64)>);
+pub(crate) type Series = (String, RGBColor, Dash, Vec<(f64, f64)>);
 
 /// A green for the third lead (motion), apart from the policies' red and blue.
-const GREEN: RGBColor = RGBColor(0, 135, 80);
+pub(crate) const GREEN: RGBColor = RGBColor(0, 135, 80);
 
 fn policy_style(mode: Mode) -> (RGBColor, Dash) {
     if mode == Mode::Pavlovian {
@@ -43,7 +43,7 @@ fn policy_style(mode: Mode) -> (RGBColor, Dash) {
 /// A panel of line series over `x`, with `references` (horizontal lines at these y values, no legend entry)
 /// and the y range fitted to the data unless `y` is given.
 #[allow(clippy::too_many_arguments)]
-fn lines_panel<DB: DrawingBackend>(
+pub(crate) fn lines_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     st: &Style,
     title: &str,

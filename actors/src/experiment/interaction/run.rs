@@ -145,6 +145,9 @@ pub(crate) struct RunPlan {
     pub(crate) keep_figure3: bool,
     /// The simulated operator.
     pub(crate) human: HumanParams,
+    /// Keep only the response and physical samples (tens of bytes a tick): no aligned windows and
+    /// nothing of Figure 3, for studies that need the timeline only.
+    pub(crate) lean: bool,
 }
 
 /// Runs one interaction run.
@@ -158,6 +161,7 @@ pub(crate) fn run(base: &Config, plan: RunPlan) -> Result<InteractionRun, RunErr
         record_dir,
         keep_figure3,
         human,
+        lean,
     } = plan;
     let (robot_seed, human_seed) = run_seeds(seed, index);
     let mut config = base.clone();
@@ -173,7 +177,11 @@ pub(crate) fn run(base: &Config, plan: RunPlan) -> Result<InteractionRun, RunErr
         human: Some(SimHuman::new(human, human_seed)),
         driver: None,
         cancel: CancellationToken::new(),
-        reducer: RunReducer::new(ticks, aligned_commands, keep_figure3),
+        reducer: if lean {
+            RunReducer::new(ticks, 0, false)
+        } else {
+            RunReducer::new(ticks, aligned_commands, keep_figure3)
+        },
     };
     let done = run_paused(request, collector)?;
     let (reduced, commands) = done.output;
