@@ -132,7 +132,6 @@ impl<W: Weight> Horde<W> {
         let mut stopped = 0;
         for slot in &mut self.slots {
             let bank = &self.banks[slot.bank];
-            slot.group.predict(&bank.active);
             let ends = slot
                 .terminate
                 .is_some_and(|i| signals.stimuli.get(i).copied().unwrap_or(false));
@@ -141,10 +140,11 @@ impl<W: Weight> Horde<W> {
             for (r, &source) in slot.cumulants.iter_mut().zip(&slot.sources) {
                 *r = signals.value(source, |k| on.is_some_and(|o| o.get(k) == Some(&true)));
             }
-            // `predict` ran and the slices are the group's size: this cannot fail.
+            // The slices are the group's size: this cannot fail. One pass over each active weight
+            // row (`learn::group`'s `fused`), the same result as `predict` then `learn`.
             stopped += slot
                 .group
-                .learn(gamma, &slot.cumulants, &mut slot.deltas)
+                .predict_and_learn(&bank.active, gamma, &slot.cumulants, &mut slot.deltas)
                 .unwrap_or(0);
         }
         self.stopped += stopped as u64;
