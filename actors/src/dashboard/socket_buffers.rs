@@ -11,8 +11,10 @@
 //!   `[dashboard] client_queue` ticks, one Horde message, the replies), and the connection's writer hands
 //!   the socket one message at a time and waits for it to be written. So the library needs to hold no
 //!   more than the message being written: with a write buffer of 0 each message goes to the socket at
-//!   once, and the library's buffer is never more than one message (the largest the server sends, about
-//!   32 KiB: a history or Horde message).
+//!   once, and the library's buffer is never more than one message. It keeps that memory, though, as
+//!   large as the largest message the connection was sent, for as long as it is open: so the history a
+//!   client gets on connecting goes in messages of at most 8 KiB (`super::history_messages`). A client
+//!   that watches the Horde gets messages of up to 32 KiB, and keeps that much.
 
 /// Bytes one read of the socket fills (the library's `read_buffer_size`).
 pub(crate) const READ_BUFFER_BYTES: usize = 4 * 1024;

@@ -128,7 +128,13 @@ impl<W: Weight> Worker<W> {
                 Err(RecvTimeoutError::Disconnected) => break,
             }
         }
-        // Shutting down: the last checkpoint is completed at once (nothing is learned any more).
+        // Shutting down: the last checkpoint is completed at once (nothing is learned any more), at the
+        // normal policy: control has stopped, and under `SCHED_IDLE` on a busy machine the copy and the
+        // write of hundreds of megabytes would wait minutes for a core.
+        if self.idle {
+            super::background::back_to_normal_policy();
+            self.idle = false;
+        }
         let (target, done) = finish.unzip();
         if let Some(target) = target.flatten() {
             if p.copying.is_none() {
