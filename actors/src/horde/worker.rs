@@ -374,6 +374,7 @@ mod tests {
             offers: Arc::new(OfferCounters::default()),
             status: status_tx,
             values: values_tx,
+            spare_values: Vec::new(),
             period,
             tick_offset,
             resumed_tick,
@@ -441,6 +442,8 @@ mod tests {
                     stimuli: vec![false],
                 })
                 .unwrap();
+            // As learning does after an offer: the thread parks between ticks.
+            thread.thread().unpark();
         }
         drop(tick_tx);
         thread.join().unwrap();
