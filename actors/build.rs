@@ -15,11 +15,6 @@
 //! release profile keeps line tables so that backtraces name files and lines, and compressed they cost a
 //! quarter of the space (Rust's backtraces and `perf` read compressed sections).
 //!
-//! It compiles the tick's schema, `proto/pavlov/tick.proto`, with `protox` (a protobuf compiler in Rust:
-//! no `protoc` is needed) into `OUT_DIR/pavlov.rs` (the prost structs, by `prost-build`) and
-//! `OUT_DIR/tick_descriptor_set.bin` (the serialised `FileDescriptorSet` a recording carries as its `ticks`
-//! schema, without source comments), for `actors/src/storage/recording/{tick_pb,schema}.rs`.
-//!
 //! And it embeds the dashboard's files (`build/web_assets.rs`).
 //!
 //! So that the dirty flag stays true, the script runs again whenever git's HEAD, index or refs move, or a
@@ -29,16 +24,10 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use prost::Message as _;
-
 #[path = "build/web_assets.rs"]
 mod web_assets;
 
 fn main() {
-    if let Err(e) = tick_schema() {
-        // A build script reports by failing: the message names the .proto problem (file, line, column).
-        panic!("compiling proto/pavlov/tick.proto: {e}");
-    }
     web_assets::embed();
 
     let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
@@ -138,17 +127,4 @@ fn git_state(root: &Path) -> (String, String) {
         None => "unknown",
     };
     (commit, dirty.into())
-}
-
-/// Compiles `proto/pavlov/tick.proto` into the prost structs and the descriptor set (see the module doc).
-fn tick_schema() -> Result<(), Box<dyn std::error::Error>> {
-    let out = PathBuf::from(std::env::var_os("OUT_DIR").ok_or("OUT_DIR is not set")?);
-    println!("cargo:rerun-if-changed=proto");
-    let mut files = protox::compile(["pavlov/tick.proto"], ["proto"])?;
-    prost_build::Config::new().compile_fds(files.clone())?;
-    for file in &mut files.file {
-        file.source_code_info = None;
-    }
-    std::fs::write(out.join("tick_descriptor_set.bin"), files.encode_to_vec())?;
-    Ok(())
 }

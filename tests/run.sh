@@ -6,7 +6,8 @@
 # It installs Debian's chromium (the dashboard's browser test drives it with playwright-core) when it is
 # missing, the dashboard's npm packages from web/package-lock.json, the Foxglove test client's from
 # tests/foxglove/package-lock.json, and the independent MCAP reader (the `mcap` Python packages pinned in
-# tests/python/requirements.txt) into the venv target/py-mcap. Nothing downloads a browser of its own.
+# tests/python/requirements.txt) into the venv target/py-mcap, and the `eclipse-zenoh` Python package (pinned in
+# tests/python/requirements-zenoh.txt) into target/py-zenoh. Nothing downloads a browser of its own.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -115,6 +116,18 @@ step "python/pavlov_recording.py against a fresh recording (python/requirements.
 PAVLOV_BIN="${CARGO_TARGET_DIR:-target}/debug/pavlov" \
   "$PY_VENV/bin/python" -m unittest discover --start-directory python --pattern 'test_*.py' --verbose
 # --- end of the Python loader ----------------------------------------------------------------------------
+
+# --- the Zenoh wire from Python (tests/python/test_zenoh_wire.py) ----------------------------------------
+# The `eclipse-zenoh` package pinned in tests/python/requirements-zenoh.txt (the zenoh crate's version) goes
+# into a venv of its own; the test starts two simulated robots and a fleet with the debug binary `cargo test`
+# built with the zenoh feature, and talks to them as a lab's script would (docs/src/zenoh-wire.md).
+PY_ZENOH="${CARGO_TARGET_DIR:-target}/py-zenoh"
+step "the Zenoh wire from Python (tests/python/requirements-zenoh.txt into $PY_ZENOH; unittest)"
+[ -x "$PY_ZENOH/bin/python" ] || python3 -m venv "$PY_ZENOH"
+"$PY_ZENOH/bin/python" -m pip install --quiet --disable-pip-version-check -r tests/python/requirements-zenoh.txt
+PAVLOV_BIN="${CARGO_TARGET_DIR:-target}/debug/pavlov" \
+  "$PY_ZENOH/bin/python" -m unittest discover --start-directory tests/python --pattern 'test_zenoh_*.py' --verbose
+# --- end of the Zenoh wire from Python -------------------------------------------------------------------
 
 step "soak: 24 simulated hours of the whole server with faults injected (release build, ~1 min)"
 cargo test --profile soak -p pavlov-actors --test soak -- --nocapture

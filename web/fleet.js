@@ -31,7 +31,9 @@ function draw(data) {
     const t = s.ticks || {};
     const z = s.zenoh || {};
     const tr = document.createElement("tr");
-    if (r.last_seen_ms_ago > STALE_MS) tr.className = "stale";
+    // Presence comes from each robot's liveliness token: alive, departed (token gone), or unknown (never had one).
+    const presence = r.presence || "unknown";
+    if (presence !== "alive" || r.last_seen_ms_ago > STALE_MS) tr.className = "stale";
     cell(tr, r.robot);
     cell(tr, r.mode);
     cell(tr, r.estop ? "latched" : "off", r.estop ? "bad" : "");
@@ -41,8 +43,9 @@ function draw(data) {
     cell(tr, t.ticks_skipped);
     cell(tr, us(t.lateness));
     cell(tr, us(t.tick_to_command));
-    cell(tr, (z.ticks_missed || 0) + (z.events_missed || 0));
-    cell(tr, (r.last_seen_ms_ago / 1000).toFixed(1) + " s ago");
+    // Missed by the robot's publisher, then lost in transit (gaps in the puts' publication numbers).
+    cell(tr, (z.ticks_missed || 0) + (z.events_missed || 0) + " · " + (r.samples_lost || 0));
+    cell(tr, presence + " · " + (r.last_seen_ms_ago / 1000).toFixed(1) + " s ago", presence === "alive" ? "" : "bad");
     const link = cell(tr, "");
     // The fleet server keeps only http(s) URLs; checked again here, as anyone on Zenoh can publish a status.
     if (typeof s.dashboard_url === "string" && /^https?:\/\//i.test(s.dashboard_url)) {

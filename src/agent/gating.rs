@@ -6,11 +6,17 @@
 //! [`crate::control::rules`]) whose highest-priority rule that fired picks the response; in manual mode
 //! the wheels follow teleop commands, which expire after [`TELEOP_HOLD_TICKS`] so that an operator who
 //! goes away cannot leave the robot driving.
+//!
+//! With a [`StochasticGate`] (`[control] gate = "stochastic"`) a rule that fires while the stimulus is off
+//! takes π's action with probability ε instead of its response; every output carries the behaviour
+//! probability b(A|S) of its action (1 for every certain choice).
 
 use std::sync::Arc;
 
 use crate::control::rules::{Fired, GateInput, Rule, STIMULUS_RULE, select};
 use crate::control::{Action, Mode, Policy};
+
+use super::stochastic_gate::StochasticGate;
 
 /// How many ticks a teleop command drives the wheels without being refreshed (0.5 s at 50 Hz).
 pub const TELEOP_HOLD_TICKS: u64 = 25;
@@ -20,15 +26,18 @@ pub const TELEOP_HOLD_TICKS: u64 = 25;
 pub struct GateOutput {
     /// Mode in force.
     pub mode: Mode,
-    /// Whether the fixed response was selected.
+    /// Whether the fixed response was selected (false where a stochastic gate drew π's action).
     pub gate: bool,
     /// The default policy's action π.
     pub default_action: Action,
     /// The action to take (actuation may still override it for safety).
     pub action: Action,
-    /// What engaged the gate: the name of the rule that fired, or `stimulus` (the stimulus alone);
-    /// `None` when the gate did not engage.
+    /// What engaged the mixing function: the name of the rule that fired, or `stimulus` (the stimulus
+    /// alone); `None` when it did not engage. Set also where a stochastic gate drew π's action
+    /// (`gate` false, `behaviour_prob` = ε).
     pub rule: Option<Arc<str>>,
+    /// The behaviour probability b(A|S) of `action`: 1 unless a stochastic gate drew it.
+    pub behaviour_prob: f64,
 }
 
 /// Gating's state.
@@ -41,6 +50,7 @@ pub struct GatingStage {
     stimulus_rule: Arc<str>,
     estop: bool,
     teleop: Option<(Action, u64)>,
+    stochastic: Option<StochasticGate>,
 }
 
 /// Why a command was refused.
@@ -66,7 +76,14 @@ impl GatingStage {
             stimulus_rule: STIMULUS_RULE.into(),
             estop: false,
             teleop: None,
+            stochastic: None,
         }
+    }
+
+    /// This gate with the stochastic mixing function `gate` (`None`: the paper's).
+    pub fn with_stochastic_gate(mut self, gate: Option<StochasticGate>) -> Self {
+        self.stochastic = gate;
+        self
     }
 
     /// The mode in force.
@@ -102,31 +119,49 @@ impl GatingStage {
     /// prediction set's order (a `None` value = invalid input: that prediction fires no rule).
     pub fn decide(&mut self, seq: u64, stimulus: bool, inputs: &[GateInput]) -> GateOutput {
         let default_action = self.default_policy.action(seq);
-        let (rule, action) = match self.mode {
+        // (what engaged, the action, whether it is the response, b of the action)
+        let (rule, action, responded, b) = match self.mode {
             Mode::Manual => {
                 let a = match self.teleop {
                     Some((a, at)) if seq.saturating_sub(at) <= TELEOP_HOLD_TICKS => a,
                     _ => Action::STOP,
                 };
-                (None, a)
+                (None, a, false, 1.0)
             }
             mode => match select(mode, stimulus, &self.rules, inputs) {
-                None => (None, default_action),
-                Some(Fired::Stimulus) => {
-                    (Some(self.stimulus_rule.clone()), self.response.action(seq))
-                }
+                None => (None, default_action, false, 1.0),
+                Some(Fired::Stimulus) => (
+                    Some(self.stimulus_rule.clone()),
+                    self.response.action(seq),
+                    true,
+                    1.0,
+                ),
                 Some(Fired::Rule(i)) => {
                     let rule = &self.rules[i];
-                    (Some(rule.name.clone()), rule.response.action(seq))
+                    let response = rule.response.action(seq);
+                    match &self.stochastic {
+                        Some(g) if !stimulus => {
+                            let d = g.choose(seq, response, default_action);
+                            let responded = !(d.took_default && response != default_action);
+                            (
+                                Some(rule.name.clone()),
+                                d.action,
+                                responded,
+                                d.behaviour_prob,
+                            )
+                        }
+                        _ => (Some(rule.name.clone()), response, true, 1.0),
+                    }
                 }
             },
         };
         GateOutput {
             mode: self.mode,
-            gate: rule.is_some(),
+            gate: responded,
             default_action,
             action: if self.estop { Action::STOP } else { action },
             rule,
+            behaviour_prob: if self.estop { 1.0 } else { b },
         }
     }
 }
@@ -238,6 +273,68 @@ mod tests {
         assert_eq!(out.default_action, Action::new(200, 200));
         // An invalid prediction falls back to the stimulus alone.
         assert!(!p.decide(1, false, &one(None)).gate);
+    }
+
+    #[test]
+    fn the_stochastic_gate_logs_b_of_the_action_it_took() {
+        let eps = 0.3;
+        let g = StochasticGate::new(eps, 11);
+        let mut p = stage(Mode::Pavlovian).with_stochastic_gate(Some(g.clone()));
+        let forward = Action::new(200, 200);
+        let (mut pi, mut response) = (0, 0);
+        for seq in 0..200 {
+            // The region: the rule fires, the stimulus is off.
+            let out = p.decide(seq, false, &one(Some(0.9)));
+            assert_eq!(
+                out.rule.as_deref(),
+                Some("p"),
+                "the rule engaged the mixing function"
+            );
+            if g.draw(seq) < eps {
+                pi += 1;
+                assert_eq!(
+                    (out.action, out.gate, out.behaviour_prob),
+                    (forward, false, eps)
+                );
+            } else {
+                response += 1;
+                assert_eq!(
+                    (out.action, out.gate, out.behaviour_prob),
+                    (Action::STOP, true, 1.0 - eps)
+                );
+            }
+            // Outside it every choice is certain: π's action, the stimulus's response (even with the
+            // rule firing too), an invalid prediction.
+            let quiet = p.decide(seq, false, &one(Some(0.1)));
+            assert_eq!(
+                (quiet.action, quiet.behaviour_prob, quiet.rule),
+                (forward, 1.0, None)
+            );
+            let both = p.decide(seq, true, &one(Some(0.9)));
+            assert_eq!(
+                (both.action, both.gate, both.behaviour_prob),
+                (Action::STOP, true, 1.0)
+            );
+            let alone = p.decide(seq, true, &one(Some(0.1)));
+            assert_eq!((alone.action, alone.behaviour_prob), (Action::STOP, 1.0));
+        }
+        assert!(pi > 0 && response > 0, "{pi} π, {response} ϱ");
+        // The e-stop is certain too, and reactive mode never reaches the rule.
+        p.set_estop(true);
+        let stopped = p.decide(3, false, &one(Some(0.9)));
+        assert_eq!(
+            (stopped.action, stopped.behaviour_prob),
+            (Action::STOP, 1.0)
+        );
+        let mut r = stage(Mode::Reactive).with_stochastic_gate(Some(g));
+        assert_eq!(r.decide(3, false, &one(Some(0.9))).behaviour_prob, 1.0);
+        // The paper's gate: certain everywhere.
+        assert_eq!(
+            stage(Mode::Pavlovian)
+                .decide(3, false, &one(Some(0.9)))
+                .behaviour_prob,
+            1.0
+        );
     }
 
     #[test]

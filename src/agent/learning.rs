@@ -11,9 +11,10 @@
 //! reported by [`LearningStage::learn`], and no longer drives the gate (see [`crate::learn::set`]).
 //!
 //! Off-policy predictions (`learner = "gtd"`, `target_policy = "default"`) learn about the default
-//! policy π from the behaviour actually run: the input [`LearnInput::previous_followed_default`] gives
-//! the ratio ρ of the transition into the tick ([`followed_default`] says how it is defined and why it is
-//! 0 or 1). On-policy predictions ignore it.
+//! policy π from the behaviour actually run: the inputs [`LearnInput::previous_followed_default`] and
+//! [`LearnInput::previous_behaviour_prob`] give the ratio ρ of the transition into the tick
+//! ([`importance_ratio`]: 0 or 1 with the paper's deterministic gate, [`followed_default`] says why;
+//! 1/ε on π's action drawn by a stochastic gate). On-policy predictions ignore it.
 //!
 //! With the left-elbow stimulus, a tick whose elbow angles are missing or stale (either arm: the features
 //! tile both) is acted on but not learned from, and the learning chain breaks there, as it does for stale
@@ -45,6 +46,22 @@ pub struct LearnInput<'a> {
     /// ([`followed_default`]): the importance sampling ratio of the transition into this tick for an
     /// off-policy prediction about π (see the module documentation).
     pub previous_followed_default: bool,
+    /// The behaviour probability b(A|S) of the command sent on the previous tick (its record's
+    /// `behaviour_prob`): 1 unless a stochastic gate drew it ([`importance_ratio`]).
+    pub previous_behaviour_prob: f64,
+}
+
+/// The importance sampling ratio ρ = π(A|S)/b(A|S) of a tick's command for a prediction whose target
+/// policy is π: 1/b when the command was π's (π is deterministic, so π(A|S) = 1), else 0 (π never takes
+/// it). With the paper's gate b = 1 and ρ ∈ {0, 1}; with a stochastic gate b = ε on π's action in the gate
+/// region, so ρ = 1/ε there. A b that is not a probability above 0 gives 0 (it cannot be the
+/// probability of an action taken).
+pub fn importance_ratio(followed_default: bool, behaviour_prob: f64) -> f64 {
+    if followed_default && behaviour_prob > 0.0 && behaviour_prob <= 1.0 {
+        1.0 / behaviour_prob
+    } else {
+        0.0
+    }
 }
 
 /// Whether a tick's command was the default policy π's: the importance sampling ratio
@@ -54,9 +71,9 @@ pub struct LearnInput<'a> {
 /// tick (the stall cycle) and the behaviour b is the gate's choice between π and the response ϱ (and a
 /// safety stop or teleop over it), made from the stimulus, the prediction and the mode, all of which are
 /// part of that state. So b gives the action taken probability 1 (b(A|S) = 1) and π gives it 1 when it
-/// is π's action and 0 otherwise: ρ = 1/b = 1 when the command equals π's, else 0. (Were b a genuinely
-/// random mixture of π and ϱ with probability p of π, ρ would be 1/p on π's action: the case of the
-/// issue's "ρ ∈ {0, 1/b}".) The comparison is on the command actually written, so a safety stop or an
+/// is π's action and 0 otherwise: ρ = 1/b = 1 when the command equals π's, else 0. (With the stochastic
+/// gate b is a genuinely random mixture of π and ϱ, with probability ε of π in the gate region, and
+/// ρ = 1/ε on π's action there: [`importance_ratio`].) The comparison is on the command actually written, so a safety stop or an
 /// e-stop counts as leaving π.
 pub fn followed_default(command: crate::control::Action, default: crate::control::Action) -> bool {
     command == default
@@ -140,6 +157,8 @@ pub struct LearnOutput {
     pub elbow: Option<ElbowAngles>,
     /// The input of the same name, carried into the tick's record for replay.
     pub previous_followed_default: bool,
+    /// The input of the same name, carried into the tick's record for replay.
+    pub previous_behaviour_prob: f64,
 }
 
 /// Perception, prediction and learning for one configuration.
@@ -162,6 +181,10 @@ pub struct LearningStage {
     pending_complete: bool,
     /// Ticks not learned from because an elbow angle was missing or stale.
     skipped_missing_elbow: u64,
+    /// The largest ratio the behaviour produces (1/ε with a stochastic gate, else 1), and the
+    /// predictions whose α it bounds (off-policy about π): α·ρ_max·‖x‖² ≤ 1 for runtime changes too.
+    rho_max: f64,
+    about_default: Vec<String>,
 }
 
 fn scaled_angle(a: Option<f64>) -> f64 {
@@ -197,6 +220,13 @@ impl LearningStage {
             reported: Vec::new(),
             pending_complete: true,
             skipped_missing_elbow: 0,
+            rho_max: config.rho_max(),
+            about_default: config
+                .predictions
+                .iter()
+                .filter(|p| crate::config::gate::learns_about_default(p))
+                .map(|p| p.name.clone())
+                .collect(),
         })
     }
 
@@ -263,11 +293,10 @@ impl LearningStage {
         }
         let stimulus = self.stimulus(&input);
         self.pending_stimulus = Some(stimulus);
-        self.pending_rho = if input.previous_followed_default {
-            1.0
-        } else {
-            0.0
-        };
+        self.pending_rho = importance_ratio(
+            input.previous_followed_default,
+            input.previous_behaviour_prob,
+        );
         self.stimuli = [stimulus];
         self.pending_complete = match self.stimulus_spec {
             StimulusSpec::Stall { .. } => true,
@@ -305,6 +334,7 @@ impl LearningStage {
             gate_inputs,
             elbow,
             previous_followed_default: input.previous_followed_default,
+            previous_behaviour_prob: input.previous_behaviour_prob,
         }
     }
 
@@ -368,7 +398,11 @@ impl LearningStage {
             Some(n) => self.set.specs().find(|s| s.name == n),
             None => self.set.specs().nth(self.gate_index),
         }?;
-        let bounds = self.set.bounds(&spec.name)?;
+        let mut bounds = self.set.bounds(&spec.name)?;
+        if self.about_default.contains(&spec.name) {
+            // α·ρ_max·‖x‖² ≤ 1 under a stochastic gate (`crate::config::gate`).
+            bounds.max_alpha /= self.rho_max;
+        }
         Some(ParamsInForce {
             prediction: spec.name.clone(),
             alpha: spec.alpha,
@@ -381,7 +415,9 @@ impl LearningStage {
 
     /// Changes α, λ or θ of prediction `name` (default: the gating prediction) and returns the
     /// parameters now in force. Every value is checked against its bound first (α finite, > 0 and
-    /// α·‖x‖² ≤ 1, λ in `[0, 1]`, θ finite; [`crate::learn::bounds`]); on error nothing changes.
+    /// α·‖x‖² ≤ 1 — α·ρ_max·‖x‖² ≤ 1 for an off-policy prediction about π under a stochastic gate,
+    /// [`crate::config::gate`] —, λ in `[0, 1]`, θ finite; [`crate::learn::bounds`]); on error nothing
+    /// changes.
     pub fn set_params(
         &mut self,
         name: Option<&str>,
@@ -397,6 +433,22 @@ impl LearningStage {
                 ));
             }
         };
+        if let (Some(a), Some(b)) = (alpha, self.set.bounds(&name))
+            && self.about_default.contains(&name)
+            && a > b.max_alpha / self.rho_max * (1.0 + 1e-12)
+        {
+            return Err(crate::learn::bounds::out_of_bounds(
+                &name,
+                "alpha",
+                a,
+                format!(
+                    "exceeds ε/{n} = {max:.6} (α·ρ_max·‖x‖² ≤ 1 with ρ_max = {rho} under the stochastic gate)",
+                    n = b.active_features,
+                    max = b.max_alpha / self.rho_max,
+                    rho = self.rho_max
+                ),
+            ));
+        }
         self.set
             .set_params(&name, alpha, lambda, threshold.map(Threshold::Fixed))?;
         self.params(Some(&name))
@@ -478,6 +530,7 @@ mod tests {
                 elbow: None,
                 forced_stimulus: false,
                 previous_followed_default: true,
+                previous_behaviour_prob: 1.0,
             });
             s.learn().unwrap();
             seen.push(out.stimulus);
@@ -503,6 +556,7 @@ mod tests {
                 elbow: None,
                 forced_stimulus: false,
                 previous_followed_default: true,
+                previous_behaviour_prob: 1.0,
             });
             s.learn().unwrap();
             if t >= 50 * 390 && phase == 38 {
@@ -531,6 +585,7 @@ mod tests {
                 elbow: Some(elbow(left)),
                 forced_stimulus: false,
                 previous_followed_default: true,
+                previous_behaviour_prob: 1.0,
             });
             s.learn().unwrap();
         };
@@ -561,6 +616,7 @@ mod tests {
             elbow: None,
             forced_stimulus: true,
             previous_followed_default: true,
+            previous_behaviour_prob: 1.0,
         });
         assert!(out.stimulus);
         assert!(out.obs_vector.iter().all(|x| x.is_nan()));
@@ -662,6 +718,7 @@ mod tests {
             elbow: None,
             forced_stimulus: false,
             previous_followed_default: true,
+            previous_behaviour_prob: 1.0,
         };
         let out = s.act(input(&bumped));
         assert_eq!(out.gate_value, Some(0.9e308), "valid until it diverges");

@@ -6,6 +6,7 @@
 //! - [`learning`]: observation → stimulus, features, predictions (act first), then the TD(λ) update.
 //! - [`gating`]: prediction + stimulus + mode → the action, with manual teleop and the e-stop.
 //! - [`safety`]: the one predicate for safety stops and for observations fresh enough to learn from.
+//! - [`stochastic_gate`]: the stochastic mixing function's seeded draws and the behaviour probability.
 //! - [`tick_record`]: assembling a tick's record after actuation.
 //! - [`readings`]: the raw readings a tick record carries.
 
@@ -13,7 +14,9 @@ pub mod gating;
 pub mod learning;
 pub mod readings;
 pub mod safety;
+pub mod stochastic_gate;
 pub mod tick_record;
 
 pub use gating::{GateOutput, GatingStage};
 pub use learning::{LearnInput, LearnOutput, LearningStage, StageSnapshot};
+pub use stochastic_gate::StochasticGate;

@@ -65,6 +65,12 @@ pub fn assemble(
         default_action: gate.default_action,
         command: actuated.command,
         safety_stop: actuated.safety_stop,
+        // A safety stop (or the e-stop) overrides the gate with certainty.
+        behaviour_prob: if actuated.safety_stop.is_some() {
+            1.0
+        } else {
+            gate.behaviour_prob
+        },
         estop: actuated.estop,
         lateness_us: sensed.lateness_us,
         link: sensed.link,
@@ -72,6 +78,7 @@ pub fn assemble(
             values: sensed.values,
             forced_stimulus,
             previous_followed_default: learned.previous_followed_default,
+            previous_behaviour_prob: learned.previous_behaviour_prob,
         }),
     }
 }

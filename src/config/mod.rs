@@ -6,12 +6,13 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::control::{Mode, Policy};
+use crate::control::{GateKind, Mode, Policy};
 use crate::learn::PredictionSpec;
 use crate::oi::Model;
 
 mod bounds;
 mod dashboard;
+pub mod gate;
 mod horde;
 mod link;
 mod rules;
@@ -159,6 +160,14 @@ pub struct ControlConfig {
     pub response: Policy,
     /// The prediction (by name) that drives the Pavlovian gate.
     pub gate_prediction: String,
+    /// `deterministic` (the paper's, the default) or `stochastic` (π's action with probability
+    /// `epsilon` where a rule fires; see [`crate::config::gate`]).
+    #[serde(default, skip_serializing_if = "GateKind::is_deterministic")]
+    pub gate: GateKind,
+    /// The stochastic gate's ε in (0, 1): the probability of π's action where a rule fires. Required
+    /// with `gate = "stochastic"`, refused otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub epsilon: Option<f64>,
 }
 
 /// The random stream the lab variation draws from (forked from `[sim] seed`).
@@ -500,6 +509,7 @@ impl Config {
             ));
         }
         self.check_rules()?;
+        self.check_gate()?;
         Ok(())
     }
 }

@@ -1,5 +1,5 @@
 //! `[zenoh]`: how this robot appears on Zenoh when `pavlov serve --zenoh` is given: its name (the
-//! `<robot>` of every key `pavlov/<robot>/…`), whether commands are taken over Zenoh, how often the status
+//! `<robot>` of every key `pavlov/v1/<robot>/…`), whether commands are taken over Zenoh, how often the status
 //! is published and the URL of its own dashboard. How Zenoh connects (peer or client, endpoints,
 //! scouting) is Zenoh's own configuration file, given to `--zenoh`.
 
@@ -16,10 +16,10 @@ pub const MAX_ROBOT_NAME: usize = 64;
 pub struct ZenohConfig {
     /// This robot's name in key expressions: 1 to 64 of `A-Z a-z 0-9 - _`.
     pub robot: String,
-    /// Take commands on `pavlov/<robot>/command` (each must carry the dashboard's token); off: every
+    /// Take commands on `pavlov/v1/<robot>/command` (each must carry the dashboard's token); off: every
     /// command query is answered with a refusal.
     pub commands: bool,
-    /// Milliseconds between status messages on `pavlov/<robot>/status` (100 to 60000).
+    /// Milliseconds between status messages on `pavlov/v1/<robot>/status` (100 to 60000).
     pub status_every_ms: u64,
     /// The URL of this robot's dashboard as others reach it (published in the status, linked from the
     /// fleet page); empty: `http://` + `[dashboard] bind`.
@@ -83,7 +83,7 @@ pub fn check_robot_name(name: &str) -> Result<(), String> {
     {
         return Err(format!(
             "{name:?} has {c:?}: only A-Z a-z 0-9 - _ are allowed (it is one chunk of the key \
-             expression pavlov/<robot>/…)"
+             expression pavlov/v1/<robot>/…)"
         ));
     }
     Ok(())

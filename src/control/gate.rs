@@ -5,6 +5,11 @@
 //! - reactive control: `f = I{E}`;
 //! - Pavlovian control: `f_E(v) = I{E ∨ v > θ}`;
 //! - manual: a person drives; the response never engages (the operator's commands are the default).
+//!
+//! The paper lets the mixing function take any value in `[0, 1]`. [`GateKind::Stochastic`] uses that:
+//! where a prediction's rule fires (and the stimulus is off) the response acts with probability 1 − ε and
+//! π's action is taken with probability ε, so the behaviour keeps taking π's actions where an off-policy
+//! prediction about π needs them (`crate::agent::stochastic_gate` draws and logs it).
 
 use serde::{Deserialize, Serialize};
 
@@ -33,6 +38,25 @@ impl Mode {
             Mode::Pavlovian => "pavlovian",
             Mode::Manual => "manual",
         }
+    }
+}
+
+/// How the mixing function engages a prediction rule's response (`[control] gate`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GateKind {
+    /// The paper's binary mixing function: the response whenever a rule fires.
+    #[default]
+    Deterministic,
+    /// `f = 1 − ε` where a rule fires and the stimulus is off: π's action with probability ε
+    /// (`[control] epsilon`); the stimulus still engages the response with certainty.
+    Stochastic,
+}
+
+impl GateKind {
+    /// True for the paper's gate (the default, left out when a configuration is written).
+    pub fn is_deterministic(&self) -> bool {
+        *self == GateKind::Deterministic
     }
 }
 

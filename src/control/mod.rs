@@ -14,7 +14,7 @@ pub mod rules;
 pub mod stall;
 
 pub use action::{Action, MAX_WHEEL_MM_S};
-pub use gate::{Mode, gate, mix};
+pub use gate::{GateKind, Mode, gate, mix};
 pub use policy::{ControlError, Policy, StallDefaultPolicy};
 pub use rules::{Fired, GateInput, Rule, STIMULUS_RULE, select};
 pub use stall::{StallDetector, wheel_overcurrent};

@@ -1,5 +1,5 @@
 //! A lab on Zenoh, through the real binary: two `pavlov serve --zenoh` processes (robots `alpha` and
-//! `beta`, each with its own token) and one `pavlov fleet`, in Zenoh peer mode with no router, every
+//! `beta`, each with its own token, on `pavlov/v1/<robot>/…`) and one `pavlov fleet`, in Zenoh peer mode with no router, every
 //! endpoint pinned on 127.0.0.1 and scouting off so the topology is fixed. The fleet sees both robots'
 //! ticks and status; a command with alpha's token reaches alpha and only alpha; a command without a
 //! token, or with another robot's token, is refused with a precise answer and counted in `/metrics`; beta
@@ -238,6 +238,9 @@ fn the_fleet_sees_two_robots_and_commands_need_each_robots_token() {
     for (name, dash) in [("alpha", &alpha_dash), ("beta", &beta_dash)] {
         let r = row(&rows, name).expect("row");
         assert_eq!(r["mode"], "pavlovian", "{name}");
+        // Present by their liveliness tokens, their samples stamped by Zenoh's clock.
+        assert_eq!(r["presence"], "alive", "{name}: {r}");
+        assert!(r["last_timestamp"].is_string(), "{name}: {r}");
         assert_eq!(
             r["status"]["dashboard_url"]
                 .as_str()
@@ -341,6 +344,8 @@ fn the_fleet_sees_two_robots_and_commands_need_each_robots_token() {
     let table: Value = serde_json::from_str(&body).expect("robots json");
     let m = row(table["robots"].as_array().expect("rows"), "mallory").expect("mallory");
     assert_eq!(m["status"]["dashboard_url"], Value::Null, "{m}");
+    // Never seen with a liveliness token: an unknown name, in the pool of its own.
+    assert_eq!(m["presence"], "unknown", "{m}");
     assert!(table["dashboard_urls_removed"].as_u64().unwrap_or(0) >= 1);
 
     // The page, in a browser: the same robots, a command from its form, a wrong token refused.
@@ -393,7 +398,9 @@ fn hostile_peer(fleet_config: &Path, dir: &Path) -> HostilePeer {
         let stop = stop.clone();
         move || {
             while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-                let _ = session.put("pavlov/mallory/status", status.clone()).wait();
+                let _ = session
+                    .put("pavlov/v1/mallory/status", status.clone())
+                    .wait();
                 std::thread::sleep(Duration::from_millis(500));
             }
             let _ = session.close().wait();

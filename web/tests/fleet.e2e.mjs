@@ -45,7 +45,10 @@ try {
   };
   const alpha0 = await waitRow('alpha in manual mode, ticking', 'alpha', (r) => r[1] === 'manual' && Number(r[5]) > 0);
   const beta0 = await waitRow('beta in Pavlovian mode, ticking', 'beta', (r) => r[1] === 'pavlovian' && Number(r[5]) > 0);
-  await waitRow('mallory\'s hostile status', 'mallory', () => true);
+  const mallory0 = await waitRow('mallory\'s hostile status', 'mallory', () => true);
+  // Presence from liveliness tokens: the robots are alive; mallory never declared one.
+  if (!alpha0[10].startsWith('alive')) fail(`alpha not shown alive: ${alpha0[10]}`);
+  if (!mallory0[10].startsWith('unknown')) fail(`mallory not shown unknown: ${mallory0[10]}`);
   // The tick column moves: the table is live.
   await page.waitForTimeout(1500);
   const alpha1 = await rowOf('alpha');

@@ -11,6 +11,8 @@
 //! - [`horde`]: the server with a Horde against the same server without one, interleaved.
 //! - `reconnect`: clients that reconnect again and again, timing the history each connection gets.
 //! - `zenoh_load`: the Zenoh bridge on and off, interleaved, for `--zenoh`.
+//! - [`study`]: the stall study in virtual time, CPU and wall time per simulated tick, for
+//!   `--virtual-time`.
 
 pub mod abuse;
 pub mod estop_probe;
@@ -19,6 +21,7 @@ pub mod foxglove_load;
 pub mod horde;
 pub mod load;
 pub(crate) mod reconnect;
+pub mod study;
 pub mod timers;
 #[cfg(feature = "zenoh")]
 pub mod zenoh_load;

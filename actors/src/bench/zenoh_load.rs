@@ -1,7 +1,7 @@
 //! `pavlov bench --zenoh`: what publishing on Zenoh costs the tick. Runs a fresh server on the simulated
 //! Create without and with the Zenoh bridge, interleaved (`ORDER`: off, on, on, off, twice; each an
 //! eighth of the time), and with the bridge a second Zenoh session on loopback subscribed to
-//! `pavlov/<robot>/**`, so every tick and status really crosses a TCP link. Reports ticks skipped and
+//! `pavlov/v1/<robot>/**`, so every tick and status really crosses a TCP link. Reports ticks skipped and
 //! tick → command for both, and what the bridge published, lost, and the subscriber received.
 //!
 //! Each run measures the steady state: the first `WARM_UP` after the server (and the bridge, and the

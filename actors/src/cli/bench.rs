@@ -6,7 +6,7 @@ use std::time::Duration;
 use anyhow::Result;
 #[cfg(feature = "zenoh")]
 use pavlov_actors::bench::zenoh_load;
-use pavlov_actors::bench::{self, abuse::Abuse, foxglove_load, horde, load, timers};
+use pavlov_actors::bench::{self, abuse::Abuse, foxglove_load, horde, load, study, timers};
 use pavlov_actors::dashboard::WebAssets;
 
 use super::args::{ConfigArgs, load_config, validate};
@@ -51,6 +51,30 @@ pub struct BenchArgs {
     /// every tick, event and status to a subscriber on loopback TCP; ticks skipped and tick → command.
     #[arg(long, conflicts_with_all = ["ws_clients", "stalled_client", "ws_abuse", "foxglove_clients", "compare_timers"])]
     zenoh: bool,
+    /// Time the stall study in virtual time instead (the configuration as above; 10 + 10 runs of
+    /// 6 minutes, recorded into a temporary folder that is removed afterwards), twice: CPU time (user +
+    /// system) and wall time per simulated tick, side by side, with the load average.
+    #[arg(long, conflicts_with_all = ["ws_clients", "stalled_client", "ws_abuse", "foxglove_clients", "compare_timers", "horde", "zenoh"])]
+    virtual_time: bool,
+    /// With --virtual-time: runs per policy.
+    #[arg(
+        long,
+        default_value_t = 10,
+        value_name = "N",
+        requires = "virtual_time"
+    )]
+    study_runs: usize,
+    /// With --virtual-time: minutes per run.
+    #[arg(
+        long,
+        default_value_t = 6.0,
+        value_name = "MIN",
+        requires = "virtual_time"
+    )]
+    study_minutes: f64,
+    /// With --virtual-time: do not record the runs.
+    #[arg(long, requires = "virtual_time")]
+    no_record: bool,
     /// Override [tick] spin_us: wake this many µs before each deadline and spin (the timer thread only).
     #[arg(long, value_name = "US")]
     spin_us: Option<u32>,
@@ -58,6 +82,9 @@ pub struct BenchArgs {
 
 /// Runs the benchmark and prints its report.
 pub async fn run(args: BenchArgs) -> Result<()> {
+    if args.virtual_time {
+        return tokio::task::spawn_blocking(move || virtual_time(&args)).await?;
+    }
     let mut cfg = load_config(&args.config)?;
     if let Some(spin) = args.spin_us {
         cfg.tick.spin_us = spin;
@@ -146,6 +173,43 @@ pub async fn run(args: BenchArgs) -> Result<()> {
         say!("with {} Foxglove clients:", args.foxglove_clients);
         say!("{loaded}");
         say!("{}", foxglove_load::comparison(&report, &loaded));
+    }
+    Ok(())
+}
+
+/// `--virtual-time`: the stall study, timed twice.
+fn virtual_time(args: &BenchArgs) -> Result<()> {
+    anyhow::ensure!(
+        (1..=1000).contains(&args.study_runs),
+        "--study-runs must be 1 to 1000, got {}",
+        args.study_runs
+    );
+    anyhow::ensure!(
+        args.study_minutes.is_finite() && args.study_minutes > 0.0 && args.study_minutes <= 1440.0,
+        "--study-minutes must be above 0 and at most 1440, got {}",
+        args.study_minutes
+    );
+    let config = load_config(&args.config)?;
+    // As `experiment stall` does: the number of CPUs, at most 2.
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get().min(2));
+    for attempt in 1..=2 {
+        let scratch = (!args.no_record).then(|| {
+            std::env::temp_dir().join(format!(
+                "pavlov-bench-study-{}-{attempt}",
+                std::process::id()
+            ))
+        });
+        let timing = study::time_stall_study(
+            &config,
+            args.study_runs,
+            args.study_minutes,
+            threads,
+            scratch.clone(),
+        );
+        if let Some(dir) = &scratch {
+            let _ = std::fs::remove_dir_all(dir);
+        }
+        say!("run {attempt} of 2: {}", timing?);
     }
     Ok(())
 }

@@ -139,10 +139,15 @@ pub struct StallArgs {
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
     /// Compare these policies instead (interleaved in this order): reactive, pavlovian, offpolicy
-    /// (Pavlovian control on an off-policy GTD(λ) prediction of the stall under π); writes
+    /// (Pavlovian control on an off-policy GTD(λ) prediction of the stall under π), offpolicy-stochastic
+    /// (the same with a stochastic gate: π's action with probability ε where it fires); writes
     /// policies.json, policies.md and runs.csv.
     #[arg(long, value_name = "LIST")]
     pub policies: Option<String>,
+    /// With --policies …,offpolicy-stochastic: the stochastic gate's ε, the probability of π's action where
+    /// the prediction fires; a list runs one arm per ε (the sweep). Default 0.5.
+    #[arg(long, value_name = "LIST", requires = "policies")]
+    pub epsilon: Option<String>,
     /// Run only the I-th (0-based) of N disjoint slices of the planned runs and write
     /// shard-I-of-N.json into the results directory; `pavlov experiment merge` puts the shards together.
     #[arg(long, value_name = "I/N")]
@@ -211,8 +216,14 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
             };
             let folder = place.study(name, a.seed)?;
             opts.out = folder.path.clone();
+            let epsilons = match &a.epsilon {
+                Some(list) => stall::stochastic::parse_epsilons(list)?,
+                None => vec![stall::stochastic::DEFAULT_EPSILON],
+            };
             let table = match &policies {
-                Some(policies) => stall::policies::run_and_report(&config, &opts, policies, true)?,
+                Some(policies) => {
+                    stall::policies::run_and_report(&config, &opts, policies, &epsilons, true)?
+                }
                 None => stall::run_and_report(&config, &opts, true)?,
             };
             say!("{}", table.trim_end());

@@ -66,7 +66,7 @@ pub enum Command {
     /// Benchmark: run the server on the simulator in real time and print tick lateness and
     /// tick-to-command latency percentiles, optionally with websocket clients and abusers attached.
     Bench(bench::BenchArgs),
-    /// One dashboard page for a lab's robots: subscribes to pavlov/*/… on Zenoh (what `serve --zenoh`
+    /// One dashboard page for a lab's robots: subscribes to pavlov/v1/*/… on Zenoh (what `serve --zenoh`
     /// publishes) and lists each robot's mode, link, tick health and counters, linking to its dashboard.
     #[cfg_attr(
         not(feature = "zenoh"),

@@ -49,7 +49,7 @@ pub struct ServeArgs {
         default_missing_value = foxglove::DEFAULT_ADDR
     )]
     foxglove: Option<String>,
-    /// Also publish every tick, event and a status on Zenoh under pavlov/<robot>/… ([zenoh] robot) and
+    /// Also publish every tick, event and a status on Zenoh under pavlov/v1/<robot>/… ([zenoh] robot) and
     /// answer queries for the configuration, the newest checkpoint and (with [zenoh] commands = true and a
     /// token) commands. CONFIG is a Zenoh configuration file (JSON5: mode, listen/connect endpoints,
     /// scouting); without it, Zenoh's defaults (a peer found by multicast scouting).
@@ -57,7 +57,7 @@ pub struct ServeArgs {
         not(feature = "zenoh"),
         arg(
             help = "(needs the zenoh feature: cargo install --path actors --features zenoh) Also \
-                    publish the run on Zenoh under pavlov/<robot>/…"
+                    publish the run on Zenoh under pavlov/v1/<robot>/…"
         )
     )]
     #[arg(long, value_name = "CONFIG", num_args = 0..=1)]
@@ -240,7 +240,8 @@ pub async fn run(args: ServeArgs) -> Result<()> {
     #[cfg(feature = "zenoh")]
     if let Some(z) = &zenoh {
         say!(
-            "zenoh: publishing on pavlov/{}/{{tick,event,status}}; commands over Zenoh {}",
+            "zenoh: publishing on pavlov/v1/{}/{{tick,event,status}} (liveliness token pavlov/v1/{}/alive); commands over Zenoh {}",
+            z.robot(),
             z.robot(),
             if server.config().zenoh.commands {
                 "on (with the token)"

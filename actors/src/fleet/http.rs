@@ -1,6 +1,6 @@
 //! The fleet page's HTTP side: `/` (web/fleet.html), `/fleet.js`, `/api/robots` (the table as JSON) and
 //! `POST /api/command/<robot>`, which forwards its body (`{"token": …, "command": {…}}`) as a Zenoh query
-//! to `pavlov/<robot>/command` and answers with the robot's reply: 200 with `{"ok": true, …}`, 403 for a
+//! to `pavlov/v1/<robot>/command` and answers with the robot's reply: 200 with `{"ok": true, …}`, 403 for a
 //! refusal of the token or of commands being off, 400 for another refusal, 504 when no robot answered.
 
 use std::sync::{Arc, Mutex};
@@ -39,10 +39,10 @@ fn json(status: StatusCode, body: String) -> Response {
 }
 
 async fn robots(state: State) -> Response {
-    let body = state
-        .table
-        .lock()
-        .map_or_else(|_| "{}".to_string(), |t| t.to_json().to_string());
+    let body = state.table.lock().map_or_else(
+        |_| "{}".to_string(),
+        |t| t.to_json(super::now_ms()).to_string(),
+    );
     json(StatusCode::OK, body)
 }
 

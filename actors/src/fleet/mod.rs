@@ -1,9 +1,13 @@
-//! `pavlov fleet`: one page for a lab's robots. It subscribes to `pavlov/*/tick`, `pavlov/*/event` and
-//! `pavlov/*/status` on Zenoh (what `pavlov serve --zenoh` publishes), keeps one row per robot, and serves
+//! `pavlov fleet`: one page for a lab's robots. It subscribes to `pavlov/v1/*/tick`, `pavlov/v1/*/event`
+//! and `pavlov/v1/*/status` on Zenoh (what `pavlov serve --zenoh` publishes) and to the robots'
+//! liveliness tokens `pavlov/v1/*/alive` (presence), keeps one row per robot (`table`), and serves
 //! a small dashboard (`web/fleet.html`, `web/fleet.js`) listing each robot's mode, link, tick health, key
 //! counters, when it was last seen, and a link to its own dashboard (`http`).
 //!
-//! Commands typed on the fleet page are forwarded as Zenoh queries to `pavlov/<robot>/command` with the
+//! Its session gets [`wire::harden`]: HLC timestamps on, and no message over
+//! 256 KiB (`table::MAX_SAMPLE_BYTES`) reassembled.
+//!
+//! Commands typed on the fleet page are forwarded as Zenoh queries to `pavlov/v1/<robot>/command` with the
 //! token the user gives; the fleet holds no token of its own, so each robot decides (see
 //! [`crate::zenoh_bridge`]).
 
@@ -12,13 +16,31 @@ pub(crate) mod table;
 
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 
-use crate::zenoh_bridge::KEY_ROOT;
-use table::{Leaf, RobotTable};
+use crate::zenoh_bridge::{KEY_ROOT, wire};
+use table::{Leaf, Meta, RobotTable};
+
+/// Now, Unix ms.
+fn now_ms() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
+/// What the table needs of a sample besides its key and payload.
+fn meta_of(sample: &zenoh::sample::Sample) -> Meta {
+    Meta {
+        timestamp: sample.timestamp().map(|t| t.to_string()),
+        source: sample.timestamp().map(|t| t.get_id().to_string()),
+        pub_seq: sample
+            .attachment()
+            .and_then(|a| wire::seq_of(&a.to_bytes())),
+    }
+}
 
 /// Errors starting the fleet.
 #[derive(Debug, thiserror::Error)]
@@ -50,7 +72,8 @@ pub struct Fleet {
 
 impl Fleet {
     /// Opens a Zenoh session with `config`, subscribes to every robot, and serves the page on `listen`.
-    pub async fn start(config: zenoh::Config, listen: &str) -> Result<Fleet, FleetError> {
+    pub async fn start(mut config: zenoh::Config, listen: &str) -> Result<Fleet, FleetError> {
+        wire::harden(&mut config, table::MAX_SAMPLE_BYTES).map_err(FleetError::Zenoh)?;
         let addr: SocketAddr = listen
             .parse()
             .map_err(|_| FleetError::BadAddress(listen.to_string()))?;
@@ -84,8 +107,35 @@ impl Fleet {
                         s = subscriber.recv_async() => match s {
                             Ok(sample) => {
                                 let bytes = sample.payload().to_bytes();
+                                let meta = meta_of(&sample);
                                 if let Ok(mut t) = table.lock() {
-                                    t.observe(sample.key_expr().as_str(), leaf, &bytes);
+                                    t.observe(sample.key_expr().as_str(), leaf, &bytes, meta, now_ms());
+                                }
+                            }
+                            Err(_) => break,
+                        }
+                    }
+                }
+            }));
+        }
+        let alive_keys = format!("{KEY_ROOT}/*/{}", wire::ALIVE_LEAF);
+        let tokens = session
+            .liveliness()
+            .declare_subscriber(alive_keys.clone())
+            .history(true)
+            .await
+            .map_err(|e| FleetError::Zenoh(format!("cannot subscribe to {alive_keys}: {e}")))?;
+        {
+            let (table, cancel) = (table.clone(), cancel.clone());
+            tasks.push(tokio::spawn(async move {
+                loop {
+                    tokio::select! {
+                        _ = cancel.cancelled() => break,
+                        s = tokens.recv_async() => match s {
+                            Ok(sample) => {
+                                let alive = sample.kind() == zenoh::sample::SampleKind::Put;
+                                if let Ok(mut t) = table.lock() {
+                                    t.presence(sample.key_expr().as_str(), alive, now_ms());
                                 }
                             }
                             Err(_) => break,
@@ -118,7 +168,7 @@ impl Fleet {
     pub fn robots(&self) -> serde_json::Value {
         self.table
             .lock()
-            .map_or(serde_json::Value::Null, |t| t.to_json())
+            .map_or(serde_json::Value::Null, |t| t.to_json(now_ms()))
     }
 
     /// Stops serving and closes the session.

@@ -8,9 +8,9 @@
 //! type, and the tests below check every schema against those rules and every field of real messages
 //! against the schema.
 //!
-//! The schema of `/pavlov/ticks` is not written here: it is derived from the tick's one definition,
-//! `actors/proto/pavlov/tick.proto`, through the descriptor the recordings carry
-//! ([`TICK_DESCRIPTOR_SET`]), so a field added there appears in Foxglove's field lists with no line here
+//! The schema of `/pavlov/ticks` is not written here: it is derived from the tick's one definition, the
+//! record's types and their wire declaration (`pavlov::record`), through the descriptor the recordings
+//! carry ([`TICK_DESCRIPTOR_SET`]), so a field added there appears in Foxglove's field lists with no line here
 //! (the tests check that a [`TickRecord`](pavlov::record::TickRecord)'s JSON has exactly the descriptor's
 //! fields, both ways).
 
@@ -154,7 +154,7 @@ fn from_descriptor(file: &FileDescriptorProto, type_name: &str) -> Value {
 /// `pavlov.TickRecord`: a [`pavlov::record::TickRecord`] as the recorder writes it, derived from the
 /// descriptor of `pavlov.Tick` (see the module doc).
 pub(crate) fn tick_record() -> Value {
-    let set = FileDescriptorSet::decode(TICK_DESCRIPTOR_SET).unwrap_or_default();
+    let set = FileDescriptorSet::decode(TICK_DESCRIPTOR_SET.as_slice()).unwrap_or_default();
     let fields = set
         .file
         .iter()
@@ -387,6 +387,7 @@ pub(crate) mod tests {
                 values: Some(values),
                 forced_stimulus: true,
                 previous_followed_default: true,
+                previous_behaviour_prob: 0.5,
             }),
             sensors: pavlov::record::SensorReadings {
                 battery_current_ma: Some(-250),
@@ -461,10 +462,10 @@ pub(crate) mod tests {
         assert_eq!(
             missing,
             Vec::<String>::new(),
-            "fields of tick.proto a record lacks"
+            "fields of the descriptor a record lacks"
         );
         // As many fields as the descriptor's Tick, and the enums' values in serde's names.
-        let set = FileDescriptorSet::decode(TICK_DESCRIPTOR_SET).unwrap();
+        let set = FileDescriptorSet::decode(TICK_DESCRIPTOR_SET.as_slice()).unwrap();
         let tick = set.file[0]
             .message_type
             .iter()

@@ -170,9 +170,9 @@ pub(crate) struct ActuationChannels {
     pub(crate) stats: watch::Sender<ActuationStats>,
     /// Where a pipeline stall is announced.
     pub(crate) events: EventLog,
-    /// The last record's tick and whether its command was the default policy's, for learning's
-    /// off-policy ratio on the next tick.
-    pub(crate) followed: watch::Sender<Option<(u64, bool)>>,
+    /// The last record's tick, whether its command was the default policy's and its behaviour
+    /// probability b, for learning's off-policy ratio on the next tick.
+    pub(crate) followed: watch::Sender<Option<(u64, bool, f64)>>,
 }
 
 /// Runs until `cancel` fires or the decision channel closes; the writer then sends the shut-down sequence.
@@ -191,10 +191,13 @@ pub(crate) async fn run(
         events,
         followed,
     } = channels;
+    // One wait for the cancellation, polled again on every pass (not a new one per pass).
+    let cancelled = cancel.cancelled();
+    tokio::pin!(cancelled);
     loop {
         tokio::select! {
             biased;
-            _ = cancel.cancelled() => break,
+            _ = &mut cancelled => break,
             d = decisions.recv() => {
                 let Some(d) = d else { break };
                 let latched = *estop.borrow();
@@ -202,6 +205,7 @@ pub(crate) async fn run(
                 followed.send_replace(Some((
                     record.seq,
                     followed_default(record.command, record.default_action),
+                    record.behaviour_prob,
                 )));
                 feed.publish(Arc::new(record));
                 stats.send_replace(actuation.stats());

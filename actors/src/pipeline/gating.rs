@@ -94,10 +94,13 @@ pub(crate) async fn run(
     } = channels;
     let mut after = None;
     let mut engaged = false;
+    // One wait for the cancellation, polled again on every pass (not a new one per pass).
+    let cancelled = cancel.cancelled();
+    tokio::pin!(cancelled);
     loop {
         tokio::select! {
             biased;
-            _ = cancel.cancelled() => break,
+            _ = &mut cancelled => break,
             changed = estop.changed() => {
                 if changed.is_err() {
                     break;

@@ -365,7 +365,7 @@ pub(crate) struct LearningChannels {
     /// Requests for the learner's state between two ticks (a recording begins).
     pub(crate) snapshots: mpsc::Receiver<oneshot::Sender<StartState>>,
     /// Actuation's last record: its tick and whether its command was the default policy's.
-    pub(crate) followed: watch::Receiver<Option<(u64, bool)>>,
+    pub(crate) followed: watch::Receiver<Option<(u64, bool, f64)>>,
 }
 
 /// Runs until `cancel` fires or observations stop.
@@ -389,10 +389,13 @@ pub(crate) async fn run(
     }
     learning.events = Some(events);
     let mut seq = 0;
+    // One wait for the cancellation, polled again on every pass (not a new one per pass).
+    let cancelled = cancel.cancelled();
+    tokio::pin!(cancelled);
     loop {
         tokio::select! {
             biased;
-            _ = cancel.cancelled() => break,
+            _ = &mut cancelled => break,
             Some(Envelope { command, reply }) = commands.recv() => {
                 learning.command(command, seq, reply);
             }
@@ -410,15 +413,16 @@ pub(crate) async fn run(
                 // ρ of the transition into this tick: the previous tick's record, if actuation made
                 // one, says whether π was followed; no record (a dropped decision, the watchdog's stop)
                 // means it was not.
-                let previous_followed_default = matches!(
-                    *followed.borrow(),
-                    Some((s, true)) if s.checked_add(1) == Some(seq)
-                );
+                let (previous_followed_default, previous_behaviour_prob) = match *followed.borrow() {
+                    Some((s, true, b)) if s.checked_add(1) == Some(seq) => (true, b),
+                    _ => (false, 1.0),
+                };
                 let output = learning.stage.act(LearnInput {
                     values: obs.values.as_ref(),
                     elbow,
                     forced_stimulus,
                     previous_followed_default,
+                    previous_behaviour_prob,
                 });
                 let fresh = observation_is_fresh(obs.link.state, obs.age_ticks, learning.max_obs_age_ticks);
                 let p = Learned {

@@ -112,7 +112,8 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
         config.control.default_policy,
         config.control.response,
         config.rule_table(),
-    );
+    )
+    .with_stochastic_gate(pavlov::agent::StochasticGate::from_config(config));
     let actuation = Actuation::new(config.robot.model, config.safety.clone());
 
     let (tick_tx, tick_rx) = watch::channel(None);

@@ -32,9 +32,12 @@ pub(crate) async fn route(
     routes: Routes,
     cancel: CancellationToken,
 ) {
+    // One wait for the cancellation, polled again on every pass (not a new one per pass).
+    let cancelled = cancel.cancelled();
+    tokio::pin!(cancelled);
     loop {
         let next = tokio::select! {
-            _ = cancel.cancelled() => None,
+            _ = &mut cancelled => None,
             r = inbox.recv() => r,
         };
         let Some(ControlRequest { command, reply }) = next else {

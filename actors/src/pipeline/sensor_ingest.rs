@@ -91,10 +91,13 @@ pub(crate) async fn run(
     let (mut distance, mut angle) = (0i32, 0i32);
     let mut events = EventLatch::new();
     let mut commands_open = true;
+    // One wait for the cancellation, polled again on every pass (not a new one per pass).
+    let cancelled = cancel.cancelled();
+    tokio::pin!(cancelled);
     loop {
         tokio::select! {
             biased;
-            _ = cancel.cancelled() => break,
+            _ = &mut cancelled => break,
             changed = ticks.changed() => {
                 if changed.is_err() {
                     break;

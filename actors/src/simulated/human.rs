@@ -229,12 +229,15 @@ pub async fn drive_pose(
     started: Instant,
     cancel: CancellationToken,
 ) -> SimHuman {
+    // One wait for the cancellation, polled again on every pass (not a new one per pass).
+    let cancelled = cancel.cancelled();
+    tokio::pin!(cancelled);
     loop {
         let frame = human.step();
         let due = started + Duration::from_secs_f64(frame.t_ms.max(0.0) / 1000.0);
         tokio::select! {
             biased;
-            _ = cancel.cancelled() => break,
+            _ = &mut cancelled => break,
             _ = tokio::time::sleep_until(due) => {}
         }
         let at_ms = u64::try_from(

@@ -126,10 +126,13 @@ where
     let mut buf = vec![0u8; 4096];
     let mut reading = true;
     let mut flowing = true;
+    // One wait for the cancellation, polled again on every pass (not a new one per pass).
+    let cancelled = cancel.cancelled();
+    tokio::pin!(cancelled);
     loop {
         tokio::select! {
             biased;
-            _ = cancel.cancelled() => break,
+            _ = &mut cancelled => break,
             next = plug.next(), if plugged => match next {
                 Some((io, baud)) => {
                     conn = Some(tokio::io::split(io));

@@ -1,6 +1,7 @@
 //! `pavlov replay DIR`: runs a recording back through the core's learning, gating and safety stages and
 //! checks that they reproduce the recorded stimulus, predictions, gate, the rule that engaged it, safety
-//! stop and command exactly.
+//! stop, command and behaviour probability b exactly (a stochastic gate's draws come from the recorded
+//! configuration's seed and the tick, `pavlov::agent::stochastic_gate`).
 //!
 //! The learner starts from the state the recording began with (its header's [`StartState`]: weights,
 //! traces, parameters in force, the stall detector — so a recording made after `--resume` or started from
@@ -54,6 +55,9 @@ pub struct ReplayReport {
     /// Ticks whose `rule` (what engaged the gate) was compared: every tick, unless the recording
     /// predates the rule table (it engaged the gate on some tick but names no rule anywhere).
     pub rules_compared: usize,
+    /// Behaviour probabilities b(A|S) compared (every tick; the stochastic gate's draws are the run's
+    /// seed's and the tick's, so they replay exactly).
+    pub behaviour_compared: usize,
     /// Ticks where `seq` jumped (records missing from the recording).
     pub seq_gaps: usize,
     /// Every event the recording holds (what `pavlov convert` counts too).
@@ -112,7 +116,8 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
         config.control.default_policy,
         config.control.response,
         config.rule_table(),
-    );
+    )
+    .with_stochastic_gate(pavlov::agent::StochasticGate::from_config(config));
     let start: Option<&StartState> = rec.header.start.as_ref();
     if let Some(start) = start {
         learning
@@ -169,6 +174,7 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
             elbow,
             forced_stimulus: inputs.forced_stimulus,
             previous_followed_default: inputs.previous_followed_default,
+            previous_behaviour_prob: inputs.previous_behaviour_prob,
         });
         // The same rule as the learning actor: a stale observation is acted on but not learned from.
         if safety::observation_is_fresh(
@@ -222,6 +228,21 @@ pub fn replay(rec: &Recording) -> Result<ReplayReport, ReplayError> {
                 "rule",
                 format!("{:?}", r.rule),
                 format!("{:?}", g.rule.as_deref()),
+            );
+        }
+        // b of the command: a safety stop overrides the gate with certainty (as actuation records it).
+        let behaviour_prob = if r.safety_stop.is_some() {
+            1.0
+        } else {
+            g.behaviour_prob
+        };
+        report.behaviour_compared += 1;
+        if behaviour_prob.to_bits() != r.behaviour_prob.to_bits() {
+            report.note(
+                r.seq,
+                "behaviour_prob",
+                r.behaviour_prob.to_string(),
+                behaviour_prob.to_string(),
             );
         }
         if g.default_action != r.default_action {
@@ -321,13 +342,14 @@ fn fmt_action(a: Action) -> String {
 /// The report as text for the terminal.
 pub fn describe(report: &ReplayReport) -> String {
     let mut s = format!(
-        "replayed {} ticks and {} events ({} applied to learning or gating): {} prediction values, {} safety stops and {} commands compared, {} seq gaps: ",
+        "replayed {} ticks and {} events ({} applied to learning or gating): {} prediction values, {} safety stops, {} commands and {} behaviour probabilities compared, {} seq gaps: ",
         report.ticks,
         report.events,
         report.events_applied,
         report.predictions_compared,
         report.stops_compared,
         report.commands_compared,
+        report.behaviour_compared,
         report.seq_gaps
     );
     if report.exact() {

@@ -206,11 +206,11 @@ counter_set! {
     // `bench --zenoh` subtracts and adds them.
     arithmetic #[cfg(feature = "zenoh")];
     "pavlov_zenoh_published_total" counter "Messages the Zenoh bridge published (serve --zenoh; 0 without it), by stream." by "stream" {
-        /// Tick records published on `pavlov/<robot>/tick`.
+        /// Tick records published on `pavlov/v1/<robot>/tick`.
         pub ticks_published: u64 = "tick",
-        /// Events published on `pavlov/<robot>/event`.
+        /// Events published on `pavlov/v1/<robot>/event`.
         pub events_published: u64 = "event",
-        /// Status messages published on `pavlov/<robot>/status`.
+        /// Status messages published on `pavlov/v1/<robot>/status`.
         pub status_published: u64 = "status",
     }
     "pavlov_zenoh_missed_total" counter "Tick records and events the Zenoh publisher lost because it fell behind (its queue drops the oldest; never delays the tick)." by "stream" {
@@ -223,7 +223,11 @@ counter_set! {
         /// Puts Zenoh refused (the session closing, a transport error).
         pub put_errors: u64,
     }
-    "pavlov_zenoh_queries_total" counter "Zenoh queries answered on pavlov/<robot>/config and pavlov/<robot>/checkpoint." {
+    "pavlov_zenoh_oversized_dropped_total" counter "Incoming Zenoh messages dropped by Zenoh's transport before delivery for being larger than transport.link.rx.max_message_size (64 KiB on a robot)." {
+        /// Messages Zenoh dropped for their size (read from its log: `telemetry::zenoh_drops`).
+        pub oversized_dropped: u64,
+    }
+    "pavlov_zenoh_queries_total" counter "Zenoh queries answered on pavlov/v1/<robot>/config and pavlov/v1/<robot>/checkpoint." {
         /// Queries answered on `config` and `checkpoint`.
         pub queries: u64,
     }

@@ -13,9 +13,12 @@ pub(crate) const EVERY: Duration = Duration::from_secs(60);
 /// Logs tick health every [`EVERY`] until `cancel` fires.
 pub(crate) async fn run(health: Health, cancel: CancellationToken) {
     let mut every = tokio::time::interval_at(Instant::now() + EVERY, EVERY);
+    // One wait for the cancellation, polled again on every pass (not a new one per pass).
+    let cancelled = cancel.cancelled();
+    tokio::pin!(cancelled);
     loop {
         tokio::select! {
-            _ = cancel.cancelled() => break,
+            _ = &mut cancelled => break,
             _ = every.tick() => {
                 let f = health.figures();
                 let (lat, cmd) = (f.lateness, f.tick_to_command);

@@ -17,7 +17,10 @@ use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::time::Duration;
 
 use tracing_subscriber::EnvFilter;
+use tracing_subscriber::Layer as _;
 use tracing_subscriber::fmt::MakeWriter;
+use tracing_subscriber::layer::SubscriberExt as _;
+use tracing_subscriber::util::SubscriberInitExt as _;
 
 /// Lines the queue holds before new ones are dropped (about a minute of a busy INFO log).
 pub const QUEUE_LINES: usize = 4096;
@@ -130,7 +133,8 @@ impl Drop for LogGuard {
 }
 
 /// Installs the global subscriber: `filter` (from `RUST_LOG`, default `info`), plain text unless stderr is a
-/// terminal, written through a [`LogSink`] by a thread of its own.
+/// terminal, written through a [`LogSink`] by a thread of its own; beside it, with a filter of its own,
+/// the count of Zenoh's oversized-message drops ([`super::zenoh_drops`]).
 pub fn init(filter: EnvFilter) -> LogGuard {
     let (sink, lines) = LogSink::new(QUEUE_LINES);
     let counters = sink.counters();
@@ -139,11 +143,14 @@ pub fn init(filter: EnvFilter) -> LogGuard {
         .name("log-writer".into())
         .spawn(move || drain(lines, std::io::stderr(), &thread_counters))
         .ok();
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
+    let fmt = tracing_subscriber::fmt::layer()
         .with_ansi(std::io::stderr().is_terminal())
         .log_internal_errors(false)
         .with_writer(sink)
+        .with_filter(filter);
+    let _ = tracing_subscriber::registry()
+        .with(fmt)
+        .with(super::zenoh_drops::layer())
         .try_init();
     LogGuard { thread, counters }
 }

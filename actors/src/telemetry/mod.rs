@@ -23,6 +23,7 @@ pub(crate) mod prometheus;
 #[doc(hidden)]
 pub mod prometheus_check;
 pub mod sim_status;
+pub mod zenoh_drops;
 
 use pavlov::config::TickTimer;
 use pavlov::record::LinkStatus;

@@ -1,10 +1,15 @@
-//! The bridge's queryables: `pavlov/<robot>/config`, `pavlov/<robot>/checkpoint` and
-//! `pavlov/<robot>/command`.
+//! The bridge's queryables: `pavlov/v1/<robot>/config`, `pavlov/v1/<robot>/checkpoint` and
+//! `pavlov/v1/<robot>/command`.
+//!
+//! Every reply is made under the robot's own key, not the query's (a query `pavlov/v1/*/config` gets one
+//! reply per robot, each under `pavlov/v1/<robot>/config`, which Zenoh's default consolidation keeps
+//! apart), and declares `application/json`. Zenoh's error replies carry no key, so each error reply's
+//! JSON names the robot and the key: `{"ok": false, "robot": …, "key": …, "error": CODE, "message": …}`.
 //!
 //! A command query's payload is JSON `{"token": "…", "command": {"cmd": "set_mode", "mode": "manual"}}`
 //! (the command as the websocket takes it, `web/PROTOCOL.md`). The answer is a reply
 //! `{"ok": true, "result": …}` with what the owner applied, or an error reply
-//! `{"ok": false, "error": CODE, "message": …}` with CODE one of `off` (`[zenoh] commands = false`),
+//! `{"ok": false, "robot": …, "key": …, "error": CODE, "message": …}` with CODE one of `off` (`[zenoh] commands = false`),
 //! `token` (missing or wrong), `invalid` (not such a message), or the websocket's `busy`, `rejected`,
 //! `unavailable`. Every outcome is counted (`pavlov_zenoh_commands_total{outcome}`).
 //!
@@ -29,7 +34,7 @@ use zenoh::Session;
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::query::{Query, Queryable};
 
-use super::{ZenohError, key};
+use super::{ZenohError, key, wire};
 #[cfg(test)]
 use crate::command::{CommandError, LatchCommand};
 use crate::command::{ControlCommand, ControlRequest, Outcome};
@@ -80,6 +85,9 @@ pub(crate) async fn declare(session: Session, robot: String) -> Result<Queryable
 
 /// What the queryables answer with.
 pub(crate) struct Answers {
+    robot: String,
+    /// The session, for its clock: replies are stamped with its HLC.
+    clock: Session,
     config: Vec<u8>,
     run_dir: Option<PathBuf>,
     token: Option<String>,
@@ -127,8 +135,8 @@ pub(crate) async fn newest_checkpoint(dir: Option<&Path>) -> Result<Vec<u8>, Str
 struct Refusal(&'static str, String);
 
 impl Answers {
-    /// The answers for `server`.
-    pub(crate) fn new(server: &Server, counters: Arc<ZenohCounters>) -> Answers {
+    /// The answers for `server`, stamped with `session`'s clock.
+    pub(crate) fn new(server: &Server, session: Session, counters: Arc<ZenohCounters>) -> Answers {
         let config = server.config().redacted();
         let message = json!({
             "program": crate::provenance::BUILD.program(),
@@ -136,6 +144,8 @@ impl Answers {
             "obs_names": server.obs_names(),
         });
         Answers {
+            robot: server.config().zenoh.robot.clone(),
+            clock: session,
             config: serde_json::to_vec(&message).unwrap_or_default(),
             run_dir: server.checkpoints().run_dir.clone(),
             token: server.config().dashboard.token.clone(),
@@ -155,19 +165,22 @@ impl Answers {
                 _ = cancel.cancelled() => break,
                 Ok(query) = q.config.recv_async() => {
                     this.counters.queries.fetch_add(1, Ordering::Relaxed);
-                    let _ = query.reply(query.key_expr().clone(), this.config.clone()).await;
+                    this.reply(&query, "config", this.config.clone()).await;
                 }
                 Ok(query) = q.checkpoint.recv_async() => {
                     this.counters.queries.fetch_add(1, Ordering::Relaxed);
                     if sending.swap(true, Ordering::AcqRel) {
-                        let _ = query.reply_err("busy: a checkpoint is being sent; ask again").await;
+                        let busy = Refusal("busy", "a checkpoint is being sent; ask again".into());
+                        this.refuse(&query, "checkpoint", busy).await;
                         continue;
                     }
-                    let (dir, sending) = (this.run_dir.clone(), sending.clone());
+                    let (this, sending) = (this.clone(), sending.clone());
                     tokio::spawn(async move {
-                        match newest_checkpoint(dir.as_deref()).await {
-                            Ok(bytes) => { let _ = query.reply(query.key_expr().clone(), bytes).await; }
-                            Err(why) => { let _ = query.reply_err(why).await; }
+                        match newest_checkpoint(this.run_dir.as_deref()).await {
+                            Ok(bytes) => this.reply(&query, "checkpoint", bytes).await,
+                            Err(why) => {
+                                this.refuse(&query, "checkpoint", Refusal("unavailable", why)).await;
+                            }
                         }
                         sending.store(false, Ordering::Release);
                     });
@@ -178,17 +191,17 @@ impl Answers {
                     let Ok(permit) = in_flight.clone().try_acquire_owned() else {
                         this.count(&this.counters.commands_failed);
                         let busy = format!("{MAX_COMMANDS_IN_FLIGHT} commands are being answered; try again");
-                        Self::answer(&query, Err(Refusal("busy", busy))).await;
+                        this.answer(&query, Err(Refusal("busy", busy))).await;
                         continue;
                     };
                     let payload = query.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
                     match this.submit(&payload) {
-                        Err(refusal) => Self::answer(&query, Err(refusal)).await,
+                        Err(refusal) => this.answer(&query, Err(refusal)).await,
                         Ok(reply) => {
                             let this = this.clone();
                             tokio::spawn(async move {
                                 let outcome = this.outcome(reply).await;
-                                Self::answer(&query, outcome).await;
+                                this.answer(&query, outcome).await;
                                 drop(permit);
                             });
                         }
@@ -198,16 +211,45 @@ impl Answers {
         }
     }
 
-    /// Answers `query` with `answer`: a reply, or an error reply with the refusal's code and message.
-    async fn answer(query: &Query, answer: Result<String, Refusal>) {
+    /// Replies `bytes` to `query` under this robot's key `leaf`, declaring JSON, with a timestamp.
+    async fn reply(&self, query: &Query, leaf: &str, bytes: impl Into<zenoh::bytes::ZBytes>) {
+        let k = key(&self.robot, leaf);
+        if let Err(e) = query
+            .reply(k.clone(), bytes)
+            .encoding(wire::json_encoding())
+            .timestamp(self.clock.new_timestamp())
+            .await
+        {
+            tracing::debug!("zenoh: reply on {k} failed: {e}");
+        }
+    }
+
+    /// The error reply's body for `refusal` on `leaf`: JSON naming the robot and the key.
+    fn refusal_body(&self, leaf: &str, Refusal(code, message): Refusal) -> String {
+        json!({
+            "ok": false,
+            "robot": self.robot,
+            "key": key(&self.robot, leaf),
+            "error": code,
+            "message": message,
+        })
+        .to_string()
+    }
+
+    /// An error reply to `query` on `leaf`.
+    async fn refuse(&self, query: &Query, leaf: &str, refusal: Refusal) {
+        let body = self.refusal_body(leaf, refusal);
+        let _ = query.reply_err(body).encoding(wire::json_encoding()).await;
+    }
+
+    /// Answers a command `query` with `answer`: a reply, or an error reply with the refusal's code and
+    /// message.
+    async fn answer(&self, query: &Query, answer: Result<String, Refusal>) {
         match answer {
-            Ok(answer) => {
-                let _ = query.reply(query.key_expr().clone(), answer).await;
-            }
-            Err(Refusal(code, message)) => {
-                tracing::info!("zenoh: command refused ({code}): {message}");
-                let body = json!({ "ok": false, "error": code, "message": message });
-                let _ = query.reply_err(body.to_string()).await;
+            Ok(answer) => self.reply(query, "command", answer).await,
+            Err(refusal) => {
+                tracing::info!("zenoh: command refused ({}): {}", refusal.0, refusal.1);
+                self.refuse(query, "command", refusal).await;
             }
         }
     }
@@ -345,7 +387,7 @@ mod tests {
     ) -> Result<String, String> {
         let body = json!({ "token": token, "command": command }).to_string();
         let replies = session
-            .get("pavlov/t/command")
+            .get("pavlov/v1/t/command")
             .payload(body)
             .timeout(Duration::from_secs(10))
             .await
@@ -353,9 +395,91 @@ mod tests {
         let reply = replies.recv_async().await.expect("a reply");
         let text = |b: Vec<u8>| String::from_utf8_lossy(&b).into_owned();
         match reply.result() {
-            Ok(sample) => Ok(text(sample.payload().to_bytes().into_owned())),
-            Err(e) => Err(text(e.payload().to_bytes().into_owned())),
+            Ok(sample) => {
+                assert_eq!(sample.key_expr().as_str(), "pavlov/v1/t/command");
+                assert_eq!(sample.encoding(), &wire::json_encoding());
+                Ok(text(sample.payload().to_bytes().into_owned()))
+            }
+            Err(e) => {
+                assert_eq!(e.encoding(), &wire::json_encoding());
+                Err(text(e.payload().to_bytes().into_owned()))
+            }
         }
+    }
+
+    /// The answers of robot `robot` with commands off.
+    fn answers_of(robot: &str, session: &Session) -> Answers {
+        let (tx, _) = mpsc::channel::<ControlRequest>(1);
+        Answers {
+            robot: robot.into(),
+            clock: session.clone(),
+            config: format!(r#"{{"robot": "{robot}"}}"#).into_bytes(),
+            run_dir: None,
+            token: None,
+            commands_on: false,
+            commands: tx,
+            counters: Arc::new(ZenohCounters::default()),
+        }
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_wildcard_query_gets_one_reply_per_robot_under_its_own_key() {
+        let session = lone_session().await;
+        let cancel = CancellationToken::new();
+        for robot in ["a", "b", "c"] {
+            let q = declare(session.clone(), robot.into())
+                .await
+                .expect("declare");
+            tokio::spawn(answers_of(robot, &session).run(q, cancel.clone()));
+        }
+        // Zenoh's default consolidation: replies under one key would be merged into one.
+        let replies = session
+            .get("pavlov/v1/*/config")
+            .timeout(Duration::from_secs(10))
+            .await
+            .expect("query");
+        let mut keys = Vec::new();
+        while let Ok(reply) = replies.recv_async().await {
+            let sample = reply.result().expect("a reply, not an error");
+            assert_eq!(sample.encoding(), &wire::json_encoding());
+            assert!(sample.timestamp().is_some(), "a stamped reply");
+            keys.push(sample.key_expr().as_str().to_string());
+        }
+        keys.sort();
+        assert_eq!(
+            keys,
+            [
+                "pavlov/v1/a/config",
+                "pavlov/v1/b/config",
+                "pavlov/v1/c/config"
+            ]
+        );
+        // Error replies name who refused: commands are off on every one of them.
+        let replies = session
+            .get("pavlov/v1/*/command")
+            .payload(r#"{"command": {"cmd": "estop"}}"#)
+            .timeout(Duration::from_secs(10))
+            .await
+            .expect("query");
+        let mut robots = Vec::new();
+        while let Ok(reply) = replies.recv_async().await {
+            let err = reply.result().expect_err("an error reply");
+            let body: serde_json::Value =
+                serde_json::from_slice(&err.payload().to_bytes()).expect("JSON");
+            assert_eq!(body["error"], "off");
+            assert_eq!(
+                body["key"],
+                format!(
+                    "pavlov/v1/{}/command",
+                    body["robot"].as_str().unwrap_or("?")
+                )
+            );
+            robots.push(body["robot"].as_str().unwrap_or_default().to_string());
+        }
+        robots.sort();
+        assert_eq!(robots, ["a", "b", "c"]);
+        cancel.cancel();
+        let _ = session.close().await;
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -364,6 +488,8 @@ mod tests {
         let queryables = declare(session.clone(), "t".into()).await.expect("declare");
         let (tx, mut owner) = mpsc::channel::<ControlRequest>(8);
         let answers = Answers {
+            robot: "t".into(),
+            clock: session.clone(),
             config: Vec::new(),
             run_dir: None,
             token: Some("the-right-token-0123".into()),
@@ -397,6 +523,9 @@ mod tests {
             .send(Err(CommandError::Rejected("second, refused".into())));
         let answer = second.await.expect("task").unwrap_err();
         assert!(answer.contains("second, refused"), "{answer}");
+        let refusal: serde_json::Value = serde_json::from_str(&answer).expect("JSON");
+        assert_eq!(refusal["robot"], "t");
+        assert_eq!(refusal["key"], "pavlov/v1/t/command");
         assert!(
             !first.is_finished(),
             "the first was answered before its owner did"

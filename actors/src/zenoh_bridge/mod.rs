@@ -1,15 +1,20 @@
 //! `pavlov serve --zenoh [CONFIG]`: this robot on Zenoh, so a lab's robots can be watched and commanded
 //! from one place (`pavlov fleet`, or anything that speaks Zenoh, e.g. next to ROS 2's rmw_zenoh).
 //!
-//! Keys, with `<robot>` = `[zenoh] robot` (one key-expression chunk, checked at start-up):
-//! - `pavlov/<robot>/tick`: every [`TickRecord`](pavlov::record::TickRecord) as JSON (put, dropped by Zenoh
-//!   under congestion rather than queued);
-//! - `pavlov/<robot>/event`: every [`Event`](pavlov::event::Event) as JSON;
-//! - `pavlov/<robot>/status`: every `[zenoh] status_every_ms`, the fleet's row (`status`): mode, link,
+//! Keys, with `<robot>` = `[zenoh] robot` (one key-expression chunk, checked at start-up) and `v1` the
+//! wire format's version (the conventions, encodings and settings are in [`wire`]):
+//! - `pavlov/v1/<robot>/tick`: every [`TickRecord`](pavlov::record::TickRecord) as JSON (put, dropped by
+//!   Zenoh under congestion rather than queued; the attachment numbers the puts, so a gap is visible);
+//! - `pavlov/v1/<robot>/event`: every [`Event`](pavlov::event::Event) as JSON;
+//! - `pavlov/v1/<robot>/status`: every `[zenoh] status_every_ms`, the fleet's row (`status`): mode, link,
 //!   tick health, key counters, the dashboard's URL;
-//! - `pavlov/<robot>/config` (query): the configuration in force, token redacted;
-//! - `pavlov/<robot>/checkpoint` (query): this run's newest automatic checkpoint file, or an error reply;
-//! - `pavlov/<robot>/command` (query): a command (`commands`), answered with the outcome.
+//! - `pavlov/v1/<robot>/alive`: a liveliness token, held while the bridge runs (presence);
+//! - `pavlov/v1/<robot>/config` (query): the configuration in force, token redacted;
+//! - `pavlov/v1/<robot>/checkpoint` (query): this run's newest automatic checkpoint file, or an error reply;
+//! - `pavlov/v1/<robot>/command` (query): a command (`commands`), answered with the outcome.
+//!
+//! Every reply is made under the robot's own key (so a wildcard query gets one reply per robot under
+//! Zenoh's default consolidation), and every error reply is JSON naming the robot and the key.
 //!
 //! Commands are off unless `[zenoh] commands = true`, and then each must carry the dashboard's token (so
 //! a token must be configured): one secret for the websocket and Zenoh, checked in constant time, counted
@@ -25,6 +30,7 @@
 pub(crate) mod commands;
 pub(crate) mod publish;
 pub(crate) mod status;
+pub mod wire;
 
 use std::path::Path;
 use std::sync::Arc;
@@ -36,13 +42,7 @@ use tokio_util::sync::CancellationToken;
 use crate::server::Server;
 use crate::telemetry::counters::{ZenohCounters, ZenohFigures};
 
-/// The root of every key.
-pub const KEY_ROOT: &str = "pavlov";
-
-/// The key `pavlov/<robot>/<leaf>`.
-pub fn key(robot: &str, leaf: &str) -> String {
-    format!("{KEY_ROOT}/{robot}/{leaf}")
-}
+pub use wire::{KEY_ROOT, key};
 
 /// Errors starting the bridge.
 #[derive(Debug, thiserror::Error)]
@@ -101,6 +101,8 @@ pub struct ZenohBridge {
     cancel: CancellationToken,
     tasks: Vec<JoinHandle<()>>,
     counters: Arc<ZenohCounters>,
+    /// The presence token, undeclared when the bridge stops (or by Zenoh when the process dies).
+    alive: Option<zenoh::liveliness::LivelinessToken>,
     session: Option<zenoh::Session>,
     runtime: Option<tokio::runtime::Runtime>,
 }
@@ -115,10 +117,10 @@ impl Drop for ZenohBridge {
 }
 
 impl ZenohBridge {
-    /// Opens a Zenoh session with `config` and starts publishing `server`'s ticks, events and status and
+    /// Opens a Zenoh session with `config` (hardened: [`wire::harden`]) and starts publishing `server`'s ticks, events and status and
     /// answering its queries; `dashboard_url` is published in the status.
     pub async fn start(
-        config: zenoh::Config,
+        mut config: zenoh::Config,
         server: &Server,
         dashboard_url: String,
     ) -> Result<ZenohBridge, ZenohError> {
@@ -139,6 +141,12 @@ impl ZenohBridge {
                 reason,
             }
         })?;
+        wire::harden(&mut config, wire::ROBOT_MAX_MESSAGE_BYTES).map_err(|reason| {
+            ZenohError::Config {
+                path: "(settings pavlov adds)".into(),
+                reason,
+            }
+        })?;
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)
             .thread_name("zenoh-bridge")
@@ -156,6 +164,7 @@ impl ZenohBridge {
             cancel: CancellationToken::new(),
             tasks: Vec::new(),
             counters: counters.clone(),
+            alive: None,
             session: Some(session.clone()),
             runtime: None,
         };
@@ -173,11 +182,27 @@ impl ZenohBridge {
             .await
             .map_err(|e| ZenohError::Open(e.to_string()))??;
         let status = status::StatusSource::new(server, dashboard_url, counters.clone());
-        let answers = commands::Answers::new(server, counters.clone());
+        let answers = commands::Answers::new(server, session.clone(), counters.clone());
         let queryables = runtime
             .spawn(commands::declare(session.clone(), settings.robot.clone()))
             .await
             .map_err(|e| ZenohError::Open(e.to_string()))??;
+        let alive_key = key(&settings.robot, wire::ALIVE_LEAF);
+        let token_session = session.clone();
+        let alive = runtime
+            .spawn(async move {
+                token_session
+                    .liveliness()
+                    .declare_token(alive_key.clone())
+                    .await
+                    .map_err(|e| ZenohError::Declare {
+                        key: alive_key,
+                        reason: e.to_string(),
+                    })
+            })
+            .await
+            .map_err(|e| ZenohError::Open(e.to_string()))??;
+        bridge.alive = Some(alive);
         let cancel = bridge.cancel.clone();
         let phase = publish::Phase {
             first_tick: server.started(),
@@ -212,6 +237,10 @@ impl ZenohBridge {
         self.cancel.cancel();
         for task in std::mem::take(&mut self.tasks) {
             let _ = tokio::time::timeout(Duration::from_secs(3), task).await;
+        }
+        if let (Some(alive), Some(rt)) = (self.alive.take(), self.runtime.as_ref()) {
+            let gone = rt.spawn(async move { alive.undeclare().await });
+            let _ = tokio::time::timeout(Duration::from_secs(3), gone).await;
         }
         if let (Some(session), Some(rt)) = (self.session.take(), self.runtime.as_ref()) {
             let closing = rt.spawn(async move { session.close().await });

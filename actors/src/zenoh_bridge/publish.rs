@@ -1,5 +1,7 @@
-//! The publisher: reads the tick feed and the event log and puts them on `pavlov/<robot>/tick` and
-//! `pavlov/<robot>/event`, and puts the status on `pavlov/<robot>/status` at a fixed period.
+//! The publisher: reads the tick feed and the event log and puts them on `pavlov/v1/<robot>/tick` and
+//! `pavlov/v1/<robot>/event`, and puts the status on `pavlov/v1/<robot>/status` at a fixed period.
+//! Every put declares `application/json`, carries the session's HLC timestamp, and has its stream's
+//! publication number as attachment ([`super::wire`]).
 //!
 //! **It works half a period away from the tick.** The publisher does not wait on the broadcasts (a
 //! waiting receiver would be woken by actuation's send, on the tick's own path, at the moment the link
@@ -10,7 +12,15 @@
 //!
 //! It holds receivers of the feed's and the event log's lossy broadcasts: bounded rings that drop their
 //! oldest entry when the publisher falls behind, so it can never delay the tick; what it loses is counted
-//! (`pavlov_zenoh_missed_total`). Puts use Zenoh's default congestion control for data (drop, not block).
+//! (`pavlov_zenoh_missed_total`).
+//!
+//! **Congestion.** Every put uses congestion control *drop*: a tick is worth nothing late and the next
+//! one replaces it, and a *block* put would hold the bridge's one thread, on which the command queryable
+//! (an e-stop) is answered too, for as long as a slow subscriber's link stays full. Queries and their
+//! replies (commands) use Zenoh's default for requests, *block*. Zenoh gives a publisher no word of a
+//! dropped put, so the drops are made visible where they can be seen: at the subscriber, as a gap in the
+//! publication numbers (the fleet counts them per robot), and here, as failed puts
+//! (`pavlov_zenoh_put_errors_total`).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -23,8 +33,10 @@ use tokio::time::{Instant, MissedTickBehavior};
 use tokio_util::sync::CancellationToken;
 use zenoh::Session;
 use zenoh::pubsub::Publisher as ZPublisher;
+use zenoh::qos::CongestionControl;
 
 use super::status::StatusSource;
+use super::wire::{self, SeqCounter};
 use super::{ZenohError, key};
 use crate::telemetry::counters::ZenohCounters;
 
@@ -87,11 +99,18 @@ fn drain<T: Clone>(rx: &mut broadcast::Receiver<T>) -> Drained<T> {
     }
 }
 
+/// One stream: its publisher and its publication numbers.
+struct Stream {
+    publisher: ZPublisher<'static>,
+    seq: SeqCounter,
+}
+
 /// The three publishers and what they read.
 pub(crate) struct Publisher {
-    tick: ZPublisher<'static>,
-    event: ZPublisher<'static>,
-    status: ZPublisher<'static>,
+    session: Session,
+    tick: Stream,
+    event: Stream,
+    status: Stream,
     counters: Arc<ZenohCounters>,
     inputs: Inputs,
 }
@@ -104,13 +123,19 @@ impl Publisher {
         counters: Arc<ZenohCounters>,
         inputs: Inputs,
     ) -> Result<Publisher, ZenohError> {
-        let declare = |leaf: &str| {
+        let declare = |leaf: &str, congestion: CongestionControl| {
             let k = key(&robot, leaf);
             let session = session.clone();
             async move {
                 session
                     .declare_publisher(k.clone())
+                    .encoding(wire::json_encoding())
+                    .congestion_control(congestion)
                     .await
+                    .map(|publisher| Stream {
+                        publisher,
+                        seq: SeqCounter::default(),
+                    })
                     .map_err(|e| ZenohError::Declare {
                         key: k,
                         reason: e.to_string(),
@@ -118,16 +143,22 @@ impl Publisher {
             }
         };
         Ok(Publisher {
-            tick: declare("tick").await?,
-            event: declare("event").await?,
-            status: declare("status").await?,
+            tick: declare("tick", CongestionControl::Drop).await?,
+            event: declare("event", CongestionControl::Drop).await?,
+            status: declare("status", CongestionControl::Drop).await?,
+            session,
             counters,
             inputs,
         })
     }
 
-    async fn put(&self, publisher: &ZPublisher<'static>, bytes: Vec<u8>, sent: &AtomicU64) {
-        match publisher.put(bytes).await {
+    async fn put(&self, stream: &Stream, bytes: Vec<u8>, sent: &AtomicU64) {
+        let publisher = &stream.publisher;
+        let put = publisher
+            .put(bytes)
+            .timestamp(self.session.new_timestamp())
+            .attachment(wire::seq_attachment(stream.seq.next()));
+        match put.await {
             Ok(()) => {
                 sent.fetch_add(1, Ordering::Relaxed);
             }
@@ -143,7 +174,7 @@ impl Publisher {
     async fn publish<T: serde::Serialize>(
         &self,
         drained: Drained<Arc<T>>,
-        publisher: &ZPublisher<'static>,
+        publisher: &Stream,
         sent: &AtomicU64,
         missed: &AtomicU64,
     ) -> bool {
@@ -190,6 +221,10 @@ impl Publisher {
                     .publish(d, &self.event, &c.events_published, &c.events_missed)
                     .await;
             }
+            self.counters.oversized_dropped.store(
+                crate::telemetry::zenoh_drops::OVERSIZED_DROPS.load(Ordering::Relaxed),
+                Ordering::Relaxed,
+            );
             let now = Instant::now();
             if now >= next_status {
                 next_status = now + status_every;

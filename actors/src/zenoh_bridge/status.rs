@@ -1,4 +1,4 @@
-//! The status message on `pavlov/<robot>/status`: what the fleet page shows of a robot — its mode, the
+//! The status message on `pavlov/v1/<robot>/status`: what the fleet page shows of a robot — its mode, the
 //! link, the tick health (the `/healthz` verdict and the tick figures), key counters, and the URL of the
 //! robot's own dashboard.
 

@@ -19,7 +19,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 const STALL_CONFIG: &str = include_str!("../../../config/stall.toml");
 
 /// Every family `/metrics` serves once the first tick is out (the README lists the same).
-const FAMILIES: [(&str, &str); 53] = [
+const FAMILIES: [(&str, &str); 54] = [
     ("pavlov_tick_lateness_seconds", "histogram"),
     ("pavlov_ticks_fired_total", "counter"),
     ("pavlov_tick_timer", "gauge"),
@@ -62,6 +62,7 @@ const FAMILIES: [(&str, &str); 53] = [
     ("pavlov_zenoh_published_total", "counter"),
     ("pavlov_zenoh_missed_total", "counter"),
     ("pavlov_zenoh_put_errors_total", "counter"),
+    ("pavlov_zenoh_oversized_dropped_total", "counter"),
     ("pavlov_zenoh_queries_total", "counter"),
     ("pavlov_zenoh_commands_total", "counter"),
     ("pavlov_recorder_backlog", "gauge"),

@@ -47,7 +47,7 @@ fn a_short_interaction_study_is_deterministic_and_replays_exactly() {
     // Both policies of the pair answered the same operator: the same ground-truth commands.
     assert_eq!(a.runs[0].commands, a.runs[1].commands);
     for r in &a.runs {
-        assert_eq!(r.records.len(), 3000);
+        assert_eq!(r.figure3.len(), 3000);
         assert!(!r.commands.is_empty(), "the operator commanded in a minute");
         // Most commands are answered by the response (the reactive gate follows the observed elbow).
         let answered = r.metrics.latencies_ms().len();

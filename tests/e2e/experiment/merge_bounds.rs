@@ -84,7 +84,7 @@ fn a_huge_shard_count_is_refused_before_anything_is_sized_by_it() {
     let cwd = TestDir::new("merge-count");
     let file = cwd.join("shard-0-of-1.json");
     let crafted = serde_json::json!({
-        "format": "pavlov-shard/1",
+        "format": "pavlov-shard/2",
         "experiment": "stall",
         "shard": { "index": 0, "count": u64::MAX },
         "planned_runs": u64::MAX,

@@ -206,7 +206,7 @@ fn four_shards_merged_equal_the_unsharded_study() {
     }
 }
 
-/// How many tick records each run of a shard file keeps.
+/// How many ticks each run of a shard file keeps for Figure 3.
 fn records_kept(file: &Path) -> Vec<usize> {
     let text = std::fs::read_to_string(file).expect("shard file");
     let v: serde_json::Value = serde_json::from_str(&text).expect("parses");
@@ -214,7 +214,7 @@ fn records_kept(file: &Path) -> Vec<usize> {
         .as_array()
         .expect("runs")
         .iter()
-        .map(|r| r["records"].as_array().map_or(0, Vec::len))
+        .map(|r| r["figure3"].as_array().map_or(0, Vec::len))
         .collect()
 }
 

@@ -29,6 +29,7 @@ fn predictions_from(cfg: &Config, cp: Option<&Checkpoint>, record: &TickRecord) 
         elbow: None,
         forced_stimulus: inputs.forced_stimulus,
         previous_followed_default: inputs.previous_followed_default,
+        previous_behaviour_prob: inputs.previous_behaviour_prob,
     });
     out.predictions.iter().map(|p| p.value).collect()
 }

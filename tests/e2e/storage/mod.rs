@@ -1,5 +1,5 @@
 //! What the server keeps on disk: recordings (round trip, replay, a rule table's rules, a kill mid-write, names a client may
-//! give, conversion between MCAP and JSON Lines, an independent MCAP reader, `replay`'s exit statuses),
+//! give, conversion between MCAP and JSON Lines, an independent MCAP reader, `replay`'s exit statuses, a stochastic gate's run replayed bit for bit),
 //! checkpoints (periodic, per run, resumed with fallback) and saves; no artifact carrying the token.
 
 mod checkpoint;
@@ -16,4 +16,5 @@ mod recording_roundtrip;
 mod recording_rules;
 mod replay_cases;
 mod replay_exit;
+mod replay_stochastic;
 mod saves;

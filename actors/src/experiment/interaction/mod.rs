@@ -10,13 +10,15 @@
 //! ([`pavlov::analysis::interaction::curve`]), from which the Figure 3 analogue takes its moment: when
 //! anticipation first holds, or the end of the run.
 //!
-//! - `run`: one run; `analysis`: the statistics; [`report`]: files and the terminal table;
+//! - `run`: one run, its ticks reduced as they arrive (`reduce`: the run keeps a few dozen bytes a
+//!   tick, never its records); `analysis`: the statistics; [`report`]: files and the terminal table;
 //!   `plots`: the Figure 3 and Figure 4 analogues and the time course; [`sensitivity`]: the study over
 //!   operator and learner variants; [`sharded`]: one slice of the study (`--shard I/N`), and merging the
 //!   slices back (`assemble` makes the study from its runs, whoever ran them).
 
 pub(crate) mod analysis;
 pub(crate) mod plots;
+pub(crate) mod reduce;
 pub mod report;
 pub(crate) mod run;
 pub mod sensitivity;
@@ -160,7 +162,7 @@ pub(crate) fn run_runs(
                 aligned_commands: o.aligned_commands,
                 record_dir: dir,
                 // The Figure 3 analogue draws the first run of each policy.
-                keep_records: i < 2,
+                keep_figure3: i < 2,
                 human: o.human.clone(),
             },
         )

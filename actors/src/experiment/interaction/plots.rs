@@ -5,13 +5,11 @@
 //! false starts against minutes of learning, with 95 % intervals).
 
 use std::path::Path;
-use std::sync::Arc;
 
 use pavlov::analysis::bootstrap::MeanDifference;
 use pavlov::analysis::interaction::curve::{CurvePoint, Rate};
 use pavlov::analysis::stats::Describe;
 use pavlov::control::Mode;
-use pavlov::record::TickRecord;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -22,6 +20,7 @@ use crate::experiment::plot_style::{
 
 use super::InteractionStudy;
 use super::analysis::AlignedPoint;
+use super::reduce::{Fig3Tick, observed_onsets};
 use super::run::{self as interaction, InteractionRun};
 
 /// A policy's band (x, low, high) in its colour, with its dash for the mean line.
@@ -91,23 +90,23 @@ fn lines_panel<DB: DrawingBackend>(
 
 /// Ten seconds of a run centred on its first observed command onset at or after `at_min` minutes (the last
 /// one whose ten seconds fit, when none comes later).
-fn excerpt(r: &InteractionRun, at_min: f64) -> &[Arc<TickRecord>] {
+fn excerpt(r: &InteractionRun, at_min: f64) -> &[Fig3Tick] {
     let half = 250usize;
-    let fits: Vec<usize> = interaction::observed_onsets(&r.records)
+    let fits: Vec<usize> = observed_onsets(&r.figure3, |x| (x.t_ms, x.stimulus))
         .into_iter()
         .map(|i| i as usize)
-        .filter(|&i| i >= half && i + half <= r.records.len())
+        .filter(|&i| i >= half && i + half <= r.figure3.len())
         .collect();
     let at_ms = at_min * 60_000.0;
     let onset = fits
         .iter()
         .copied()
-        .find(|&i| r.records.get(i).is_some_and(|x| x.t_ms >= at_ms))
+        .find(|&i| r.figure3.get(i).is_some_and(|x| x.t_ms >= at_ms))
         .or_else(|| fits.last().copied())
         .unwrap_or(half);
     let start = onset.saturating_sub(half);
-    r.records
-        .get(start..(start + 2 * half).min(r.records.len()))
+    r.figure3
+        .get(start..(start + 2 * half).min(r.figure3.len()))
         .unwrap_or(&[])
 }
 
@@ -142,25 +141,21 @@ impl Figure for Fig3<'_> {
         for (r, col) in firsts.iter().zip(cols.iter()) {
             let recs = excerpt(r, s.fig3_at_min);
             let t0 = recs.first().map_or(0.0, |x| x.t_ms);
-            let t = |x: &TickRecord| (x.t_ms - t0) / 1000.0;
+            let t = |x: &Fig3Tick| (x.t_ms - t0) / 1000.0;
             let span = 0.0..10.0;
             let (c, _) = policy_style(r.mode);
             let rows = col.split_evenly((4, 1));
             let elbow: Vec<(f64, f64)> = recs
                 .iter()
-                .filter_map(|x| x.elbow.as_ref().and_then(|e| e.left).map(|a| (t(x), a)))
+                .filter_map(|x| x.elbow_left.map(|a| (t(x), a)))
                 .collect();
             let pred: Vec<(f64, f64)> = recs
                 .iter()
-                .filter_map(|x| {
-                    x.predictions
-                        .first()
-                        .map(|p| (t(x), p.value.clamp(0.0, 1.0)))
-                })
+                .filter_map(|x| x.prediction.map(|(v, _)| (t(x), v.clamp(0.0, 1.0))))
                 .collect();
             let theta: Vec<(f64, f64)> = recs
                 .iter()
-                .filter_map(|x| x.predictions.first().map(|p| (t(x), p.threshold)))
+                .filter_map(|x| x.prediction.map(|(_, th)| (t(x), th)))
                 .collect();
             let stim: Vec<(f64, f64)> = recs
                 .iter()
@@ -168,11 +163,11 @@ impl Figure for Fig3<'_> {
                 .collect();
             let current: Vec<(f64, f64)> = recs
                 .iter()
-                .filter_map(|x| x.sensors.battery_current_ma.map(|i| (t(x), f64::from(i))))
+                .filter_map(|x| x.current_ma.map(|i| (t(x), f64::from(i))))
                 .collect();
             let right_cmd: Vec<(f64, f64)> = recs
                 .iter()
-                .map(|x| (t(x), f64::from(x.command.right_mm_s)))
+                .map(|x| (t(x), f64::from(x.right_mm_s)))
                 .collect();
             let name = ps::policy_label(r.mode);
             if let Some(a) = rows.first() {

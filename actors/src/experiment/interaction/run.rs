@@ -14,11 +14,9 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use pavlov::analysis::interaction::curve::{CommandResult, RunTimeline};
-use pavlov::analysis::interaction::debounce::{self, COMMAND};
-use pavlov::analysis::interaction::live_physical::physical_sample;
 use pavlov::analysis::interaction::physical::{PhysicalLatency, PhysicalParams, measure_physical};
 use pavlov::analysis::interaction::{
-    CommandOutcome, CommandWindow, MatchParams, ResponseSample, ResponseTiming, measure,
+    CommandOutcome, CommandWindow, MatchParams, ResponseTiming, measure,
 };
 use pavlov::config::Config;
 use pavlov::control::Mode;
@@ -27,6 +25,7 @@ use pavlov::sim::human::{HumanParams, SimHuman};
 use serde::{Deserialize, Serialize};
 use tokio_util::sync::CancellationToken;
 
+use super::reduce::{Fig3Tick, Reduced, RunReducer};
 use crate::experiment::run_rng;
 use crate::experiment::runner::{Collect, RunError, RunRequest, run_paused};
 use crate::server::Server;
@@ -40,7 +39,7 @@ pub(crate) const AFTER_TICKS: i64 = 50;
 /// after, the battery current (mA, `None` when not reported) and the rotation odometry reported (° per tick).
 pub(crate) type AlignedWindow = Vec<(Option<f64>, f64)>;
 
-/// One run's outcome (`summary.json` holds it but its aligned windows, timeline and records, which only a
+/// One run's outcome (`summary.json` holds it but its aligned windows, timeline and what Figure 3 draws, which only a
 /// shard file keeps: [`super::sharded`]).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct InteractionRun {
@@ -71,10 +70,10 @@ pub struct InteractionRun {
     pub recording: Option<PathBuf>,
     /// Wall time, s.
     pub(crate) wall_s: f64,
-    /// Every tick when the run was asked to keep them (the runs the Figure 3 analogue draws), else empty
-    /// (not serialised).
+    /// What Figure 3 draws of every tick, when the run was asked to keep it (the first run of each
+    /// policy), else empty (not serialised).
     #[serde(skip)]
-    pub records: Vec<Arc<TickRecord>>,
+    pub figure3: Vec<Fig3Tick>,
 }
 
 /// The seeds of run `index`: (robot, operator). The operator is the pair's: runs 2k and 2k + 1 share it.
@@ -84,16 +83,17 @@ pub(crate) fn run_seeds(seed: u64, index: usize) -> (u64, u64) {
     (robot, operator)
 }
 
-/// What an interaction run keeps: every record, and the simulated operator driving the pose channel.
+/// What an interaction run keeps: its ticks reduced as they arrive ([`RunReducer`]), and the simulated
+/// operator driving the pose channel.
 struct InteractionCollector {
     human: Option<SimHuman>,
     driver: Option<tokio::task::JoinHandle<SimHuman>>,
     cancel: CancellationToken,
-    records: Vec<Arc<TickRecord>>,
+    reducer: RunReducer,
 }
 
 impl Collect for InteractionCollector {
-    type Output = (Vec<Arc<TickRecord>>, Vec<CommandWindow>);
+    type Output = (Reduced, Vec<CommandWindow>);
 
     fn start(&mut self, server: &Server) {
         if let Some(human) = self.human.take() {
@@ -107,7 +107,7 @@ impl Collect for InteractionCollector {
     }
 
     fn record(&mut self, record: Arc<TickRecord>) {
-        self.records.push(record);
+        self.reducer.push(&record);
     }
 
     async fn finish(self) -> Result<Self::Output, RunError> {
@@ -123,7 +123,7 @@ impl Collect for InteractionCollector {
             },
             None => Vec::new(),
         };
-        Ok((self.records, commands))
+        Ok((self.reducer.finish(), commands))
     }
 }
 
@@ -141,8 +141,8 @@ pub(crate) struct RunPlan {
     pub(crate) aligned_commands: usize,
     /// Record the run into this directory.
     pub(crate) record_dir: Option<PathBuf>,
-    /// Keep every tick record in the result (for the Figure 3 analogue).
-    pub(crate) keep_records: bool,
+    /// Keep what Figure 3 draws of every tick.
+    pub(crate) keep_figure3: bool,
     /// The simulated operator.
     pub(crate) human: HumanParams,
 }
@@ -156,7 +156,7 @@ pub(crate) fn run(base: &Config, plan: RunPlan) -> Result<InteractionRun, RunErr
         ticks,
         aligned_commands,
         record_dir,
-        keep_records,
+        keep_figure3,
         human,
     } = plan;
     let (robot_seed, human_seed) = run_seeds(seed, index);
@@ -173,43 +173,32 @@ pub(crate) fn run(base: &Config, plan: RunPlan) -> Result<InteractionRun, RunErr
         human: Some(SimHuman::new(human, human_seed)),
         driver: None,
         cancel: CancellationToken::new(),
-        records: Vec::with_capacity(ticks),
+        reducer: RunReducer::new(ticks, aligned_commands, keep_figure3),
     };
     let done = run_paused(request, collector)?;
-    let (records, commands) = done.output;
-    let samples: Vec<ResponseSample> = records
-        .iter()
-        .map(|r| ResponseSample {
-            t_ms: r.t_ms,
-            responding: r.gate,
-        })
-        .collect();
-    let end_ms = records.last().map_or(0.0, |r| r.t_ms);
+    let (reduced, commands) = done.output;
+    let Reduced {
+        samples,
+        physical: physical_samples,
+        aligned_onsets,
+        aligned_windows,
+        figure3,
+    } = reduced;
+    let end_ms = samples.last().map_or(0.0, |r| r.t_ms);
     let commands: Vec<CommandWindow> = commands
         .into_iter()
         .filter(|c| c.onset_ms <= end_ms)
         .collect();
     let metrics = measure(&samples, &commands, &MatchParams::default());
-    let physical_samples: Vec<_> = records.iter().map(|r| physical_sample(r)).collect();
     let physical = measure_physical(
         &physical_samples,
         &commands,
         &MatchParams::default(),
         &PhysicalParams::default(),
     );
-    let aligned_onsets: Vec<u64> = observed_onsets(&records)
-        .into_iter()
-        .rev()
-        .take(aligned_commands)
-        .rev()
-        .collect();
-    let aligned_windows = aligned_onsets
-        .iter()
-        .map(|&i| aligned_window(&records, i))
-        .collect();
     let timeline = RunTimeline {
         pavlovian: mode == Mode::Pavlovian,
-        duration_ms: records.len() as f64 * base.tick.period_ms.max(1) as f64,
+        duration_ms: samples.len() as f64 * base.tick.period_ms.max(1) as f64,
         commands: commands
             .iter()
             .zip(&metrics.outcomes)
@@ -239,66 +228,13 @@ pub(crate) fn run(base: &Config, plan: RunPlan) -> Result<InteractionRun, RunErr
         timeline,
         recording: done.recording,
         wall_s: done.wall_s,
-        records: if keep_records { records } else { Vec::new() },
+        figure3,
     })
-}
-
-fn aligned_window(records: &[Arc<TickRecord>], onset: u64) -> AlignedWindow {
-    (-BEFORE_TICKS..=AFTER_TICKS)
-        .map(|offset| {
-            let r = usize::try_from(onset as i64 + offset)
-                .ok()
-                .and_then(|k| records.get(k));
-            (
-                r.and_then(|t| t.sensors.battery_current_ma.map(f64::from)),
-                r.map_or(f64::NAN, |t| f64::from(t.sensors.angle_deg)),
-            )
-        })
-        .collect()
-}
-
-/// Ticks (indices into `records`) of the observed command onsets, debounced ([`debounce::COMMAND`]: the
-/// stimulus was off for more than a second before), where the aligned window fits.
-pub(crate) fn observed_onsets(records: &[Arc<TickRecord>]) -> Vec<u64> {
-    let period = match records {
-        [a, b, ..] => b.t_ms - a.t_ms,
-        _ => 20.0,
-    };
-    let mut commands = debounce::Debouncer::new(COMMAND, period);
-    let mut out = Vec::new();
-    for (i, r) in records.iter().enumerate() {
-        if commands.step(r.t_ms, r.stimulus).is_some() {
-            let fits = i as i64 >= BEFORE_TICKS && (i as i64 + AFTER_TICKS) < records.len() as i64;
-            if fits {
-                out.push(i as u64);
-            }
-        }
-    }
-    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn rec(seq: u64, stimulus: bool) -> Arc<TickRecord> {
-        Arc::new(TickRecord {
-            stimulus,
-            gate: stimulus,
-            ..TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Pavlovian)
-        })
-    }
-
-    #[test]
-    fn onsets_are_debounced_and_need_room_for_the_aligned_window() {
-        // Stimulus at 10 (too early for the window), 100..110, a flicker at 115 (debounced), 200..205,
-        // and 300 (too late: the run ends at 320).
-        let on = |i: u64| {
-            i == 10 || (100..110).contains(&i) || i == 115 || (200..205).contains(&i) || i == 300
-        };
-        let records: Vec<Arc<TickRecord>> = (0..320).map(|i| rec(i, on(i))).collect();
-        assert_eq!(observed_onsets(&records), vec![100, 200]);
-    }
 
     #[test]
     fn both_runs_of_a_pair_see_the_same_operator_and_pairs_differ() {

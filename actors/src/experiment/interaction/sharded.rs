@@ -3,20 +3,20 @@
 //! the unsharded study (the wall-clock fields aside: the merged `wall_s` is the shards' wall times added up).
 //!
 //! `summary.json` holds each run without what only the analysis reads (its aligned windows, its timeline and
-//! its tick records); a shard keeps those too (`ShardRun`), so the merged study computes its statistics
-//! and figures from the same numbers. Tick records are kept only by the runs that keep them in the
-//! unsharded study (runs 0 and 1, which the Figure 3 analogue draws), so other shards stay small.
+//! what Figure 3 draws of its ticks); a shard keeps those too (`ShardRun`), so the merged study computes
+//! its statistics and figures from the same numbers. Figure 3's ticks are kept only by the runs that keep
+//! them in the unsharded study (runs 0 and 1, which the Figure 3 analogue draws), so other shards stay
+//! small.
 
 use std::ops::Range;
 use std::path::PathBuf;
-use std::sync::Arc;
 
 use pavlov::analysis::interaction::curve::RunTimeline;
 use pavlov::config::Config;
 use pavlov::control::Mode;
-use pavlov::record::TickRecord;
 use serde::{Deserialize, Serialize};
 
+use super::reduce::Fig3Tick;
 use super::run::{AlignedWindow, InteractionRun, run_seeds};
 use super::{InteractionOptions, assemble, plan, report, run_runs};
 use crate::experiment::interleaved_mode;
@@ -35,8 +35,8 @@ pub(crate) struct ShardRun {
     aligned_windows: Vec<AlignedWindow>,
     /// Its timeline (the time course).
     timeline: RunTimeline,
-    /// Its tick records, when the study keeps them (runs 0 and 1, for Figure 3); else empty.
-    records: Vec<TickRecord>,
+    /// What Figure 3 draws of its ticks, when the study keeps it (runs 0 and 1); else empty.
+    figure3: Vec<Fig3Tick>,
 }
 
 impl From<InteractionRun> for ShardRun {
@@ -44,10 +44,7 @@ impl From<InteractionRun> for ShardRun {
         ShardRun {
             aligned_windows: std::mem::take(&mut run.aligned_windows),
             timeline: std::mem::take(&mut run.timeline),
-            records: std::mem::take(&mut run.records)
-                .into_iter()
-                .map(Arc::unwrap_or_clone)
-                .collect(),
+            figure3: std::mem::take(&mut run.figure3),
             run,
         }
     }
@@ -58,7 +55,7 @@ impl From<ShardRun> for InteractionRun {
         InteractionRun {
             aligned_windows: s.aligned_windows,
             timeline: s.timeline,
-            records: s.records.into_iter().map(Arc::new).collect(),
+            figure3: s.figure3,
             ..s.run
         }
     }
@@ -137,6 +134,7 @@ mod tests {
     use super::*;
     use pavlov::analysis::interaction::curve::CommandResult;
     use pavlov::analysis::interaction::{CommandOutcome, CommandWindow, ResponseTiming};
+    use pavlov::record::TickRecord;
 
     fn run() -> InteractionRun {
         InteractionRun {
@@ -171,7 +169,11 @@ mod tests {
             },
             recording: None,
             wall_s: 0.5,
-            records: vec![Arc::new(TickRecord::at_rest(7, 140.0, Mode::Pavlovian))],
+            figure3: vec![Fig3Tick::of(&TickRecord::at_rest(
+                7,
+                140.0,
+                Mode::Pavlovian,
+            ))],
         }
     }
 
@@ -187,7 +189,7 @@ mod tests {
         );
         assert_eq!(before.aligned_windows, after.aligned_windows);
         assert_eq!(before.timeline, after.timeline);
-        assert_eq!(before.records, after.records);
+        assert_eq!(before.figure3, after.figure3);
     }
 
     #[test]
@@ -220,11 +222,11 @@ mod tests {
     }
 
     #[test]
-    fn a_run_that_keeps_no_records_writes_none() {
+    fn a_run_that_keeps_no_figure3_ticks_writes_none() {
         let mut r = run();
-        r.records.clear();
+        r.figure3.clear();
         let v = serde_json::to_value(ShardRun::from(r)).unwrap();
-        assert_eq!(v["records"], serde_json::json!([]));
-        assert!(v["run"].get("records").is_none(), "not twice");
+        assert_eq!(v["figure3"], serde_json::json!([]));
+        assert!(v["run"].get("figure3").is_none(), "not twice");
     }
 }

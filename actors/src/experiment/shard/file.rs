@@ -262,7 +262,9 @@ fn check_format(path: &Path, format: &str) -> Result<(), MergeError> {
     } else {
         Err(MergeError::Parse {
             path: path.to_path_buf(),
-            reason: format!("format is {format:?}"),
+            reason: format!(
+                "format is {format:?}; this pavlov merges {SHARD_FORMAT:?} (run the shards again with it)"
+            ),
         })
     }
 }

@@ -34,8 +34,9 @@ mod error;
 #[cfg(test)]
 mod robustness;
 
-/// The format tag of a shard file.
-pub const SHARD_FORMAT: &str = "pavlov-shard/1";
+/// The format tag of a shard file. Version 2: an interaction shard keeps its runs' reduced samples and
+/// only Figure 3's fields (`figure3`), not their tick records; a version-1 shard is refused by name.
+pub const SHARD_FORMAT: &str = "pavlov-shard/2";
 
 pub use file::{
     MAX_SHARD_BYTES, ShardFile, experiment_of, experiment_of_all, load, parse, run_slice,

@@ -209,6 +209,8 @@ mod tests {
             first_predictive_stop_s: (mode == Mode::Pavlovian).then_some(4.0 + index as f64),
             policy: String::new(),
             accuracy: None,
+            coverage: None,
+            epsilon: None,
             excerpt: Vec::new(),
         }
     }

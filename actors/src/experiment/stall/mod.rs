@@ -15,6 +15,7 @@ pub mod policies;
 pub mod report;
 pub(crate) mod run;
 pub mod sharded;
+pub mod stochastic;
 pub mod variations;
 pub(crate) mod variations_forest;
 
@@ -82,6 +83,7 @@ pub fn plan(config: &Config, opts: &StallOptions) -> Vec<RunSpec> {
                 policy: mode.name().to_string(),
                 gate_prediction: None,
                 score: None,
+                epsilon: None,
             }
         })
         .collect()

@@ -1,9 +1,11 @@
-//! `pavlov experiment stall --policies reactive,pavlovian,offpolicy`: the experiment the paper's
-//! Discussion proposes — the stall study with a third policy whose gate is driven by an **off-policy**
-//! prediction of the stall under the default policy π (GTD(λ), `crate`'s `pavlov::learn::gtd`), next to
-//! reactive control and the paper's on-policy Pavlovian control.
+//! `pavlov experiment stall --policies reactive,pavlovian,offpolicy,offpolicy-stochastic`: the experiment
+//! the paper's Discussion proposes — the stall study with a policy whose gate is driven by an
+//! **off-policy** prediction of the stall under the default policy π (GTD(λ), `crate`'s
+//! `pavlov::learn::gtd`), next to reactive control and the paper's on-policy Pavlovian control; and the
+//! same with a stochastic gate that keeps taking π's action with probability ε where the prediction
+//! fires ([`super::stochastic`]; `--epsilon 0.2,0.5` runs one arm per ε).
 //!
-//! Runs are interleaved in the order given (run i uses policy i mod k) with the stall study's seed
+//! Runs are interleaved in the order given (run i uses arm i mod k, an arm being a policy with its ε) with the stall study's seed
 //! derivation ([`super::run_seed`]). Every run, whatever its policy, carries both predictions — the
 //! paper's on-policy `stall` and the off-policy [`OFFPOLICY_PREDICTION`] — and only the gate's prediction
 //! differs (`pavlovian`: `stall`, `offpolicy`: `stall_pi`; reactive ignores both), so each run also
@@ -60,6 +62,9 @@ pub enum StallPolicy {
     Pavlovian,
     /// Pavlovian control on the off-policy prediction `stall_pi`.
     Offpolicy,
+    /// The same with the stochastic gate: π's action with probability ε where `stall_pi` fires.
+    #[serde(rename = "offpolicy-stochastic")]
+    OffpolicyStochastic,
 }
 
 impl StallPolicy {
@@ -69,6 +74,7 @@ impl StallPolicy {
             StallPolicy::Reactive => "reactive",
             StallPolicy::Pavlovian => "pavlovian",
             StallPolicy::Offpolicy => "offpolicy",
+            StallPolicy::OffpolicyStochastic => "offpolicy-stochastic",
         }
     }
 
@@ -81,7 +87,7 @@ impl StallPolicy {
 
     fn gate_prediction(self) -> &'static str {
         match self {
-            StallPolicy::Offpolicy => OFFPOLICY_PREDICTION,
+            StallPolicy::Offpolicy | StallPolicy::OffpolicyStochastic => OFFPOLICY_PREDICTION,
             _ => ONPOLICY_PREDICTION,
         }
     }
@@ -91,8 +97,13 @@ impl StallPolicy {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum PoliciesError {
     /// A name that is not a policy.
-    #[error("--policies: unknown policy `{0}` (expected reactive, pavlovian or offpolicy)")]
+    #[error(
+        "--policies: unknown policy `{0}` (expected reactive, pavlovian, offpolicy or offpolicy-stochastic)"
+    )]
     Unknown(String),
+    /// A bad `--epsilon` list.
+    #[error("--epsilon: {0}")]
+    Epsilon(String),
     /// A policy named twice.
     #[error("--policies: `{0}` is named twice")]
     Twice(String),
@@ -112,6 +123,7 @@ pub fn parse_policies(list: &str) -> Result<Vec<StallPolicy>, PoliciesError> {
             "reactive" => StallPolicy::Reactive,
             "pavlovian" => StallPolicy::Pavlovian,
             "offpolicy" => StallPolicy::Offpolicy,
+            "offpolicy-stochastic" => StallPolicy::OffpolicyStochastic,
             other => return Err(PoliciesError::Unknown(other.to_string())),
         };
         if out.contains(&p) {
@@ -123,6 +135,53 @@ pub fn parse_policies(list: &str) -> Result<Vec<StallPolicy>, PoliciesError> {
         return Err(PoliciesError::TooFew(out.len()));
     }
     Ok(out)
+}
+
+/// One arm of the study: a policy, with its ε for `offpolicy-stochastic`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Arm {
+    /// The policy.
+    pub policy: StallPolicy,
+    /// The stochastic gate's ε (`offpolicy-stochastic` only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub epsilon: Option<f64>,
+}
+
+impl Arm {
+    /// The name in tables: the policy's, with `ε=…` for a stochastic gate.
+    pub fn name(&self) -> String {
+        match self.epsilon {
+            Some(e) => format!("{} ε={e}", self.policy.name()),
+            None => self.policy.name().to_string(),
+        }
+    }
+
+    /// The name in a run's folder (no spaces, ASCII).
+    fn folder(&self) -> String {
+        match self.epsilon {
+            Some(e) => format!("{}-eps{e}", self.policy.name()),
+            None => self.policy.name().to_string(),
+        }
+    }
+}
+
+/// The arms of `policies`: one per policy, and one per ε of `epsilons` for `offpolicy-stochastic`.
+pub fn arms(policies: &[StallPolicy], epsilons: &[f64]) -> Vec<Arm> {
+    let mut out = Vec::new();
+    for &policy in policies {
+        if policy == StallPolicy::OffpolicyStochastic {
+            out.extend(epsilons.iter().map(|&e| Arm {
+                policy,
+                epsilon: Some(e),
+            }));
+        } else {
+            out.push(Arm {
+                policy,
+                epsilon: None,
+            });
+        }
+    }
+    out
 }
 
 /// `base` with the off-policy prediction added (when it has none of that name), checked.
@@ -143,22 +202,19 @@ pub fn with_offpolicy_prediction(base: &Config) -> Result<Config, PoliciesError>
     Ok(config)
 }
 
-/// The interleaved run list: run i uses `policies[i mod k]` and the stall study's seed for index i.
-pub(crate) fn plan(
-    config: &Config,
-    opts: &StallOptions,
-    policies: &[StallPolicy],
-) -> Vec<(StallPolicy, RunSpec)> {
+/// The interleaved run list: run i uses `arms[i mod k]` and the stall study's seed for index i.
+pub(crate) fn plan(config: &Config, opts: &StallOptions, arms: &[Arm]) -> Vec<(Arm, RunSpec)> {
     let period_s = config.tick.period_ms.max(1) as f64 / 1000.0;
     let ticks = (opts.minutes * 60.0 / period_s).round().max(1.0) as u64;
     let window_ticks = (WINDOW_S / period_s).round().max(1.0) as u64;
-    let k = policies.len().max(1);
+    let k = arms.len().max(1);
     (0..k * opts.runs_per_policy)
         .map(|index| {
-            let policy = policies[index % k];
-            let name = format!("{index:02}-{}", policy.name());
+            let arm = arms[index % k];
+            let policy = arm.policy;
+            let name = format!("{index:02}-{}", arm.folder());
             (
-                policy,
+                arm,
                 RunSpec {
                     index,
                     mode: policy.mode(),
@@ -168,12 +224,13 @@ pub(crate) fn plan(
                     excerpt_from_tick: None,
                     excerpt_len: 0,
                     record_dir: opts.record.then(|| opts.out.join("runs").join(name)),
-                    policy: policy.name().to_string(),
+                    policy: arm.name(),
                     gate_prediction: Some(policy.gate_prediction().to_string()),
                     score: Some((
                         ONPOLICY_PREDICTION.to_string(),
                         OFFPOLICY_PREDICTION.to_string(),
                     )),
+                    epsilon: arm.epsilon,
                 },
             )
         })
@@ -244,6 +301,20 @@ pub struct AccuracyRow {
     pub off_bias: Describe,
 }
 
+/// The behaviour's coverage of π in the gate region over one arm's runs (each figure: over runs; see
+/// [`super::stochastic`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CoverageRow {
+    /// The arm.
+    pub policy: String,
+    /// Fraction of all ticks in the gate region.
+    pub region_fraction: Describe,
+    /// Fraction of the region's ticks on which π's command went out (runs with a region).
+    pub coverage: Describe,
+    /// Mean behaviour probability b(A|S) over the region's ticks (runs with a region).
+    pub mean_b: Describe,
+}
+
 /// Everything `policies.json` holds.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PoliciesStudy {
@@ -251,6 +322,12 @@ pub struct PoliciesStudy {
     pub options: StallOptions,
     /// The policies in interleaved order.
     pub policies: Vec<StallPolicy>,
+    /// The arms in interleaved order (a policy with its ε).
+    #[serde(default)]
+    pub arms: Vec<Arm>,
+    /// The behaviour's coverage of π in the gate region, per arm.
+    #[serde(default)]
+    pub coverage: Vec<CoverageRow>,
     /// The off-policy prediction as configured.
     pub offpolicy_prediction: Option<PredictionSpec>,
     /// Every run.
@@ -277,18 +354,23 @@ fn range(xs: &[f64]) -> Option<(f64, f64)> {
     })
 }
 
-/// The statistics of `runs` over `policies`.
+/// The statistics of `runs` over `arms`.
 pub(crate) fn analyse(
     runs: &[RunResult],
-    policies: &[StallPolicy],
+    arms: &[Arm],
 ) -> (Vec<MetricRow>, Vec<AccuracyRow>, Vec<(String, Describe)>) {
-    let of = |p: StallPolicy| runs.iter().filter(move |r| r.policy == p.name());
+    let names: Vec<String> = arms.iter().map(Arm::name).collect();
+    let policies = &names;
+    let of = |p: &String| {
+        let p = p.clone();
+        runs.iter().filter(move |r| r.policy == p)
+    };
     let metrics = TOTALS
         .iter()
         .map(|(key, label, unit)| {
             let values: Vec<Vec<f64>> = policies
                 .iter()
-                .map(|&p| of(p).filter_map(|r| total(r, key)).collect())
+                .map(|p| of(p).filter_map(|r| total(r, key)).collect())
                 .collect();
             let mut changes = Vec::new();
             for i in 0..policies.len() {
@@ -296,8 +378,8 @@ pub(crate) fn analyse(
                     let (a, b) = (&values[i], &values[j]);
                     let da = describe(a);
                     changes.push(PairChange {
-                        a: policies[i].name().to_string(),
-                        b: policies[j].name().to_string(),
+                        a: policies[i].clone(),
+                        b: policies[j].clone(),
                         relative_change: relative_change(da.mean, describe(b).mean),
                         relative_change_ci: ratio_of_means(b, a, RESAMPLES, 1)
                             .map(|r| (r.lo, r.hi)),
@@ -312,7 +394,7 @@ pub(crate) fn analyse(
                     .iter()
                     .zip(&values)
                     .map(|(p, xs)| PolicyMetric {
-                        policy: p.name().to_string(),
+                        policy: p.clone(),
                         describe: describe(xs),
                         range: range(xs),
                     })
@@ -323,7 +405,7 @@ pub(crate) fn analyse(
         .collect();
     let accuracy = policies
         .iter()
-        .map(|&p| {
+        .map(|p| {
             let acc: Vec<_> = of(p).filter_map(|r| r.accuracy).collect();
             let d = |f: &dyn Fn(&super::accuracy::RunAccuracy) -> f64| {
                 describe(
@@ -336,7 +418,7 @@ pub(crate) fn analyse(
             let on = |a: &super::accuracy::RunAccuracy| a.on_policy;
             let off = |a: &super::accuracy::RunAccuracy| a.off_policy;
             AccuracyRow {
-                policy: p.name().to_string(),
+                policy: p.clone(),
                 followed_fraction: d(&|a| a.followed_fraction),
                 scored_ticks: d(&|a| a.off_policy.n as f64),
                 near_ticks: d(&|a| a.off_policy.n_near as f64),
@@ -351,12 +433,45 @@ pub(crate) fn analyse(
         .collect();
     let firsts = policies
         .iter()
-        .map(|&p| {
+        .map(|p| {
             let xs: Vec<f64> = of(p).filter_map(|r| r.first_predictive_stop_s).collect();
-            (p.name().to_string(), describe(&xs))
+            (p.clone(), describe(&xs))
         })
         .collect();
     (metrics, accuracy, firsts)
+}
+
+/// The coverage of π in the gate region over each arm's runs.
+pub(crate) fn coverage(runs: &[RunResult], arms: &[Arm]) -> Vec<CoverageRow> {
+    arms.iter()
+        .map(|arm| {
+            let name = arm.name();
+            let cov: Vec<_> = runs
+                .iter()
+                .filter(|r| r.policy == name)
+                .filter_map(|r| r.coverage)
+                .collect();
+            let with_region: Vec<_> = cov.iter().filter(|c| c.region_ticks > 0).collect();
+            CoverageRow {
+                policy: name,
+                region_fraction: describe(
+                    &cov.iter().map(|c| c.region_fraction()).collect::<Vec<_>>(),
+                ),
+                coverage: describe(
+                    &with_region
+                        .iter()
+                        .filter_map(|c| c.coverage())
+                        .collect::<Vec<_>>(),
+                ),
+                mean_b: describe(
+                    &with_region
+                        .iter()
+                        .map(|c| c.region_b_sum / c.region_ticks as f64)
+                        .collect::<Vec<_>>(),
+                ),
+            }
+        })
+        .collect()
 }
 
 /// Runs the study and returns it.
@@ -364,11 +479,19 @@ pub fn run_study(
     base: &Config,
     opts: &StallOptions,
     policies: &[StallPolicy],
+    epsilons: &[f64],
     progress: bool,
 ) -> anyhow::Result<PoliciesStudy> {
     let wall = Instant::now();
     let config = with_offpolicy_prediction(base)?;
-    let planned = plan(&config, opts, policies);
+    let arms = arms(policies, epsilons);
+    // Every stochastic arm's configuration is checked before any run (the step-size bound at load).
+    for arm in &arms {
+        if let Some(eps) = arm.epsilon {
+            super::stochastic::with_stochastic_gate(&config, eps)?;
+        }
+    }
+    let planned = plan(&config, opts, &arms);
     let specs: Vec<RunSpec> = planned.iter().map(|(_, s)| s.clone()).collect();
     let bar = crate::experiment::progress_bar(specs.len(), progress);
     let on_done = |r: &RunResult| {
@@ -385,10 +508,13 @@ pub fn run_study(
         &on_done,
     )?;
     bar.finish_and_clear();
-    let (metrics, accuracy, first_predictive_stop_s) = analyse(&runs, policies);
+    let (metrics, accuracy, first_predictive_stop_s) = analyse(&runs, &arms);
+    let coverage = coverage(&runs, &arms);
     Ok(PoliciesStudy {
         options: opts.clone(),
         policies: policies.to_vec(),
+        arms,
+        coverage,
         offpolicy_prediction: config
             .predictions
             .iter()
@@ -434,7 +560,18 @@ fn mean_se(d: Describe) -> String {
 /// bootstrap interval and Welch's p) and the predictions' accuracy.
 pub fn table(study: &PoliciesStudy) -> String {
     let mut s = String::new();
-    let names: Vec<&str> = study.policies.iter().map(|p| p.name()).collect();
+    let names: Vec<String> = if study.arms.is_empty() {
+        study
+            .policies
+            .iter()
+            .map(|p| p.name().to_string())
+            .collect()
+    } else {
+        study.arms.iter().map(Arm::name).collect()
+    };
+    // More than four arms (an ε sweep): the Markdown shows the changes against Pavlovian control only;
+    // table.csv and policies.json hold every pair.
+    let shown = |c: &PairChange| names.len() <= 4 || c.a == StallPolicy::Pavlovian.name();
     let _ = writeln!(
         s,
         "{} policies × {} runs × {} min, seed {}; mean ± SE over runs; spread = SD [min – max]; \
@@ -451,12 +588,16 @@ pub fn table(study: &PoliciesStudy) -> String {
         let _ = write!(s, " {n} |");
     }
     if let Some(row) = study.metrics.first() {
-        for c in &row.changes {
+        for c in row.changes.iter().filter(|c| shown(c)) {
             let _ = write!(s, " {} vs {} |", c.b, c.a);
         }
     }
     let _ = writeln!(s);
-    let cols = names.len() + study.metrics.first().map_or(0, |r| r.changes.len());
+    let cols = names.len()
+        + study
+            .metrics
+            .first()
+            .map_or(0, |r| r.changes.iter().filter(|c| shown(c)).count());
     let _ = writeln!(s, "|---|{}", "---|".repeat(cols));
     for row in &study.metrics {
         let _ = write!(s, "| {} |", row.label);
@@ -470,7 +611,7 @@ pub fn table(study: &PoliciesStudy) -> String {
                 p.range.map_or("–".into(), |r| fmt(r.1)),
             );
         }
-        for c in &row.changes {
+        for c in row.changes.iter().filter(|c| shown(c)) {
             let ci = match c.relative_change_ci {
                 Some((lo, hi)) if lo.is_finite() && hi.is_finite() => {
                     format!("({:+.1}, {:+.1})", 100.0 * lo, 100.0 * hi)
@@ -526,6 +667,8 @@ pub fn table(study: &PoliciesStudy) -> String {
         );
     }
     let _ = writeln!(s);
+    coverage_table(&mut s, study);
+    sweep_table(&mut s, study);
     for (p, d) in &study.first_predictive_stop_s {
         if d.n > 0 {
             let _ = writeln!(
@@ -540,15 +683,147 @@ pub fn table(study: &PoliciesStudy) -> String {
     s
 }
 
+/// The behaviour's coverage of π in the gate region, per arm.
+fn coverage_table(s: &mut String, study: &PoliciesStudy) {
+    if study.coverage.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "Coverage of π in the gate region: the ticks on which a prediction's rule engaged the mixing function \
+         while the stimulus was off; coverage = the fraction of them on which π's command went out; b = the \
+         behaviour probability of the command there (mean ± SE over runs; runs without such ticks are left out \
+         of the last two columns).\n"
+    );
+    let _ = writeln!(
+        s,
+        "| policy | ticks in the gate region | coverage of π there | mean b there |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|");
+    let pc = |d: Describe| match d.n {
+        0 => "–".to_string(),
+        _ => format!("{:.1} ± {:.1} %", 100.0 * d.mean, 100.0 * d.se),
+    };
+    for c in &study.coverage {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} |",
+            c.policy,
+            pc(c.region_fraction),
+            pc(c.coverage),
+            match c.mean_b.n {
+                0 => "–".to_string(),
+                _ => format!("{:.3}", c.mean_b.mean),
+            },
+        );
+    }
+    let _ = writeln!(s);
+}
+
+/// The change of `metric` of arm `b` against arm `a`, as `+x % (lo, hi)`.
+fn change_cell(study: &PoliciesStudy, metric: &str, a: &str, b: &str) -> String {
+    study
+        .metrics
+        .iter()
+        .find(|r| r.metric == metric)
+        .and_then(|r| r.changes.iter().find(|c| c.a == a && c.b == b))
+        .map_or("–".into(), |c| match c.relative_change_ci {
+            Some((lo, hi)) if lo.is_finite() && hi.is_finite() => format!(
+                "{} ({:+.1}, {:+.1})",
+                pct(c.relative_change),
+                100.0 * lo,
+                100.0 * hi
+            ),
+            _ => pct(c.relative_change),
+        })
+}
+
+/// The ε sweep, when the study has more than one stochastic arm: the main metrics of each against
+/// Pavlovian control, with its coverage.
+fn sweep_table(s: &mut String, study: &PoliciesStudy) {
+    let stochastic: Vec<String> = study
+        .arms
+        .iter()
+        .filter(|a| a.epsilon.is_some())
+        .map(Arm::name)
+        .collect();
+    let base = StallPolicy::Pavlovian.name();
+    if stochastic.len() < 2
+        || !study
+            .arms
+            .iter()
+            .any(|a| a.policy == StallPolicy::Pavlovian)
+    {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "The ε sweep against Pavlovian control (change = mean(arm) / mean(pavlovian) − 1 with its 95 % \
+         bootstrap interval):\n"
+    );
+    let _ = writeln!(
+        s,
+        "| arm | over-current observations | vs pavlovian | stall events vs pavlovian | distance (m) | \
+         efficiency (m/kJ) | vs pavlovian | coverage of π in the gate region |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+    let mean = |metric: &str, arm: &str| {
+        study
+            .metrics
+            .iter()
+            .find(|r| r.metric == metric)
+            .and_then(|r| r.policies.iter().find(|p| p.policy == arm))
+            .map_or("–".into(), |p| mean_se(p.describe))
+    };
+    let mut rows = vec![base.to_string()];
+    if study
+        .arms
+        .iter()
+        .any(|a| a.policy == StallPolicy::Offpolicy)
+    {
+        rows.push(StallPolicy::Offpolicy.name().to_string());
+    }
+    rows.extend(stochastic);
+    for arm in &rows {
+        let cov = study
+            .coverage
+            .iter()
+            .find(|c| &c.policy == arm)
+            .map_or("–".into(), |c| match c.coverage.n {
+                0 => "–".to_string(),
+                _ => format!("{:.1} %", 100.0 * c.coverage.mean),
+            });
+        let vs = |metric: &str| {
+            if arm == base {
+                "–".to_string()
+            } else {
+                change_cell(study, metric, base, arm)
+            }
+        };
+        let _ = writeln!(
+            s,
+            "| {arm} | {} | {} | {} | {} | {} | {} | {cov} |",
+            mean("overcurrent_observations", arm),
+            vs("overcurrent_observations"),
+            vs("stall_events"),
+            mean("distance_m", arm),
+            mean("efficiency_m_per_kj", arm),
+            vs("efficiency_m_per_kj"),
+        );
+    }
+    let _ = writeln!(s);
+}
+
 /// Runs the study, writes `policies.{json,md}`, `table.{md,csv}` and `runs.csv` into `opts.out`, and returns the
 /// tables.
 pub fn run_and_report(
     base: &Config,
     opts: &StallOptions,
     policies: &[StallPolicy],
+    epsilons: &[f64],
     progress: bool,
 ) -> anyhow::Result<String> {
-    let study = run_study(base, opts, policies, progress)?;
+    let study = run_study(base, opts, policies, epsilons, progress)?;
     std::fs::create_dir_all(&opts.out)?;
     std::fs::write(
         opts.out.join("policies.json"),
@@ -581,7 +856,11 @@ mod tests {
         );
         assert_eq!(
             parse_policies("reactive, greedy").unwrap_err().to_string(),
-            "--policies: unknown policy `greedy` (expected reactive, pavlovian or offpolicy)"
+            "--policies: unknown policy `greedy` (expected reactive, pavlovian, offpolicy or offpolicy-stochastic)"
+        );
+        assert_eq!(
+            parse_policies("pavlovian,offpolicy-stochastic").unwrap(),
+            vec![StallPolicy::Pavlovian, StallPolicy::OffpolicyStochastic]
         );
         assert_eq!(
             parse_policies("offpolicy,offpolicy"),
@@ -605,7 +884,7 @@ mod tests {
         let p = plan(
             &config,
             &opts,
-            &[StallPolicy::Pavlovian, StallPolicy::Offpolicy],
+            &arms(&[StallPolicy::Pavlovian, StallPolicy::Offpolicy], &[]),
         );
         let off = super::super::run::config_for(&config, &p[1].1);
         let table = off.rule_table();
@@ -645,8 +924,8 @@ mod tests {
             StallPolicy::Pavlovian,
             StallPolicy::Offpolicy,
         ];
-        let p = plan(&config, &opts, &all);
-        let names: Vec<&str> = p.iter().map(|(p, _)| p.name()).collect();
+        let p = plan(&config, &opts, &arms(&all, &[]));
+        let names: Vec<&str> = p.iter().map(|(p, _)| p.policy.name()).collect();
         assert_eq!(
             names,
             [
@@ -666,5 +945,56 @@ mod tests {
         );
         // The stall study's seed derivation.
         assert_eq!(p[4].1.seed, run_seed(1, 4));
+    }
+
+    #[test]
+    fn an_epsilon_sweep_gives_one_stochastic_arm_per_epsilon() {
+        let all = [
+            StallPolicy::Reactive,
+            StallPolicy::OffpolicyStochastic,
+            StallPolicy::Pavlovian,
+        ];
+        let a = arms(&all, &[0.2, 0.5]);
+        let names: Vec<String> = a.iter().map(Arm::name).collect();
+        assert_eq!(
+            names,
+            [
+                "reactive",
+                "offpolicy-stochastic ε=0.2",
+                "offpolicy-stochastic ε=0.5",
+                "pavlovian"
+            ]
+        );
+        let config = with_offpolicy_prediction(
+            &Config::from_toml(include_str!("../../../../config/stall.toml")).unwrap(),
+        )
+        .unwrap();
+        let opts = StallOptions {
+            runs_per_policy: 2,
+            minutes: 0.1,
+            seed: 1,
+            record: true,
+            threads: 1,
+            out: "x".into(),
+        };
+        let p = plan(&config, &opts, &a);
+        assert_eq!(p.len(), 8);
+        assert_eq!(
+            (p[1].1.epsilon, p[2].1.epsilon, p[3].1.epsilon),
+            (Some(0.2), Some(0.5), None)
+        );
+        assert_eq!(p[5].1.policy, "offpolicy-stochastic ε=0.2");
+        assert_eq!(p[2].1.gate_prediction.as_deref(), Some("stall_pi"));
+        assert_eq!(
+            p[1].1.record_dir.as_deref(),
+            Some(std::path::Path::new(
+                "x/runs/01-offpolicy-stochastic-eps0.2"
+            ))
+        );
+        // The run's configuration has the gate and the bound's α; it loads.
+        let c = super::super::run::config_for(&config, &p[1].1);
+        assert_eq!(c.control.epsilon, Some(0.2));
+        assert_eq!(c.predictions[1].alpha, 0.2 * config.predictions[1].alpha);
+        c.validate().unwrap();
     }
 }

@@ -38,6 +38,8 @@ pub struct RunSpec {
     pub(crate) gate_prediction: Option<String>,
     /// Score the on-policy and off-policy predictions (named) against π's return.
     pub(crate) score: Option<(String, String)>,
+    /// The stochastic gate's ε (`offpolicy-stochastic`), when the run has one.
+    pub(crate) epsilon: Option<f64>,
 }
 
 /// Counts over one window of a run.
@@ -84,6 +86,12 @@ pub struct RunResult {
     /// The predictions' accuracy against π's return, when scored.
     #[serde(default)]
     pub accuracy: Option<super::accuracy::RunAccuracy>,
+    /// The behaviour's coverage of π in the gate region (policy studies).
+    #[serde(default)]
+    pub coverage: Option<super::stochastic::Coverage>,
+    /// The stochastic gate's ε, when the run had one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub epsilon: Option<f64>,
     /// The Figure 1 excerpt (not serialised into the study).
     #[serde(skip)]
     pub(crate) excerpt: Vec<TickRecord>,
@@ -97,6 +105,7 @@ struct StallCollector<'a> {
     excerpt: Vec<TickRecord>,
     first_predictive_stop_s: Option<f64>,
     returns: Option<super::accuracy::PiReturns>,
+    coverage: Option<super::stochastic::Coverage>,
 }
 
 struct Kept {
@@ -105,6 +114,7 @@ struct Kept {
     excerpt: Vec<TickRecord>,
     first_predictive_stop_s: Option<f64>,
     accuracy: Option<super::accuracy::RunAccuracy>,
+    coverage: Option<super::stochastic::Coverage>,
 }
 
 impl Collect for StallCollector<'_> {
@@ -116,6 +126,9 @@ impl Collect for StallCollector<'_> {
         }
         if let Some(r) = &mut self.returns {
             r.observe(&record);
+        }
+        if let Some(c) = &mut self.coverage {
+            c.observe(&record);
         }
         let before = self.metrics.totals();
         self.metrics.observe(&record);
@@ -149,6 +162,7 @@ impl Collect for StallCollector<'_> {
                 .returns
                 .as_ref()
                 .map(super::accuracy::PiReturns::finish),
+            coverage: self.coverage,
         })
     }
 }
@@ -162,6 +176,9 @@ pub(crate) fn config_for(base: &Config, spec: &RunSpec) -> Config {
     if let Some(g) = &spec.gate_prediction {
         config.control.gate_prediction = g.clone();
         config.rules.clear();
+    }
+    if let Some(eps) = spec.epsilon {
+        super::stochastic::apply_stochastic_gate(&mut config, eps);
     }
     config
 }
@@ -191,6 +208,10 @@ pub(crate) fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> 
             .score
             .as_ref()
             .map(|(on, off)| super::accuracy::PiReturns::new(on, off, continuation)),
+        coverage: spec
+            .score
+            .is_some()
+            .then(super::stochastic::Coverage::default),
     };
     let done = run_paused(request, collector)?;
     let kept = done.output;
@@ -208,6 +229,8 @@ pub(crate) fn run(base: &Config, spec: &RunSpec) -> Result<RunResult, RunError> 
         first_predictive_stop_s: kept.first_predictive_stop_s,
         policy: spec.policy.clone(),
         accuracy: kept.accuracy,
+        coverage: kept.coverage,
+        epsilon: spec.epsilon,
         excerpt: kept.excerpt,
     })
 }

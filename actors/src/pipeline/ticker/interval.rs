@@ -23,9 +23,12 @@ pub(crate) async fn run(
     let mut interval = tokio::time::interval_at(start, period);
     interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
     let mut next_seq = 0u64;
+    // One wait for the cancellation, polled again on every pass (not a new one per pass).
+    let cancelled = cancel.cancelled();
+    tokio::pin!(cancelled);
     loop {
         let deadline = tokio::select! {
-            _ = cancel.cancelled() => break,
+            _ = &mut cancelled => break,
             d = interval.tick() => d,
         };
         let fired = Instant::now();

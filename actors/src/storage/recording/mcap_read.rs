@@ -196,6 +196,7 @@ mod tests {
                 values: Some(values),
                 forced_stimulus: false,
                 previous_followed_default: false,
+                previous_behaviour_prob: 1.0,
             }),
             ..TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Pavlovian)
         }

@@ -18,7 +18,7 @@ use pavlov::event::Event;
 use pavlov::record::TickRecord;
 
 use super::schema::{self, CONFIG, EVENTS, LEARNER, TICKS};
-use super::tick_encode::TickEncoder;
+use super::tick_pb::TickEncoder;
 use super::{Recording, RecordingHeader, StartState, Step, in_order};
 
 /// The uncompressed size at which a chunk is finished (about 1 700 ticks). Measured on the stall study:
@@ -126,7 +126,7 @@ impl<W: Write + Seek> McapSink<W> {
         let tick_schema = out.add_schema(
             schema::TICK_SCHEMA_NAME,
             "protobuf",
-            schema::TICK_DESCRIPTOR_SET,
+            schema::TICK_DESCRIPTOR_SET.as_slice(),
         )?;
         let event_schema = out.add_schema(
             "pavlov.Event",

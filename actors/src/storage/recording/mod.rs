@@ -33,7 +33,7 @@ mod mcap_read;
 mod mcap_scan;
 pub(crate) mod mcap_write;
 pub mod schema;
-mod tick_encode;
+mod tick_descriptor;
 pub(crate) mod tick_pb;
 
 /// What the recording benchmark (`cargo bench -p pavlov-actors --bench recording`) measures: a tick's
@@ -41,7 +41,7 @@ pub(crate) mod tick_pb;
 #[doc(hidden)]
 pub mod bench_support {
     pub use super::mcap_write::McapSink;
-    pub use super::tick_encode::TickEncoder;
+    pub use super::tick_pb::TickEncoder;
 }
 
 pub use bounded_file::MAX_FILE;

@@ -2,9 +2,8 @@
 //! metadata record. The writer (`super::mcap_write`) and the reader (`super::mcap_read`) both take
 //! their names from here, and so does the channel table in `docs/src/recordings.md`.
 //!
-//! - `ticks`: one `pavlov.Tick` per tick, protobuf; the schema is the `FileDescriptorSet` compiled at
-//!   build time from `actors/proto/pavlov/tick.proto`, the same file `super::tick_pb`'s structs are
-//!   generated from ([`TICK_DESCRIPTOR_SET`]).
+//! - `ticks`: one `pavlov.Tick` per tick, protobuf; the schema is the `FileDescriptorSet` derived from
+//!   the tick record's wire declaration ([`TICK_DESCRIPTOR_SET`], built in `super::tick_descriptor`).
 //! - `events`, `config`, `learner`: JSON with a JSON Schema.
 //! - Metadata `pavlov.recording`: format, program, label, UTC start, seed, where the run stood.
 
@@ -46,10 +45,8 @@ pub(crate) const CONFIG_SCHEMA: &str = r#"{"title":"pavlov.Config","description"
 /// The JSON Schema of a `learner` message.
 pub(crate) const LEARNER_SCHEMA: &str = r#"{"title":"pavlov.StartState","description":"Where the run stood when the recording began: the ticks recorded are those after `after`, the events those with id >= `events_before`; `learner` is the learner's complete state then (weights, traces, parameters in force, previous step, stall level).","type":"object","properties":{"after":{"type":["integer","null"]},"events_before":{"type":"integer"},"learner":{"type":"object","properties":{"predictions":{"type":"object","properties":{"predictions":{"type":"array","items":{"type":"object","properties":{"name":{"type":"string"},"alpha":{"type":"number"},"lambda":{"type":"number"},"threshold":{},"weights":{"type":"array","items":{"type":"number"}},"traces":{"type":"array","items":{"type":"number"}},"previous":{}}}}}},"stall_level":{"type":"integer"}}}},"required":["after","events_before","learner"]}"#;
 
-/// The `ticks` channel's schema: the serialised `FileDescriptorSet` of `pavlov/tick.proto`, compiled from
-/// `actors/proto/pavlov/tick.proto` by `actors/build.rs` (without its comments).
-pub const TICK_DESCRIPTOR_SET: &[u8] =
-    include_bytes!(concat!(env!("OUT_DIR"), "/tick_descriptor_set.bin"));
+/// The `ticks` channel's schema: the serialised `FileDescriptorSet` of `pavlov/tick.proto`.
+pub(crate) use super::tick_descriptor::TICK_DESCRIPTOR_SET;
 
 #[cfg(test)]
 mod tests {
@@ -90,7 +87,7 @@ mod tests {
 
     #[test]
     fn the_tick_descriptor_reads_back_with_optional_fields_in_synthetic_oneofs() {
-        let set = FileDescriptorSet::decode(TICK_DESCRIPTOR_SET).unwrap();
+        let set = FileDescriptorSet::decode(TICK_DESCRIPTOR_SET.as_slice()).unwrap();
         let file = &set.file[0];
         assert_eq!(file.package(), "pavlov");
         let tick = &file.message_type[0];
@@ -148,12 +145,12 @@ mod tests {
 
     #[test]
     fn the_compiled_schema_declares_every_field_of_the_one_recordings_were_written_with() {
-        // The hand-built descriptor every `pavlov-recording/3` file carried before tick.proto (see
+        // The hand-built descriptor every `pavlov-recording/3` file carried before the derived one (see
         // tests/data/README.md): each of its messages, fields and enum values is in the compiled one with
         // the same number, label, type, type name and presence, so those recordings read as they did.
         let old = include_bytes!("../../../../tests/data/tick_descriptor_recording3.bin");
         let old = FileDescriptorSet::decode(old.as_slice()).unwrap();
-        let new = FileDescriptorSet::decode(TICK_DESCRIPTOR_SET).unwrap();
+        let new = FileDescriptorSet::decode(TICK_DESCRIPTOR_SET.as_slice()).unwrap();
         let (old, new) = (&old.file[0], &new.file[0]);
         assert_eq!(
             (old.name(), old.package(), old.syntax()),
