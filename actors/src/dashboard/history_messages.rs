@@ -24,8 +24,10 @@ use super::history::{
 /// What a watcher sees of a file path.
 pub(crate) use pavlov::config::REDACTED;
 
-/// The largest `history` message, bytes (smaller when `max_message_bytes` is).
-pub(crate) const HISTORY_MESSAGE_BYTES: usize = 32 * 1024;
+/// The largest `history` message, bytes (smaller when `max_message_bytes` is). Small, because the
+/// websocket library keeps the memory of the largest message a connection sent for as long as it is
+/// open (`super::socket_buffers`): 8 KiB of it a client rather than 32.
+pub(crate) const HISTORY_MESSAGE_BYTES: usize = 8 * 1024;
 
 /// The entries of a history row, in order (`hello` and every `history` message name them).
 pub(crate) const HISTORY_FIELDS: [&str; 17] = [

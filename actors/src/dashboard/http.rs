@@ -198,6 +198,8 @@ async fn ws_handler(
     ws.protocols([SUBPROTOCOL])
         .max_message_size(state.max_message_bytes)
         .max_frame_size(state.max_message_bytes)
+        .read_buffer_size(super::socket_buffers::READ_BUFFER_BYTES)
+        .write_buffer_size(super::socket_buffers::WRITE_BUFFER_BYTES)
         .on_upgrade(move |socket| async move {
             let _seat = seat;
             session.run(socket).await;

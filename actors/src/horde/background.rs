@@ -18,12 +18,34 @@ pub(crate) fn give_way_to_the_tick() {
     }
 }
 
+/// Puts the calling thread back under the normal policy (when the Horde finishes: its last checkpoint
+/// no longer competes with a tick). Lowering a thread's policy is always allowed; raising it back from
+/// `SCHED_IDLE` may need privileges an unprivileged process lacks (`RLIMIT_NICE`): a refusal is logged
+/// and the thread finishes under `SCHED_IDLE`.
+pub(crate) fn back_to_normal_policy() {
+    if let Err(e) = set_policy(POLICY_NORMAL) {
+        tracing::debug!("the Horde's thread stays under SCHED_IDLE to finish ({e})");
+    }
+}
+
 #[cfg(target_os = "linux")]
+const POLICY_NORMAL: i32 = libc::SCHED_OTHER;
+#[cfg(not(target_os = "linux"))]
+const POLICY_NORMAL: i32 = 0;
+
 fn set_idle_policy() -> std::io::Result<()> {
+    #[cfg(target_os = "linux")]
+    return set_policy(libc::SCHED_IDLE);
+    #[cfg(not(target_os = "linux"))]
+    Err(std::io::Error::other("SCHED_IDLE is Linux's"))
+}
+
+#[cfg(target_os = "linux")]
+fn set_policy(policy: i32) -> std::io::Result<()> {
     let param = libc::sched_param { sched_priority: 0 };
     // SAFETY: `sched_setscheduler` reads `param` (a valid, initialised struct that outlives the call);
     // pid 0 names the calling thread.
-    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) };
+    let rc = unsafe { libc::sched_setscheduler(0, policy, &param) };
     if rc == 0 {
         Ok(())
     } else {
@@ -32,8 +54,8 @@ fn set_idle_policy() -> std::io::Result<()> {
 }
 
 #[cfg(not(target_os = "linux"))]
-fn set_idle_policy() -> std::io::Result<()> {
-    Err(std::io::Error::other("SCHED_IDLE is Linux's"))
+fn set_policy(_policy: i32) -> std::io::Result<()> {
+    Err(std::io::Error::other("scheduling policies are Linux's"))
 }
 
 /// The calling thread's scheduling policy (`SCHED_OTHER` = 0, `SCHED_IDLE` = 5).
@@ -57,6 +79,18 @@ mod tests {
         .join()
         .expect("the thread runs");
         assert_eq!(inside, libc::SCHED_IDLE);
+        let back = std::thread::spawn(|| {
+            give_way_to_the_tick();
+            back_to_normal_policy();
+            current_policy()
+        })
+        .join()
+        .expect("the thread runs");
+        // Root (or a raised RLIMIT_NICE) may return to SCHED_OTHER; anyone else stays idle.
+        assert!(
+            back == libc::SCHED_OTHER || back == libc::SCHED_IDLE,
+            "{back}"
+        );
         assert_eq!(before, libc::SCHED_OTHER);
         assert_eq!(
             current_policy(),

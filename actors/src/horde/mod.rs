@@ -11,9 +11,11 @@
 //! time, [`pavlov::learn::group`]) and written on another thread ([`crate::storage::horde_file`]), so
 //! a checkpoint of 10⁸ weights skips no tick either.
 //!
-//! - `worker`: the thread's loop; [`status`]: what it reports.
+//! - `worker`: the thread's loop; [`status`]: what it reports; `cpu_time`: the thread's CPU time, which
+//!   its step is measured in beside the wall time.
 
 mod background;
+mod cpu_time;
 pub mod status;
 mod worker;
 
@@ -188,6 +190,7 @@ impl HordeHandle {
             offers: offers.clone(),
             status: status_tx,
             values: values_tx,
+            spare_values: Vec::new(),
             period,
             tick_offset,
             resumed_tick,
@@ -238,7 +241,7 @@ impl HordeHandle {
         fill(&mut tick.extra, signals.extra);
         fill(&mut tick.stimuli, signals.stimuli);
         match self.ticks.try_send(tick) {
-            Ok(()) => {}
+            Ok(()) => self.wake(),
             Err(TrySendError::Full(tick)) => {
                 self.spare.push(tick);
                 self.offers.skipped_busy.fetch_add(1, Ordering::Relaxed);
@@ -258,6 +261,15 @@ impl HordeHandle {
     fn command(&self, command: HordeCommand) {
         if self.commands.try_send(command).is_err() {
             tracing::warn!("the Horde's command queue is full; a command was dropped");
+        }
+        self.wake();
+    }
+
+    /// Unparks the Horde's thread (it parks between ticks rather than block in a channel: see
+    /// `Worker::next_tick`); takes no lock.
+    fn wake(&self) {
+        if let Some(thread) = &self.thread {
+            thread.thread().unpark();
         }
     }
 
@@ -308,6 +320,7 @@ impl HordeHandle {
             checkpoint: target,
             done: done_tx,
         });
+        self.wake();
         let _ = done_rx.recv();
         if let Some(t) = self.thread.take() {
             let _ = t.join();

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, TryRecvError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -42,6 +42,8 @@ pub(crate) struct Worker<W> {
     pub(crate) offers: Arc<OfferCounters>,
     pub(crate) status: watch::Sender<HordeStatus>,
     pub(crate) values: watch::Sender<Arc<HordeValues>>,
+    /// The memory of the next values published.
+    pub(crate) spare_values: Vec<f32>,
     /// The tick period: a step and the copying after it stay within half of it.
     pub(crate) period: Duration,
     /// Lifelong tick of this run's tick 0 (checkpoints are named by lifelong ticks).
@@ -58,6 +60,8 @@ type Writer<W> = JoinHandle<(Result<PathBuf, (String, String)>, HordeSnapshot<W>
 struct Progress<W> {
     last_seq: Option<u64>,
     steps: LatencyHistogram,
+    /// The steps' CPU time (the thread's).
+    steps_cpu: LatencyHistogram,
     learned: u64,
     breaks: u64,
     /// The checkpoint being copied: where it goes, and the tick it is of.
@@ -76,6 +80,7 @@ impl<W: Weight> Worker<W> {
         let mut p = Progress {
             last_seq: None,
             steps: LatencyHistogram::new(),
+            steps_cpu: LatencyHistogram::new(),
             learned: 0,
             breaks: 0,
             copying: None,
@@ -102,7 +107,7 @@ impl<W: Weight> Worker<W> {
             if finish.is_some() {
                 break;
             }
-            match self.ticks.recv_timeout(Duration::from_millis(100)) {
+            match self.next_tick(Duration::from_millis(100)) {
                 Ok(tick) => {
                     let started = Instant::now();
                     self.learn(&mut p, &tick);
@@ -123,7 +128,13 @@ impl<W: Weight> Worker<W> {
                 Err(RecvTimeoutError::Disconnected) => break,
             }
         }
-        // Shutting down: the last checkpoint is completed at once (nothing is learned any more).
+        // Shutting down: the last checkpoint is completed at once (nothing is learned any more), at the
+        // normal policy: control has stopped, and under `SCHED_IDLE` on a busy machine the copy and the
+        // write of hundreds of megabytes would wait minutes for a core.
+        if self.idle {
+            super::background::back_to_normal_policy();
+            self.idle = false;
+        }
         let (target, done) = finish.unzip();
         if let Some(target) = target.flatten() {
             if p.copying.is_none() {
@@ -140,12 +151,35 @@ impl<W: Weight> Worker<W> {
         }
     }
 
+    /// The next tick learning hands over, waiting at most `wait`. The thread parks rather than block
+    /// in the channel: a receiver blocked in a channel registers under the channel's lock, and a thread
+    /// under `SCHED_IDLE` that is preempted while it holds that lock (which a busy machine does at any
+    /// instruction) would hold up learning's next offer until the scheduler gets round to it again.
+    /// Learning unparks it after each offer ([`super::HordeHandle::offer`]); parking and unparking
+    /// take no lock, and an unpark before the park is not lost.
+    fn next_tick(&self, wait: Duration) -> Result<HordeTick, RecvTimeoutError> {
+        let deadline = Instant::now() + wait;
+        loop {
+            match self.ticks.try_recv() {
+                Ok(tick) => return Ok(tick),
+                Err(TryRecvError::Disconnected) => return Err(RecvTimeoutError::Disconnected),
+                Err(TryRecvError::Empty) => {}
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(RecvTimeoutError::Timeout);
+            }
+            std::thread::park_timeout(deadline - now);
+        }
+    }
+
     fn learn(&mut self, p: &mut Progress<W>, tick: &HordeTick) {
         if p.last_seq.is_some_and(|s| tick.seq != s + 1) {
             self.horde.break_chain();
             p.breaks += 1;
         }
         let started = Instant::now();
+        let cpu_started = super::cpu_time::thread_cpu_time();
         self.horde.step(&TickSignals {
             obs: &tick.obs,
             raw: &tick.raw,
@@ -153,6 +187,9 @@ impl<W: Weight> Worker<W> {
             stimuli: &tick.stimuli,
         });
         p.steps.record(started.elapsed());
+        if let (Some(a), Some(b)) = (cpu_started, super::cpu_time::thread_cpu_time()) {
+            p.steps_cpu.record(b.saturating_sub(a));
+        }
         p.last_seq = Some(tick.seq);
         p.learned += 1;
     }
@@ -231,10 +268,17 @@ impl<W: Weight> Worker<W> {
         }
     }
 
-    fn publish_values(&self, seq: u64) {
-        let mut values = Vec::new();
+    /// Publishes every value, in the memory of the publication before when no one holds that any more
+    /// (so the thread allocates nothing per tick but the small `Arc`).
+    fn publish_values(&mut self, seq: u64) {
+        let mut values = std::mem::take(&mut self.spare_values);
         self.horde.values_into(&mut values);
-        let _ = self.values.send(Arc::new(HordeValues { seq, values }));
+        let old = self
+            .values
+            .send_replace(Arc::new(HordeValues { seq, values }));
+        if let Ok(old) = Arc::try_unwrap(old) {
+            self.spare_values = old.values;
+        }
     }
 
     fn publish_status(&self, p: &Progress<W>) {
@@ -248,6 +292,7 @@ impl<W: Weight> Worker<W> {
             skipped_busy: self.offers.skipped(),
             chain_breaks: p.breaks,
             step: p.steps.quantiles(),
+            step_cpu: p.steps_cpu.quantiles(),
             stopped: self.horde.stopped(),
             snapshot_rows_left: self.horde.snapshot_rows_left(),
             checkpoints_written: p.written,
@@ -329,6 +374,7 @@ mod tests {
             offers: Arc::new(OfferCounters::default()),
             status: status_tx,
             values: values_tx,
+            spare_values: Vec::new(),
             period,
             tick_offset,
             resumed_tick,
@@ -396,6 +442,8 @@ mod tests {
                     stimuli: vec![false],
                 })
                 .unwrap();
+            // As learning does after an offer: the thread parks between ticks.
+            thread.thread().unpark();
         }
         drop(tick_tx);
         thread.join().unwrap();

@@ -25,6 +25,10 @@ pub struct HordeStatus {
     pub chain_breaks: u64,
     /// Time of one Horde step (every prediction, then every update).
     pub step: LatencyQuantiles,
+    /// The CPU time of one Horde step (the thread's own, without the time it waited for a core); not
+    /// on the websocket or in `/metrics`: the bench prints it beside the wall time.
+    #[serde(skip)]
+    pub step_cpu: LatencyQuantiles,
     /// Predictions that stopped learning because a step was not finite.
     pub stopped: u64,
     /// Rows of a checkpoint still being copied (0 when none is).

@@ -20,6 +20,8 @@
 
 mod copy;
 mod epochs;
+mod fused;
+mod huge;
 mod rows;
 mod state;
 pub mod weight;
@@ -218,35 +220,63 @@ impl<W: Weight> TraceGroup<W> {
             });
         }
         deltas.fill(f64::NAN);
-        let mut stopped = 0;
         if self.chain.has_prev {
-            let sigma = self.sigma;
-            let mut grad = 1.0;
-            for i in 0..cols {
-                let step = &mut self.chain.step_prev[i];
-                let y_prev = self.chain.y_prev[i] + *step * self.chain.z;
-                *step = 0.0;
-                if self.diverged[i] {
-                    continue;
-                }
-                if sigma == Sigma::Logistic && !self.unit_gradient {
-                    grad = sigma.derivative(y_prev);
-                }
-                let r = cumulants[i];
-                if !r.is_finite() {
-                    continue;
-                }
-                let delta = r + gamma_t * sigma.value(self.chain.y_now[i]) - sigma.value(y_prev);
-                if !delta.is_finite() || !gamma_t.is_finite() {
-                    self.diverged[i] = true;
-                    stopped += 1;
-                    continue;
-                }
-                deltas[i] = delta;
-                *step = self.columns[i].alpha * delta;
-            }
+            let (stopped, grad) = self.deltas(gamma_t, cumulants, deltas);
             self.rows.decay(self.chain.gamma_prev * self.lambda);
             let read_again = self.rows.touch(&self.chain.x_prev, grad);
+            Ok(self.finish_step(gamma_t, deltas, stopped, grad, read_again))
+        } else {
+            self.chain.step_prev.fill(0.0);
+            self.chain.z = 0.0;
+            Ok(self.finish_step(gamma_t, deltas, 0, 1.0, 0))
+        }
+    }
+
+    /// The δ of every prediction for the transition into this tick (`deltas`, NaN where none is
+    /// learned) and its step `αδ` (`step_prev`, applied by [`TraceGroup::finish_step`]); returns how
+    /// many predictions stopped, and the trace's gradient factor (σ′ for a logistic group, else 1).
+    fn deltas(&mut self, gamma_t: f64, cumulants: &[f64], deltas: &mut [f64]) -> (usize, f64) {
+        let sigma = self.sigma;
+        let mut grad = 1.0;
+        let mut stopped = 0;
+        for i in 0..self.columns.len() {
+            let step = &mut self.chain.step_prev[i];
+            let y_prev = self.chain.y_prev[i] + *step * self.chain.z;
+            *step = 0.0;
+            if self.diverged[i] {
+                continue;
+            }
+            if sigma == Sigma::Logistic && !self.unit_gradient {
+                grad = sigma.derivative(y_prev);
+            }
+            let r = cumulants[i];
+            if !r.is_finite() {
+                continue;
+            }
+            let delta = r + gamma_t * sigma.value(self.chain.y_now[i]) - sigma.value(y_prev);
+            if !delta.is_finite() || !gamma_t.is_finite() {
+                self.diverged[i] = true;
+                stopped += 1;
+                continue;
+            }
+            deltas[i] = delta;
+            *step = self.columns[i].alpha * delta;
+        }
+        (stopped, grad)
+    }
+
+    /// The end of a tick's update, once the trace is decayed and touched: the steps into `A` (refused
+    /// ones stop their prediction), `eᵀx_t` for the next tick, and the chain moved on. Returns the
+    /// predictions stopped in all (`stopped` before the steps).
+    fn finish_step(
+        &mut self,
+        gamma_t: f64,
+        deltas: &mut [f64],
+        mut stopped: usize,
+        grad: f64,
+        read_again: usize,
+    ) -> usize {
+        if self.chain.has_prev {
             for (i, delta) in deltas.iter_mut().enumerate() {
                 let step = self.chain.step_prev[i];
                 if step != 0.0 && !self.rows.step(i, step) {
@@ -261,9 +291,6 @@ impl<W: Weight> TraceGroup<W> {
             let carry = self.rows.carry_since(self.chain.epoch_now);
             self.chain.z =
                 self.chain.coef_sum_now * carry * self.rows.p() + grad * read_again as f64;
-        } else {
-            self.chain.step_prev.fill(0.0);
-            self.chain.z = 0.0;
         }
         let chain = &mut self.chain;
         std::mem::swap(&mut chain.x_prev, &mut chain.x_now);
@@ -271,7 +298,7 @@ impl<W: Weight> TraceGroup<W> {
         chain.gamma_prev = gamma_t;
         chain.has_prev = true;
         chain.fresh = false;
-        Ok(stopped)
+        stopped
     }
 
     /// Forgets a `predict` that has not been learned from.

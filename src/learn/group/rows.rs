@@ -35,7 +35,7 @@ impl<W: Weight> DeferredRows<W> {
     pub fn new(features: usize, initial: &[f64]) -> Self {
         let cols = initial.len();
         let row: Vec<W> = initial.iter().map(|&w| W::from_f64(w)).collect();
-        let mut w0 = Vec::with_capacity(features * cols);
+        let mut w0 = super::huge::weight_vec(features * cols);
         for _ in 0..features {
             w0.extend_from_slice(&row);
         }
@@ -92,7 +92,7 @@ impl<W: Weight> DeferredRows<W> {
     }
 
     #[inline]
-    fn preserve(&mut self, f: usize) {
+    pub(super) fn preserve(&mut self, f: usize) {
         if let Some(c) = self.copy.as_mut() {
             c.preserve(f, &self.w0);
         }

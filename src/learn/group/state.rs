@@ -214,7 +214,11 @@ impl<W: Weight> TraceGroup<W> {
         self.pending = None;
         self.rows = DeferredRows {
             cols,
-            w0: to_ws(&s.w0),
+            w0: {
+                let mut w0 = super::huge::weight_vec(s.w0.len());
+                w0.extend(s.w0.iter().map(|&w| W::from_f64(w)));
+                w0
+            },
             coef: s.coef.clone(),
             row_epoch: s.row_epoch.clone(),
             epochs: Epochs {

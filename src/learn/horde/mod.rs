@@ -8,7 +8,8 @@
 //! feature, and a tick whose cost is the active features times the predictions, never all features.
 //!
 //! A tick is [`Horde::step`]: every prediction for this tick's features with the current weights, then
-//! the TD(λ) update of the transition into this tick, as in [`crate::learn::set`].
+//! the TD(λ) update of the transition into this tick, as in [`crate::learn::set`]; both in one pass over
+//! each active weight row (`TraceGroup::predict_and_learn`).
 
 mod build;
 pub mod family;
@@ -109,6 +110,18 @@ impl<W: Weight> Horde<W> {
     /// One tick: every prediction for this tick's features, then the update into this tick. Returns
     /// how many predictions stopped learning on this tick (a step that was not finite).
     pub fn step(&mut self, signals: &TickSignals) -> usize {
+        self.step_with(signals, true)
+    }
+
+    /// [`Horde::step`] as it was before its passes were fused: each group's `predict`, then its
+    /// `learn`, two passes over the active weight rows. The same result bit for bit (the reference the
+    /// tests and `examples/horde_step_cpu.rs` compare the step with); slower at Horde scale.
+    #[doc(hidden)]
+    pub fn step_two_passes(&mut self, signals: &TickSignals) -> usize {
+        self.step_with(signals, false)
+    }
+
+    fn step_with(&mut self, signals: &TickSignals, fused: bool) -> usize {
         let inputs = FeatureInputs {
             obs: signals.obs,
             extra: signals.extra,
@@ -132,7 +145,6 @@ impl<W: Weight> Horde<W> {
         let mut stopped = 0;
         for slot in &mut self.slots {
             let bank = &self.banks[slot.bank];
-            slot.group.predict(&bank.active);
             let ends = slot
                 .terminate
                 .is_some_and(|i| signals.stimuli.get(i).copied().unwrap_or(false));
@@ -141,11 +153,16 @@ impl<W: Weight> Horde<W> {
             for (r, &source) in slot.cumulants.iter_mut().zip(&slot.sources) {
                 *r = signals.value(source, |k| on.is_some_and(|o| o.get(k) == Some(&true)));
             }
-            // `predict` ran and the slices are the group's size: this cannot fail.
-            stopped += slot
-                .group
-                .learn(gamma, &slot.cumulants, &mut slot.deltas)
-                .unwrap_or(0);
+            // The slices are the group's size: this cannot fail. One pass over each active weight
+            // row (`learn::group`'s `fused`), the same result as `predict` then `learn`.
+            stopped += if fused {
+                slot.group
+                    .predict_and_learn(&bank.active, gamma, &slot.cumulants, &mut slot.deltas)
+            } else {
+                slot.group.predict(&bank.active);
+                slot.group.learn(gamma, &slot.cumulants, &mut slot.deltas)
+            }
+            .unwrap_or(0);
         }
         self.stopped += stopped as u64;
         stopped

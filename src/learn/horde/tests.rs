@@ -358,3 +358,55 @@ fn snapshots_into_prepared_and_returned_buffers_are_exact_and_reuse_the_memory()
         "the second snapshot is copied into the first one's memory"
     );
 }
+
+#[test]
+fn the_one_pass_step_is_bit_for_bit_the_two_pass_step() {
+    // Families like config/horde.toml's at a smaller size: every observation, the stimulus and a bias
+    // and every feature as cumulants, over one tile coding; a terminating family (γ = 0 on the stall).
+    let families = vec![
+        family(
+            r#"name = "nexting"
+            cumulants = ["obs/*", "stimulus/*", "bias"]
+            taus = [2.0, 5.0, 25.0]
+            lambda = 0.9
+            alpha = 0.002
+            features = { kind = "one_dim", all_obs = true, tiles = 8, tilings = 4 }"#,
+        ),
+        family(
+            r#"name = "features"
+            cumulants = ["features/*"]
+            taus = [5.0, 25.0]
+            lambda = 0.9
+            alpha = 0.002
+            features = { kind = "one_dim", all_obs = true, tiles = 8, tilings = 4 }"#,
+        ),
+        family(
+            r#"name = "until_stall"
+            cumulants = ["obs/*"]
+            taus = [10.0]
+            lambda = 0.7
+            alpha = 0.01
+            terminate_on = "stall"
+            features = { kind = "one_dim", all_obs = true, tiles = 8, tilings = 4 }"#,
+        ),
+    ];
+    let mut one: Horde<f32> = Horde::new(families, &names()).unwrap();
+    let mut two = one.clone();
+    let (mut v1, mut v2) = (Vec::new(), Vec::new());
+    for (obs, raw, elbow, stall) in stream(1500, 11) {
+        let extra = [elbow];
+        let stimuli = [stall];
+        let signals = TickSignals {
+            obs: &obs,
+            raw: &raw,
+            extra: &extra,
+            stimuli: &stimuli,
+        };
+        assert_eq!(one.step(&signals), two.step_two_passes(&signals));
+        one.values_into(&mut v1);
+        two.values_into(&mut v2);
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&v1), bits(&v2));
+    }
+    assert_eq!(one.state(), two.state());
+}

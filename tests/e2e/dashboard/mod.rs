@@ -12,6 +12,7 @@ mod browser_analysis;
 mod browser_learning;
 mod browser_storage;
 mod browser_traps;
+mod buffers;
 mod download;
 mod installed;
 mod learning_bounds;
