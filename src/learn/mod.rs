@@ -38,6 +38,7 @@ pub mod td;
 #[cfg(test)]
 pub(crate) mod test_stream;
 pub mod tiles;
+pub mod transitions;
 
 pub use bounds::ParamBounds;
 pub use dense::DenseTd;

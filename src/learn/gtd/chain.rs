@@ -4,18 +4,13 @@
 //! which is what took the agent from the previous tick to this one.
 
 use super::Gtd;
-use crate::learn::UpdateRefused;
+use crate::learn::transitions::Transitions;
 
 /// A GTD(λ) learner and the link from one tick to the next.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GtdChain {
     gtd: Gtd,
-    x_prev: Vec<usize>,
-    x_now: Vec<usize>,
-    gamma_prev: f64,
-    has_prev: bool,
-    fresh: bool,
-    diverged: bool,
+    chain: Transitions,
 }
 
 impl GtdChain {
@@ -23,12 +18,7 @@ impl GtdChain {
     pub fn new(gtd: Gtd) -> Self {
         GtdChain {
             gtd,
-            x_prev: Vec::new(),
-            x_now: Vec::new(),
-            gamma_prev: 0.0,
-            has_prev: false,
-            fresh: false,
-            diverged: false,
+            chain: Transitions::new(),
         }
     }
 
@@ -44,9 +34,7 @@ impl GtdChain {
 
     /// `θᵀx_t` for this tick's features, kept for the next [`GtdChain::learn`].
     pub fn predict(&mut self, active: &[usize]) -> f64 {
-        self.x_now.clear();
-        self.x_now.extend_from_slice(active);
-        self.fresh = true;
+        self.chain.observe(active);
         self.gtd.predict(active)
     }
 
@@ -55,63 +43,37 @@ impl GtdChain {
     /// no `predict` since the last `learn`, or the learner has diverged (now or before); a step that
     /// would make a number non-finite stops the learner (it keeps its last finite state).
     pub fn learn(&mut self, gamma: f64, reward: f64, rho_prev: f64) -> Option<f64> {
-        if !self.fresh {
-            return None;
-        }
-        self.fresh = false;
-        let delta = if self.has_prev && !self.diverged {
-            match self.gtd.try_update(
-                &self.x_prev,
-                self.gamma_prev,
-                rho_prev,
-                reward,
-                gamma,
-                &self.x_now,
-            ) {
-                Ok(d) => Some(d),
-                Err(UpdateRefused::WouldDiverge { .. }) => {
-                    self.diverged = true;
-                    None
-                }
-                Err(UpdateRefused::NonFiniteInput { .. }) => None,
-            }
-        } else {
-            None
-        };
-        std::mem::swap(&mut self.x_prev, &mut self.x_now);
-        self.gamma_prev = gamma;
-        self.has_prev = true;
-        delta
+        let gtd = &mut self.gtd;
+        self.chain.learn(gamma, |x_prev, gamma_prev, x_now| {
+            gtd.try_update(x_prev, gamma_prev, rho_prev, reward, gamma, x_now)
+        })
     }
 
     /// Whether the learner stopped because a step would have made a number non-finite.
     pub fn diverged(&self) -> bool {
-        self.diverged
+        self.chain.diverged()
     }
 
     /// Forgets a `predict` that has not been learned from.
     pub fn clear_pending(&mut self) {
-        self.fresh = false;
+        self.chain.clear_pending();
     }
 
     /// Forgets the previous tick and clears the trace.
     pub fn break_chain(&mut self) {
-        self.fresh = false;
-        self.has_prev = false;
+        self.chain.break_chain();
         self.gtd.clear_traces();
     }
 
     /// Back to the initial weights, no previous tick; learns again after a divergence.
     pub fn reset(&mut self) {
         self.gtd.reset();
-        self.fresh = false;
-        self.has_prev = false;
-        self.diverged = false;
+        self.chain.reset();
     }
 
     /// The previous tick's features and discount, if there is one.
     pub fn previous(&self) -> Option<(&[usize], f64)> {
-        self.has_prev.then_some((&self.x_prev[..], self.gamma_prev))
+        self.chain.previous()
     }
 
     /// Replaces the learned state and the previous tick (restoring a checkpoint; the caller checked the
@@ -125,17 +87,7 @@ impl GtdChain {
         previous: Option<(&[usize], f64)>,
     ) -> Result<(), crate::learn::LearnError> {
         self.gtd.set_state(name, theta, secondary, traces)?;
-        match previous {
-            Some((x, gamma)) => {
-                self.x_prev.clear();
-                self.x_prev.extend_from_slice(x);
-                self.gamma_prev = gamma;
-                self.has_prev = true;
-            }
-            None => self.has_prev = false,
-        }
-        self.fresh = false;
-        self.diverged = false;
+        self.chain.restore(previous);
         Ok(())
     }
 }

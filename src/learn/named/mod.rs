@@ -23,6 +23,7 @@ pub use true_online::TrueOnlineTd;
 pub use xent::XentTd;
 
 use super::bounds::{check_alpha_positive, check_lambda};
+use super::transitions::Transitions;
 use super::{LearnError, TdParams, UpdateRefused};
 
 /// `wᵀx` for the binary x whose active indices are `active` (an index beyond the weights is ignored).
@@ -202,12 +203,7 @@ impl Named {
 #[derive(Debug, Clone, PartialEq)]
 pub struct NamedChain {
     learner: Named,
-    x_prev: Vec<usize>,
-    x_now: Vec<usize>,
-    gamma_prev: f64,
-    has_prev: bool,
-    fresh: bool,
-    diverged: bool,
+    chain: Transitions,
 }
 
 impl NamedChain {
@@ -215,12 +211,7 @@ impl NamedChain {
     pub fn new(learner: Named) -> Self {
         NamedChain {
             learner,
-            x_prev: Vec::new(),
-            x_now: Vec::new(),
-            gamma_prev: 0.0,
-            has_prev: false,
-            fresh: false,
-            diverged: false,
+            chain: Transitions::new(),
         }
     }
 
@@ -231,63 +222,39 @@ impl NamedChain {
 
     /// The prediction for this tick's features, kept for the next [`NamedChain::learn`].
     pub fn predict(&mut self, active: &[usize]) -> f64 {
-        self.x_now.clear();
-        self.x_now.extend_from_slice(active);
-        self.fresh = true;
+        self.chain.observe(active);
         self.learner.predict(active)
     }
 
     /// The step for the transition from the previous tick into this one; then this tick becomes the
     /// previous one. `None` when there was no previous tick or `predict`, or the learner has diverged.
     pub fn learn(&mut self, gamma: f64, reward: f64) -> Option<f64> {
-        if !self.fresh {
-            return None;
-        }
-        self.fresh = false;
-        let delta = if self.has_prev && !self.diverged {
-            match self
-                .learner
-                .try_update(&self.x_prev, self.gamma_prev, reward, gamma, &self.x_now)
-            {
-                Ok(d) => Some(d),
-                Err(UpdateRefused::WouldDiverge { .. }) => {
-                    self.diverged = true;
-                    None
-                }
-                Err(UpdateRefused::NonFiniteInput { .. }) => None,
-            }
-        } else {
-            None
-        };
-        std::mem::swap(&mut self.x_prev, &mut self.x_now);
-        self.gamma_prev = gamma;
-        self.has_prev = true;
-        delta
+        let learner = &mut self.learner;
+        self.chain.learn(gamma, |x_prev, gamma_prev, x_now| {
+            learner.try_update(x_prev, gamma_prev, reward, gamma, x_now)
+        })
     }
 
     /// Whether the learner stopped because a step would have made a number non-finite.
     pub fn diverged(&self) -> bool {
-        self.diverged
+        self.chain.diverged()
     }
 
     /// Forgets a `predict` that has not been learned from.
     pub fn clear_pending(&mut self) {
-        self.fresh = false;
+        self.chain.clear_pending();
     }
 
     /// Forgets the previous tick and clears the trace.
     pub fn break_chain(&mut self) {
-        self.fresh = false;
-        self.has_prev = false;
+        self.chain.break_chain();
         self.learner.clear_traces();
     }
 
     /// Back to the initial state, no previous tick; learns again after a divergence.
     pub fn reset(&mut self) {
         self.learner.reset();
-        self.fresh = false;
-        self.has_prev = false;
-        self.diverged = false;
+        self.chain.reset();
     }
 
     /// Changes α (Autostep: the step sizes restart from it).
@@ -309,7 +276,7 @@ impl NamedChain {
 
     /// The previous tick's features and discount, if there is one.
     pub fn previous(&self) -> Option<(&[usize], f64)> {
-        self.has_prev.then_some((&self.x_prev[..], self.gamma_prev))
+        self.chain.previous()
     }
 
     /// Replaces the learned state and the previous tick (restoring a checkpoint; the caller checked the
@@ -323,17 +290,7 @@ impl NamedChain {
         previous: Option<(&[usize], f64)>,
     ) -> Result<(), LearnError> {
         self.learner.set_state(name, weights, traces, aux)?;
-        match previous {
-            Some((x, gamma)) => {
-                self.x_prev.clear();
-                self.x_prev.extend_from_slice(x);
-                self.gamma_prev = gamma;
-                self.has_prev = true;
-            }
-            None => self.has_prev = false,
-        }
-        self.fresh = false;
-        self.diverged = false;
+        self.chain.restore(previous);
         Ok(())
     }
 }
