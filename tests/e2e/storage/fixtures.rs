@@ -165,9 +165,7 @@ pub fn record_with_changes(
     use pavlov_actors::command::{
         ControlCommand, ControlRequest, GatingCommand, LatchCommand, LearningCommand,
     };
-    use pavlov_actors::server::{RobotTarget, Server};
-    use pavlov_actors::storage::recorder::Recorder;
-    use pavlov_actors::storage::recording::RecordingHeader;
+    use pavlov_actors::server::Server;
 
     async fn send(server: &Server, command: impl Into<ControlCommand>) {
         let (req, reply) = ControlRequest::new(command);
@@ -177,25 +175,7 @@ pub fn record_with_changes(
     }
     let mut cfg = stall_config();
     cfg.sim.seed = 12;
-    let recorder = Recorder::spawn(
-        RecordingHeader::new(&cfg, "with changes"),
-        Some(dir.to_path_buf()),
-        dir.to_path_buf(),
-        ticks + 64,
-    )
-    .expect("recorder");
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .start_paused(true)
-        .build()
-        .unwrap();
-    let link = recorder.link.clone();
-    rt.block_on(async move {
-        let server = Server::builder(cfg, RobotTarget::Simulated)
-            .recorder(link)
-            .start()
-            .await
-            .expect("server");
+    let body = async |server: &Server| {
         let mut rx = server.feed().subscribe();
         let step = ticks / 6;
         crate::common::collect(&mut rx, step).await;
@@ -205,24 +185,21 @@ pub fn record_with_changes(
             lambda: Some(0.9),
             threshold: Some(0.3),
         };
-        send(&server, params).await;
+        send(server, params).await;
         crate::common::collect(&mut rx, step).await;
-        send(&server, LearningCommand::ResetWeights {}).await;
+        send(server, LearningCommand::ResetWeights {}).await;
         crate::common::collect(&mut rx, step).await;
         let reactive = GatingCommand::SetMode {
             mode: Mode::Reactive,
         };
-        send(&server, reactive).await;
+        send(server, reactive).await;
         crate::common::collect(&mut rx, step).await;
-        send(&server, LatchCommand::Estop {}).await;
+        send(server, LatchCommand::Estop {}).await;
         crate::common::collect(&mut rx, step).await;
-        send(&server, LatchCommand::Release {}).await;
+        send(server, LatchCommand::Release {}).await;
         crate::common::collect(&mut rx, ticks - 5 * step).await;
-        server.shutdown().await;
-    });
-    drop(rt);
-    let report = recorder.join();
-    assert!(report.errors.is_empty(), "{:?}", report.errors);
+    };
+    let ((), report) = with_recorded_server(cfg, "with changes", Some(dir), dir, ticks + 64, body);
     report
 }
 
@@ -234,15 +211,38 @@ pub fn record_plain(
     dir: &Path,
     ticks: usize,
 ) -> Vec<pavlov::record::TickRecord> {
+    use pavlov_actors::server::Server;
+
+    let body = async |server: &Server| {
+        let mut rx = server.feed().subscribe();
+        crate::common::collect(&mut rx, ticks).await
+    };
+    let (streamed, _) = with_recorded_server(cfg, label, Some(dir), dir, ticks + 64, body);
+    streamed
+}
+
+/// Runs `cfg` on the simulated robot under the paused clock with a recorder beside it (its header
+/// labelled `label`; recording from the start into `from_start` if given, else when `body` starts one under
+/// `root`; room for `capacity` queued ticks), calls `body` with the server, shuts the server down and waits
+/// for the recorder, which must have finished cleanly. Returns what `body` returned and the recorder's
+/// report.
+pub fn with_recorded_server<T>(
+    cfg: Config,
+    label: &str,
+    from_start: Option<&Path>,
+    root: &Path,
+    capacity: usize,
+    body: impl AsyncFnOnce(&pavlov_actors::server::Server) -> T,
+) -> (T, pavlov_actors::storage::recorder::RecorderReport) {
     use pavlov_actors::server::{RobotTarget, Server};
     use pavlov_actors::storage::recorder::Recorder;
     use pavlov_actors::storage::recording::RecordingHeader;
 
     let recorder = Recorder::spawn(
         RecordingHeader::new(&cfg, label),
-        Some(dir.to_path_buf()),
-        dir.to_path_buf(),
-        ticks + 64,
+        from_start.map(Path::to_path_buf),
+        root.to_path_buf(),
+        capacity,
     )
     .expect("recorder");
     let rt = tokio::runtime::Builder::new_current_thread()
@@ -251,19 +251,18 @@ pub fn record_plain(
         .build()
         .unwrap();
     let link = recorder.link.clone();
-    let streamed = rt.block_on(async move {
+    let out = rt.block_on(async move {
         let server = Server::builder(cfg, RobotTarget::Simulated)
             .recorder(link)
             .start()
             .await
             .expect("server");
-        let mut rx = server.feed().subscribe();
-        let records = crate::common::collect(&mut rx, ticks).await;
+        let out = body(&server).await;
         server.shutdown().await;
-        records
+        out
     });
     drop(rt);
     let report = recorder.join();
     assert!(report.errors.is_empty(), "{:?}", report.errors);
-    streamed
+    (out, report)
 }

@@ -15,7 +15,7 @@ use pavlov_actors::storage::recorder::Recorder;
 use pavlov_actors::storage::recording::{self, Recording, RecordingHeader};
 use pavlov_actors::storage::replay;
 
-use super::fixtures::{config_in, fresh_dir};
+use super::fixtures::{config_in, fresh_dir, with_recorded_server};
 use crate::common;
 
 async fn send(server: &Server, command: impl Into<ControlCommand>) -> Outcome {
@@ -210,50 +210,26 @@ fn a_recording_with_an_off_policy_prediction_replays_exactly() {
     cfg.control.gate_prediction = "stall_pi".into();
     cfg.control.mode = Mode::Reactive;
     cfg.sim.seed = 7;
-    let recorder = Recorder::spawn(
-        RecordingHeader::new(&cfg, "gtd"),
-        None,
-        root.to_path_buf(),
-        20_000,
-    )
-    .expect("recorder");
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .start_paused(true)
-        .build()
-        .unwrap();
-    let link = recorder.link.clone();
-    rt.block_on(async move {
-        let server = Server::builder(cfg, RobotTarget::Simulated)
-            .recorder(link)
-            .start()
-            .await
-            .expect("server");
-        ticks(&server, 1000).await;
+    let body = async |server: &Server| {
+        ticks(server, 1000).await;
         let started = send(
-            &server,
+            server,
             RecorderCommand::StartRecording {
                 dir: Some("gtd".into()),
             },
         )
         .await;
         assert!(started.is_ok(), "{started:?}");
-        ticks(&server, 500).await;
+        ticks(server, 500).await;
         let pavlovian = GatingCommand::SetMode {
             mode: Mode::Pavlovian,
         };
-        assert!(send(&server, pavlovian).await.is_ok());
-        ticks(&server, 1000).await;
-        assert!(
-            send(&server, RecorderCommand::StopRecording {})
-                .await
-                .is_ok()
-        );
-        server.shutdown().await;
-    });
-    drop(rt);
-    let report = recorder.join();
-    assert!(report.errors.is_empty(), "{:?}", report.errors);
+        assert!(send(server, pavlovian).await.is_ok());
+        ticks(server, 1000).await;
+        let stopped = send(server, RecorderCommand::StopRecording {}).await;
+        assert!(stopped.is_ok(), "{stopped:?}");
+    };
+    with_recorded_server(cfg, "gtd", None, &root, 20_000, body);
     let rec = recording::load(&root.join("gtd")).expect("reads back");
     let start = rec.header.start.as_ref().expect("a start state");
     let gtd = &start.learner.predictions.predictions[1];

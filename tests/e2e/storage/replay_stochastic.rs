@@ -7,12 +7,11 @@
 use pavlov::control::Mode;
 use pavlov_actors::command::{ControlCommand, ControlRequest, Outcome, RecorderCommand};
 use pavlov_actors::experiment::stall::{policies, stochastic};
-use pavlov_actors::server::{RobotTarget, Server};
-use pavlov_actors::storage::recorder::Recorder;
-use pavlov_actors::storage::recording::{self, RecordingHeader};
+use pavlov_actors::server::Server;
+use pavlov_actors::storage::recording;
 use pavlov_actors::storage::replay;
 
-use super::fixtures::fresh_dir;
+use super::fixtures::{fresh_dir, with_recorded_server};
 use crate::common;
 
 const EPSILON: f64 = 0.35;
@@ -32,29 +31,11 @@ fn a_stochastic_gate_run_replays_bit_for_bit() {
     cfg.control.gate_prediction = "stall_pi".into();
     cfg.control.mode = Mode::Pavlovian;
     cfg.sim.seed = 11;
-    let recorder = Recorder::spawn(
-        RecordingHeader::new(&cfg, "stochastic"),
-        None,
-        root.to_path_buf(),
-        20_000,
-    )
-    .expect("recorder");
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .start_paused(true)
-        .build()
-        .unwrap();
-    let link = recorder.link.clone();
-    rt.block_on(async move {
-        let server = Server::builder(cfg, RobotTarget::Simulated)
-            .recorder(link)
-            .start()
-            .await
-            .expect("server");
+    let body = async |server: &Server| {
         let mut rx = server.feed().subscribe();
         common::collect(&mut rx, 1000).await;
         let started = send(
-            &server,
+            server,
             RecorderCommand::StartRecording {
                 dir: Some("stochastic".into()),
             },
@@ -62,16 +43,10 @@ fn a_stochastic_gate_run_replays_bit_for_bit() {
         .await;
         assert!(started.is_ok(), "{started:?}");
         common::collect(&mut rx, 2000).await;
-        assert!(
-            send(&server, RecorderCommand::StopRecording {})
-                .await
-                .is_ok()
-        );
-        server.shutdown().await;
-    });
-    drop(rt);
-    let report = recorder.join();
-    assert!(report.errors.is_empty(), "{:?}", report.errors);
+        let stopped = send(server, RecorderCommand::StopRecording {}).await;
+        assert!(stopped.is_ok(), "{stopped:?}");
+    };
+    with_recorded_server(cfg, "stochastic", None, &root, 20_000, body);
     let rec = recording::load(&root.join("stochastic")).expect("reads back");
     assert!(rec.header.start.is_some(), "started mid-run");
 
