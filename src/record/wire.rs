@@ -1,12 +1,12 @@
 //! The protobuf wire form of the tick record (`pavlov.Tick`, an MCAP recording's `ticks` channel), derived
 //! from the record's own Rust types so that its shape is written once.
 //!
-//! Each record struct names its fields' protobuf numbers in one [`wire_message!`] line beside its
+//! Each record struct names its fields' protobuf numbers in one `wire_message!` line beside its
 //! definition; each Rust type a field may have says how it goes on the wire through [`Field`] (its
 //! protobuf type, its presence, how it is written and read). From those the encoder, the decoder and the
 //! schema ([`MessageSpec`], from which the shell builds the `FileDescriptorSet` a recording carries and the
 //! Foxglove JSON Schema) all follow, so adding a tick field is its line in the struct and its line in
-//! the [`wire_message!`] list, in one file.
+//! the `wire_message!` list, in one file.
 //!
 //! The rules are proto3's: a plain scalar equal to zero is left out (implicit presence); an `Option`, and
 //! every `f64` (so that −0.0, a fresh learner's prediction, comes back as −0.0), has explicit presence
@@ -160,7 +160,7 @@ pub trait Field: Sized {
     }
 }
 
-/// A record struct that is a wire message (implemented by [`wire_message!`]).
+/// A record struct that is a wire message (implemented by `wire_message!`).
 pub trait Message: Sized {
     /// The schema of the message and, through its fields, of the messages nested in it.
     fn spec() -> MessageSpec;

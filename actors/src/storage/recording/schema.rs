@@ -3,7 +3,7 @@
 //! their names from here, and so does the channel table in `docs/src/recordings.md`.
 //!
 //! - `ticks`: one `pavlov.Tick` per tick, protobuf; the schema is the `FileDescriptorSet` derived from
-//!   the tick record's wire declaration ([`TICK_DESCRIPTOR_SET`], built in `super::tick_descriptor`).
+//!   the tick record's wire declaration (`TICK_DESCRIPTOR_SET`, built in `super::tick_descriptor`).
 //! - `events`, `config`, `learner`: JSON with a JSON Schema.
 //! - Metadata `pavlov.recording`: format, program, label, UTC start, seed, where the run stood.
 
