@@ -24,10 +24,15 @@ try {
   // The learning view: the stall prediction's values and, a horizon (113 ticks, 2.26 s) later, its returns.
   await page.waitForFunction(() => window.pavlov && window.pavlov.learning && window.pavlov.learning.selected === 'stall',
     null, { timeout: patient(20000) });
+  // Wait until every count checked below holds (on a busy host the running RMSE, a point every few
+  // paired ticks, may lag the values): the wait ends as soon as it does.
   await page.waitForFunction(() => {
-    const d = window.pavlov.learning.charts.ret.data;
+    const v = window.pavlov.learning;
+    const d = v.charts.ret.data;
     const both = d[0].filter((_, i) => d[1][i] != null && d[2][i] != null).length;
-    return both >= 50 && d[0].length >= 200;
+    const td = v.charts.td.data[1].filter((x) => x != null).length;
+    const rmse = v.charts.td.data[2].filter((x) => x != null).length;
+    return both >= 50 && d[0].length >= 200 && td >= 100 && rmse >= 5;
   }, null, { timeout: patient(40000) });
   const learn = await pavlov(() => {
     const v = window.pavlov.learning;

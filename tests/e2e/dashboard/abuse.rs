@@ -310,7 +310,17 @@ async fn abusers_neither_delay_the_tick_nor_starve_a_well_behaved_client() {
 
     let t0 = Instant::now();
     let (fired0, skipped0) = fired(&server);
-    let newest_at_start = newest().expect("records before the abuse");
+    // The test's own feed task may not have run yet on a busy host: wait (patiently) for its first record.
+    let newest_at_start = {
+        let deadline = Instant::now() + PATIENCE;
+        loop {
+            if let Some(seq) = newest() {
+                break seq;
+            }
+            assert!(Instant::now() < deadline, "no record on the test's feed");
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    };
     let (phase_tx, phase_rx) = tokio::sync::oneshot::channel();
     let (go_tx, go_rx) = tokio::sync::oneshot::channel();
     let abuse = abuse_rt.spawn(abusers(addr, phase_tx, go_rx));
