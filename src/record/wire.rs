@@ -206,9 +206,13 @@ pub fn encode_nested<M: Message>(m: &M, number: u32, buf: &mut Vec<u8>) {
         // `len` < 128 fits the one byte.
         buf[at] = len as u8;
     } else {
-        let mut prefix = Vec::with_capacity(10);
-        encode_varint(len as u64, &mut prefix);
-        buf.splice(at..=at, prefix);
+        // A varint is at most 10 bytes: widened in place, with no allocation (the recorder encodes every
+        // tick, and its raw-snapshot message is over 127 bytes).
+        let mut prefix = [0u8; 10];
+        let mut free = &mut prefix[..];
+        encode_varint(len as u64, &mut free);
+        let used = 10 - free.len();
+        buf.splice(at..=at, prefix[..used].iter().copied());
     }
 }
 
