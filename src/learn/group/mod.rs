@@ -19,6 +19,7 @@
 //! then [`TraceGroup::learn`] with this tick's cumulants and discount.
 
 mod copy;
+mod dutch;
 mod epochs;
 mod fused;
 mod huge;
@@ -27,6 +28,7 @@ mod state;
 pub mod weight;
 
 pub use copy::snapshot_buffer;
+pub use dutch::DutchState;
 pub use state::GroupState;
 pub use weight::Weight;
 
@@ -58,6 +60,8 @@ pub struct TraceGroup<W> {
     acc: Vec<W>,
     /// The state of a snapshot whose weights are being copied ([`TraceGroup::begin_snapshot`]).
     pending: Option<Box<GroupState>>,
+    /// True online TD(λ) with a shared dutch trace (`learner = "true_online"`, [`dutch`]).
+    dutch: Option<DutchState>,
 }
 
 /// What links one tick to the next.
@@ -122,6 +126,7 @@ impl<W: Weight> TraceGroup<W> {
             },
             acc: vec![W::default(); cols],
             pending: None,
+            dutch: None,
         })
     }
 
@@ -219,6 +224,9 @@ impl<W: Weight> TraceGroup<W> {
                 got: cumulants.len().min(deltas.len()),
             });
         }
+        if self.dutch.is_some() {
+            return Ok(self.learn_dutch(gamma_t, cumulants, deltas));
+        }
         deltas.fill(f64::NAN);
         if self.chain.has_prev {
             let (stopped, grad) = self.deltas(gamma_t, cumulants, deltas);
@@ -313,6 +321,9 @@ impl<W: Weight> TraceGroup<W> {
         self.chain.step_prev.fill(0.0);
         self.chain.z = 0.0;
         self.rows.clear_traces();
+        if let Some(d) = &mut self.dutch {
+            d.clear();
+        }
     }
 
     /// Back to the initial weights, zero traces, no previous tick; stopped predictions learn again.
@@ -326,6 +337,12 @@ impl<W: Weight> TraceGroup<W> {
     /// Changes α of prediction `col` from the next update on (bounds are the caller's).
     pub fn set_alpha(&mut self, col: usize, alpha: f64) -> Result<(), LearnError> {
         super::bounds::check_alpha_positive("group", alpha)?;
+        if self.dutch.is_some() && self.columns.len() > 1 {
+            return Err(LearnError::SharedDutchTrace(
+                "the step size of one of its predictions cannot change alone (α is in the dutch trace)"
+                    .into(),
+            ));
+        }
         if let Some(c) = self.columns.get_mut(col) {
             c.alpha = alpha;
         }
