@@ -18,6 +18,7 @@
 //! The bookkeeping matches [`crate::learn::set`]: [`TraceGroup::predict`] with this tick's features,
 //! then [`TraceGroup::learn`] with this tick's cumulants and discount.
 
+mod autostep;
 mod copy;
 mod dutch;
 mod epochs;
@@ -27,6 +28,7 @@ mod rows;
 mod state;
 pub mod weight;
 
+pub use autostep::AutostepGroup;
 pub use copy::snapshot_buffer;
 pub use dutch::DutchState;
 pub use state::GroupState;
