@@ -393,6 +393,11 @@ impl<W: Weight> TraceGroup<W> {
         self.rows.set_dense(col, weights, traces);
         self.diverged[col] = false;
         self.set_previous(previous);
+        if let Some(d) = &mut self.dutch {
+            // The dense form holds no correction pending: V is the restored weights' value of x_{t−1}.
+            d.back_prev.fill(0.0);
+            d.overlap = 0;
+        }
         // The previous prediction under the restored weights, so that the next δ uses it exactly.
         if let Some((x_prev, _)) = previous {
             let coef_sum = self.rows.gather(x_prev, &mut self.acc);
