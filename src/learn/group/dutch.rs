@@ -98,12 +98,14 @@ impl<W: Weight> TraceGroup<W> {
         self.dutch.as_ref()
     }
 
-    /// `state`, checked against this group: present exactly when the group is true online, sized for
-    /// its predictions, finite, its overlap at most the features.
+    /// `state`, checked against this group: present exactly when the group is true online (whose
+    /// predictions' step sizes `alphas` are then one), sized for its predictions, finite, its overlap at
+    /// most the features.
     pub(super) fn checked_dutch(
         &self,
         name: &str,
         state: Option<&DutchState>,
+        alphas: &[f64],
     ) -> Result<Option<DutchState>, LearnError> {
         let bad = |what: &str| LearnError::BadGroupState {
             name: name.to_string(),
@@ -121,6 +123,12 @@ impl<W: Weight> TraceGroup<W> {
                 }
                 if s.overlap > self.features() {
                     return Err(bad("is inconsistent (overlap beyond the features)"));
+                }
+                if alphas.windows(2).any(|w| w[0] != w[1]) {
+                    return Err(bad(
+                        "gives a true online group's predictions different step sizes (α is in the \
+                         shared dutch trace)",
+                    ));
                 }
                 Ok(Some(s.clone()))
             }
@@ -367,5 +375,22 @@ mod tests {
                 .to_string()
                 .contains("dutch")
         );
+        // Nor through a state: one restored with two step sizes is refused, and one without its
+        // V_old, and the paper's group refuses a true online state.
+        let mut mixed_state = two.state();
+        mixed_state.alphas[1] = 0.05;
+        let e = two
+            .restore_state("two", &mixed_state)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("different step sizes"), "{e}");
+        let mut no_v_old = two.state();
+        no_v_old.dutch = None;
+        let e = two.restore_state("two", &no_v_old).unwrap_err().to_string();
+        assert!(e.contains("v_old"), "{e}");
+        let mut paper =
+            TraceGroup::<f64>::new(4, 0.9, Sigma::Identity, vec![col(0.1), col(0.1)]).unwrap();
+        assert!(paper.restore_state("paper", &two.state()).is_err());
+        two.restore_state("two", &two.state()).unwrap();
     }
 }

@@ -203,7 +203,7 @@ impl<W: Weight> TraceGroup<W> {
         if !sizes_ok {
             return Err(bad("is sized for another group"));
         }
-        let dutch = self.checked_dutch(name, s.dutch.as_ref())?;
+        let dutch = self.checked_dutch(name, s.dutch.as_ref(), &s.alphas)?;
         let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
         let all_finite = [&s.w0, &s.coef, &s.a, &s.a_w, &s.y_prev, &s.step_prev]
             .iter()

@@ -6,10 +6,11 @@
 //! many predictions read it, and puts predictions that share features, λ, the discount (τ and its
 //! terminating stimulus) and a linear output into one [`TraceGroup`](super::group::TraceGroup): one
 //! trace, one row of weights per feature, and a tick whose cost is the active features times the
-//! predictions, never all features. A family's `learner` picks the group's kind (`groups.rs`): `paper`, `xent` and `linear` in the
-//! paper's group; `true_online` in the same deferred group with a shared dutch trace (its group also
-//! keyed by α, which is in that trace); `autostep` in an [`super::group::AutostepGroup`] (a step size,
-//! h and v per weight: four numbers per weight). Off-policy `gtd` is not run in a Horde.
+//! predictions, never all features. A family's `learner` picks the group's kind (`groups.rs`):
+//! `paper`, `xent` and `linear` in the paper's group; `true_online` in the same deferred group with a
+//! shared dutch trace (its group also keyed by α, which is in that trace); `autostep` in an
+//! [`super::group::AutostepGroup`] (a step size, h and v per weight: four numbers per weight, and its
+//! logistic predictions share a trace too). Off-policy `gtd` is not run in a Horde.
 //!
 //! A tick is [`Horde::step`]: every prediction for this tick's features with the current weights, then
 //! the TD(λ) update of the transition into this tick, as in [`crate::learn::set`]; both in one pass over
@@ -158,8 +159,9 @@ impl<W: Weight> Horde<W> {
             for (r, &source) in slot.cumulants.iter_mut().zip(&slot.sources) {
                 *r = signals.value(source, |k| on.is_some_and(|o| o.get(k) == Some(&true)));
             }
-            // The slices are the group's size: this cannot fail. One pass over each active weight
-            // row (`learn::group`'s `fused`), the same result as `predict` then `learn`.
+            // The slices are the group's size: this cannot fail. The paper's group makes one pass
+            // over each active weight row (`learn::group`'s `fused`), the same result as `predict`
+            // then `learn`; the true-online and Autostep groups predict, then learn.
             stopped += slot
                 .group
                 .step(
