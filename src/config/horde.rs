@@ -149,10 +149,10 @@ mod tests {
             ]
         );
         let shape = crate::learn::horde::check(&cfg.horde.families, &cfg.signal_names()).unwrap();
-        assert_eq!((shape.predictions, shape.feature_sets), (360, 1));
-        assert_eq!(shape.weights, 360 * 2112);
-        // paper, true_online and autostep: a group per τ each; xent's logistic predictions one each.
-        assert_eq!(shape.groups, 3 * 2 + 90);
+        assert_eq!((shape.predictions, shape.feature_sets), (272, 1));
+        assert_eq!(shape.weights, 272 * 2112);
+        // A group per τ for each learner (xent's two logistic predictions: one each).
+        assert_eq!(shape.groups, 4 * 2);
     }
 
     #[test]
