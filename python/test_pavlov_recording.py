@@ -6,7 +6,7 @@
 skipped: without it, or when the binary cannot make a recording, every test fails saying why.
 
 The recording: `pavlov serve --seed 4242 --record DIR` on the simulated Create, stopped with SIGINT after a
-few seconds of real time, in a temporary folder (its checkpoints go there too); and its JSON Lines form,
+few seconds of real time (longer on a loaded machine, until it holds MIN_TICKS ticks), in a temporary folder (its checkpoints go there too); and its JSON Lines form,
 written by `pavlov convert DIR --to jsonl`, which carries pavlov's own observation vector. A second one the
 same way under the stochastic gate (`StochasticGateRecording`), for the behaviour probabilities.
 """
@@ -23,6 +23,7 @@ import sys
 import tempfile
 import time
 import unittest
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -59,9 +60,20 @@ def _summary_counts(path: Path) -> dict[str, int]:
     return {summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()}
 
 
+def _ticks_so_far(mcap: Path) -> int:
+    """The ticks of a recording still being written, up to its last complete chunk (0 before the first)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return len(pavlov_recording.load(mcap).ticks)
+    except (OSError, ValueError, KeyError):
+        return 0
+
+
 def _record(tmp: Path, out: Path, args: list[str]) -> None:
     """`pavlov serve --seed SEED --record OUT` (and `args`) in `tmp` for RUN_S seconds of real time after it
-    drives the robot, stopped with SIGINT; then `pavlov convert OUT --to jsonl` beside it."""
+    drives the robot, and longer until it has recorded MIN_TICKS ticks, stopped with SIGINT; then `pavlov
+    convert OUT --to jsonl` beside it."""
     binary = _binary()
     log_path = tmp / f"serve-{out.name}.log"
 
@@ -82,6 +94,10 @@ def _record(tmp: Path, out: Path, args: list[str]) -> None:
                     raise RuntimeError("pavlov serve did not start:\n" + log())
                 time.sleep(0.1)
             time.sleep(RUN_S)
+            # A loaded machine records fewer ticks in that time (the ticker skips, the recorder's queue
+            # drops): go on until the file, read as it is being written, holds MIN_TICKS.
+            while _ticks_so_far(mcap) < MIN_TICKS and serve.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.5)
             serve.send_signal(signal.SIGINT)
             status = serve.wait(timeout=SERVE_TIMEOUT_S)
         finally:
