@@ -25,7 +25,13 @@ a folder holding either (the MCAP file first). It returns a `Recording`:
       `link_down`, `robot_tripped`), `estop`, `lateness_us`;
     - `link_up`, `link_state`, `link_mode`, `link_trip`, `link_good_frames`, `link_bad_frames`,
       `link_skipped_bytes`, `link_reconnects`, `link_stale_events`;
-    - `forced_stimulus`, `previous_followed_default`, and the raw sensor packets learning saw,
+    - `behaviour_prob`: the behaviour probability b(A|S) of the tick's command (ε or 1 − ε where a
+      stochastic gate, `[control] gate = "stochastic"`, drew π's action or the response; 1.0 for every
+      certain choice, which the record leaves out, and in recordings made before the stochastic gate);
+    - `forced_stimulus`, `previous_followed_default`, `previous_behaviour_prob` (b of the previous tick's
+      command where it was π's, so that an off-policy prediction about π learned with ρ = 1/b; 1.0
+      otherwise, where the record leaves it out, and where the tick has no inputs), and the raw sensor
+      packets learning saw,
       `raw_<packet>[_<unit>]` in the Open Interface's units (e.g. `raw_current_mA`, `raw_voltage_mV`,
       `raw_requested_left_velocity_mm_s`; `<NA>` where the snapshot lacked the packet);
     - `obs_<name>`: the observation vector scaled to [0, 1] (float32), one column per name of the
@@ -245,7 +251,8 @@ _NULLABLE_INT_COLUMNS = [
 _BOOL_COLUMNS = ["overcurrent_left", "overcurrent_right", "bump_left", "bump_right", "stimulus", "gate",
                  "estop", "link_up"]
 _NULLABLE_BOOL_COLUMNS = ["forced_stimulus", "previous_followed_default"]
-_FLOAT_COLUMNS = ["t_s", "elbow_left_deg", "elbow_left_avg_deg", "elbow_right_deg", "elbow_right_avg_deg"]
+_FLOAT_COLUMNS = ["t_s", "elbow_left_deg", "elbow_left_avg_deg", "elbow_right_deg", "elbow_right_avg_deg",
+                  "behaviour_prob", "previous_behaviour_prob"]
 
 
 def _obs_layout(obs_names: list[str]) -> Optional[list[_Dim]]:
@@ -502,6 +509,16 @@ def _opt(msg: Any, name: str) -> Any:
     return getattr(msg, name) if msg.HasField(name) else None
 
 
+def _prob(msg: Any, name: str) -> float:
+    """A behaviour probability, written only when it is not 1: 1.0 when absent. The schema declares it
+    without presence (a plain `double`), so an absent one reads as proto3's default 0, which no probability
+    of an action taken is; a schema older than the field has no such field at all."""
+    if name not in msg.DESCRIPTOR.fields_by_name:
+        return 1.0
+    value = float(getattr(msg, name))
+    return 1.0 if value == 0.0 else value
+
+
 def _put_pb_tick(c: _Columns, t: Any, enums: dict[str, Any]) -> None:
     put = c.put
     put("seq", t.seq)
@@ -539,6 +556,7 @@ def _put_pb_tick(c: _Columns, t: Any, enums: dict[str, Any]) -> None:
     put("command_left_mm_s", t.command.left_mm_s)
     put("command_right_mm_s", t.command.right_mm_s)
     put("safety_stop", _enum_name(enums["safety_stop"], t.safety_stop, "SAFETY_STOP_"))
+    put("behaviour_prob", _prob(t, "behaviour_prob"))
     put("estop", t.estop)
     put("lateness_us", t.lateness_us)
     ln = t.link
@@ -555,6 +573,7 @@ def _put_pb_tick(c: _Columns, t: Any, enums: dict[str, Any]) -> None:
         i = t.inputs
         put("forced_stimulus", i.forced_stimulus)
         put("previous_followed_default", i.previous_followed_default)
+        put("previous_behaviour_prob", _prob(i, "previous_behaviour_prob"))
         if i.HasField("values"):
             c.raw.append(_present(list(i.values.values), i.values.present))
         else:
@@ -562,6 +581,7 @@ def _put_pb_tick(c: _Columns, t: Any, enums: dict[str, Any]) -> None:
     else:
         put("forced_stimulus", None)
         put("previous_followed_default", None)
+        put("previous_behaviour_prob", 1.0)
         c.raw.append(None)
     # Field 17: only a record without inputs stores its observation.
     c.obs.append(list(t.obs) if len(t.obs) else None)
@@ -659,6 +679,7 @@ def _put_json_tick(c: _Columns, r: dict[str, Any]) -> None:
     put("command_left_mm_s", cmd.get("left_mm_s", 0))
     put("command_right_mm_s", cmd.get("right_mm_s", 0))
     put("safety_stop", r.get("safety_stop"))
+    put("behaviour_prob", float(r.get("behaviour_prob", 1.0)))
     put("estop", bool(r.get("estop")))
     put("lateness_us", r.get("lateness_us", 0))
     ln = r.get("link") or {}
@@ -672,11 +693,13 @@ def _put_json_tick(c: _Columns, r: dict[str, Any]) -> None:
     if i is not None:
         put("forced_stimulus", bool(i.get("forced_stimulus")))
         put("previous_followed_default", bool(i.get("previous_followed_default")))
+        put("previous_behaviour_prob", float(i.get("previous_behaviour_prob", 1.0)))
         v = i.get("values")
         c.raw.append(_present(v["values"], v["present"]) if v else None)
     else:
         put("forced_stimulus", None)
         put("previous_followed_default", None)
+        put("previous_behaviour_prob", 1.0)
         c.raw.append(None)
     obs = r.get("obs")
     c.obs.append(obs if obs else None)

@@ -6,8 +6,9 @@
 skipped: without it, or when the binary cannot make a recording, every test fails saying why.
 
 The recording: `pavlov serve --seed 4242 --record DIR` on the simulated Create, stopped with SIGINT after a
-few seconds of real time, in a temporary folder (its checkpoints go there too); and its JSON Lines form,
-written by `pavlov convert DIR --to jsonl`, which carries pavlov's own observation vector.
+few seconds of real time (longer on a loaded machine, until it holds MIN_TICKS ticks), in a temporary folder (its checkpoints go there too); and its JSON Lines form,
+written by `pavlov convert DIR --to jsonl`, which carries pavlov's own observation vector. A second one the
+same way under the stochastic gate (`StochasticGateRecording`), for the behaviour probabilities.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import sys
 import tempfile
 import time
 import unittest
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -58,6 +60,58 @@ def _summary_counts(path: Path) -> dict[str, int]:
     return {summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()}
 
 
+def _ticks_so_far(mcap: Path) -> int:
+    """The ticks of a recording still being written, up to its last complete chunk (0 before the first)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return len(pavlov_recording.load(mcap).ticks)
+    except (OSError, ValueError, KeyError):
+        return 0
+
+
+def _record(tmp: Path, out: Path, args: list[str]) -> None:
+    """`pavlov serve --seed SEED --record OUT` (and `args`) in `tmp` for RUN_S seconds of real time after it
+    drives the robot, and longer until it has recorded MIN_TICKS ticks, stopped with SIGINT; then `pavlov
+    convert OUT --to jsonl` beside it."""
+    binary = _binary()
+    log_path = tmp / f"serve-{out.name}.log"
+
+    def log() -> str:
+        return log_path.read_text(errors="replace")[-4000:]
+
+    mcap = out / pavlov_recording.MCAP_FILE
+    with open(log_path, "w+b") as log_file:
+        # Port 0: any free port, so that other servers on the machine do not get in the way.
+        serve = subprocess.Popen(
+            [str(binary), "serve", "--seed", str(SEED), "--bind", "127.0.0.1:0", "--record", str(out), *args],
+            cwd=tmp, stdout=log_file, stderr=subprocess.STDOUT)
+        try:
+            # Real time: RUN_S after the server says it drives the robot.
+            deadline = time.monotonic() + SERVE_TIMEOUT_S
+            while b"dashboard:" not in log_path.read_bytes():
+                if serve.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError("pavlov serve did not start:\n" + log())
+                time.sleep(0.1)
+            time.sleep(RUN_S)
+            # A loaded machine records fewer ticks in that time (the ticker skips, the recorder's queue
+            # drops): go on until the file, read as it is being written, holds MIN_TICKS.
+            while _ticks_so_far(mcap) < MIN_TICKS and serve.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.5)
+            serve.send_signal(signal.SIGINT)
+            status = serve.wait(timeout=SERVE_TIMEOUT_S)
+        finally:
+            if serve.poll() is None:
+                serve.kill()
+                serve.wait()
+    if status != 0 or not mcap.is_file():
+        raise RuntimeError(f"pavlov serve exited with {status}, recording {mcap}:\n" + log())
+    convert = subprocess.run([str(binary), "convert", str(out), "--to", "jsonl"],
+                             capture_output=True, text=True, timeout=SERVE_TIMEOUT_S)
+    if convert.returncode != 0:
+        raise RuntimeError(f"pavlov convert failed: {convert.stderr}")
+
+
 class FreshRecording(unittest.TestCase):
     tmp: Path
     dir: Path
@@ -66,41 +120,11 @@ class FreshRecording(unittest.TestCase):
 
     @classmethod
     def setUpClass(cls) -> None:
-        binary = _binary()
         cls.tmp = Path(tempfile.mkdtemp(prefix="pavlov-pyloader-"))
         cls.dir = cls.tmp / "rec"
         cls.mcap = cls.dir / pavlov_recording.MCAP_FILE
-        log = open(cls.tmp / "serve.log", "w+b")
-        # Port 0: any free port, so that other servers on the machine do not get in the way.
-        serve = subprocess.Popen(
-            [str(binary), "serve", "--seed", str(SEED), "--bind", "127.0.0.1:0", "--record", str(cls.dir)],
-            cwd=cls.tmp, stdout=log, stderr=subprocess.STDOUT)
-        try:
-            # Real time: RUN_S after the server says it drives the robot.
-            deadline = time.monotonic() + SERVE_TIMEOUT_S
-            while b"dashboard:" not in (cls.tmp / "serve.log").read_bytes():
-                if serve.poll() is not None or time.monotonic() > deadline:
-                    raise RuntimeError("pavlov serve did not start:\n" + cls._log())
-                time.sleep(0.1)
-            time.sleep(RUN_S)
-            serve.send_signal(signal.SIGINT)
-            status = serve.wait(timeout=SERVE_TIMEOUT_S)
-        finally:
-            if serve.poll() is None:
-                serve.kill()
-                serve.wait()
-            log.close()
-        if status != 0 or not cls.mcap.is_file():
-            raise RuntimeError(f"pavlov serve exited with {status}, recording {cls.mcap}:\n" + cls._log())
-        convert = subprocess.run([str(binary), "convert", str(cls.dir), "--to", "jsonl"],
-                                 capture_output=True, text=True, timeout=SERVE_TIMEOUT_S)
-        if convert.returncode != 0:
-            raise RuntimeError(f"pavlov convert failed: {convert.stderr}")
+        _record(cls.tmp, cls.dir, [])
         cls.rec = pavlov_recording.load(cls.mcap)
-
-    @classmethod
-    def _log(cls) -> str:
-        return (cls.tmp / "serve.log").read_text(errors="replace")[-4000:]
 
     @classmethod
     def tearDownClass(cls) -> None:
@@ -200,6 +224,13 @@ class FreshRecording(unittest.TestCase):
         self.assertTrue(np.array_equal(jsonl.ticks[obs].to_numpy().view(np.uint32),
                                        self.rec.ticks[obs].to_numpy().view(np.uint32)))
 
+    def test_a_deterministic_gate_logs_every_command_as_certain(self) -> None:
+        # The paper's gate: the record leaves b out; the loader reads it as 1.
+        t = self.rec.ticks
+        for name in ("behaviour_prob", "previous_behaviour_prob"):
+            self.assertEqual(t[name].dtype, np.float64)
+            self.assertTrue((t[name] == 1.0).all(), name)
+
     def test_a_folder_loads_its_mcap_file(self) -> None:
         folder = pavlov_recording.load(self.dir)
         self.assertEqual(folder.path, self.mcap)
@@ -288,3 +319,79 @@ class FreshRecording(unittest.TestCase):
 
 if __name__ == "__main__":
     unittest.main()
+
+
+EPSILON = 0.35
+
+
+class StochasticGateRecording(unittest.TestCase):
+    """A recording under `[control] gate = "stochastic"`: the stall study with ε = 0.35 and a stall prediction
+    that starts above its threshold (initial weights 0.1 over 44 active features: 4.4 against 0.5) and
+    learns slowly (α = 10⁻⁵), so its rule fires on every tick of the few seconds recorded and each tick's
+    command is a draw: π's action with b = ε, or the response with b = 1 − ε."""
+
+    tmp: Path
+    dir: Path
+    rec: pavlov_recording.Recording
+
+    @classmethod
+    def setUpClass(cls) -> None:
+        cls.tmp = Path(tempfile.mkdtemp(prefix="pavlov-pyloader-stochastic-"))
+        cls.dir = cls.tmp / "stochastic"
+        text = (Path(__file__).resolve().parent.parent / "config" / "stall.toml").read_text()
+        for old, new in [
+            ('response = { kind = "stop" }',
+             f'response = {{ kind = "stop" }}\ngate = "stochastic"\nepsilon = {EPSILON}'),
+            ("alpha = 0.022727272727272728", "alpha = 0.00001"),
+            ("initial_weight = 0.0", "initial_weight = 0.1"),
+        ]:
+            assert old in text, old
+            text = text.replace(old, new, 1)
+        config = cls.tmp / "stochastic.toml"
+        config.write_text(text)
+        _record(cls.tmp, cls.dir, ["--config", str(config)])
+        cls.rec = pavlov_recording.load(cls.dir / pavlov_recording.MCAP_FILE)
+
+    @classmethod
+    def tearDownClass(cls) -> None:
+        shutil.rmtree(cls.tmp, ignore_errors=True)
+
+    def test_each_command_has_its_behaviour_probability(self) -> None:
+        t = self.rec.ticks
+        self.assertEqual(self.rec.config["control"]["gate"], "stochastic")
+        self.assertGreaterEqual(len(t), MIN_TICKS)
+        b = t["behaviour_prob"]
+        self.assertEqual(b.dtype, np.float64)
+        drawn_pi, drawn_response = (b == EPSILON), (b == 1.0 - EPSILON)
+        self.assertTrue((drawn_pi | drawn_response | (b == 1.0)).all(), sorted(set(b)))
+        # About 0.35 and 0.65 of the ticks each: both occur (P(none of either in 50 draws) < 1e-9).
+        self.assertGreater(int(drawn_pi.sum()), 0)
+        self.assertGreater(int(drawn_response.sum()), 0)
+        # π's action where b = ε (the response, stop, where b = 1 − ε).
+        pi = t[drawn_pi]
+        self.assertTrue((pi["command_left_mm_s"] == pi["default_left_mm_s"]).all())
+        self.assertTrue((pi["command_right_mm_s"] == pi["default_right_mm_s"]).all())
+
+    def test_the_next_tick_carries_the_previous_commands_probability(self) -> None:
+        # Learning records b of the previous tick's command where that command was π's (ρ = 1/b), and 1
+        # otherwise (ρ = 0 whatever b is; also when actuation's record of the previous tick had not reached
+        # learning yet, which then counts π as not followed).
+        t = self.rec.ticks
+        p = t["previous_behaviour_prob"].to_numpy()
+        self.assertEqual(t["previous_behaviour_prob"].dtype, np.float64)
+        followed = t["previous_followed_default"].fillna(False).to_numpy(dtype=bool)
+        self.assertTrue((p[~followed] == 1.0).all(), sorted(set(p[~followed])))
+        # Where the previous tick is in the recording (none skipped between), its b is the one carried.
+        seq = t["seq"].to_numpy()
+        after_previous = np.concatenate([[False], np.diff(seq) == 1])
+        b_before = np.concatenate([[np.nan], t["behaviour_prob"].to_numpy()[:-1]])
+        carried = after_previous & followed
+        self.assertGreater(int(carried.sum()), 0, "no tick after one of π's actions")
+        np.testing.assert_array_equal(p[carried], b_before[carried])
+        self.assertTrue((p[carried] == EPSILON).any(), sorted(set(p[carried])))
+
+    def test_the_json_lines_form_has_the_same_probabilities(self) -> None:
+        jsonl = pavlov_recording.load(self.dir / pavlov_recording.JSONL_FILE)
+        for name in ("behaviour_prob", "previous_behaviour_prob"):
+            np.testing.assert_array_equal(jsonl.ticks[name].to_numpy(), self.rec.ticks[name].to_numpy())
+        pd.testing.assert_frame_equal(jsonl.ticks, self.rec.ticks, check_exact=True)

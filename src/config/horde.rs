@@ -134,6 +134,28 @@ mod tests {
     }
 
     #[test]
+    fn the_shipped_learners_config_runs_every_horde_learner() {
+        use crate::learn::LearnerKind;
+        let text = include_str!("../../config/horde-learners.toml");
+        let cfg = Config::from_toml(text).unwrap();
+        let learners: Vec<LearnerKind> = cfg.horde.families.iter().map(|f| f.learner).collect();
+        assert_eq!(
+            learners,
+            [
+                LearnerKind::Td,
+                LearnerKind::Xent,
+                LearnerKind::TrueOnline,
+                LearnerKind::Autostep
+            ]
+        );
+        let shape = crate::learn::horde::check(&cfg.horde.families, &cfg.signal_names()).unwrap();
+        assert_eq!((shape.predictions, shape.feature_sets), (272, 1));
+        assert_eq!(shape.weights, 272 * 2112);
+        // A group per τ for each learner (xent's two logistic predictions: one each).
+        assert_eq!(shape.groups, 4 * 2);
+    }
+
+    #[test]
     fn a_bad_family_is_refused_with_its_key() {
         for (edit, says) in [
             (

@@ -125,6 +125,15 @@ pub enum LearnError {
         "a trace group with a logistic σ has one prediction, not {0} (σ′ makes each trace its own)"
     )]
     SharedLogisticTrace(usize),
+    /// A true-online group shares one dutch trace, which holds α: a combination that cannot share it.
+    #[error("a true online group shares one dutch trace, but {0}")]
+    SharedDutchTrace(String),
+    /// A Horde whose Autostep state (three values more per Autostep weight) is beyond its memory bound.
+    #[error(
+        "the Horde would hold {values} learned values (its weights, and for each learner = \"autostep\" \
+         weight its step size, h and v), more than the {max} allowed"
+    )]
+    AutostepStateTooLarge { values: usize, max: usize },
     /// The cumulant or δ slice given to a group's `learn` has the wrong length.
     #[error("learn: expected {expected} cumulants, got {got}")]
     CumulantCountMismatch { expected: usize, got: usize },

@@ -9,7 +9,9 @@
 //! header length                     u64
 //! header                            JSON: tick, precision, families, stopped, and each trace group's
 //!                                   exact state without its weights (traces, epochs, previous tick)
-//! weights                           each group's, feature-major, f32 or f64 little-endian
+//! weights                           each group's, feature-major, f32 or f64 little-endian (an
+//!                                   Autostep group's weights, step sizes, h and v, a prediction at a
+//!                                   time: `GroupState::value_count`)
 //! checksum                          u64, FNV-1a of every byte before it
 //! ```
 //!
@@ -220,7 +222,8 @@ pub fn read<W: Weight>(path: &Path) -> Result<(u64, HordeSnapshot<W>), HordeFile
     let mut groups = Vec::with_capacity(header.groups.len());
     let mut chunk = vec![0u8; 1 << 20];
     for state in header.groups {
-        let count = state.coef.len().saturating_mul(state.a.len());
+        // The weights, and an Autostep group's step sizes, h and v.
+        let count = state.value_count();
         let mut weights = Vec::with_capacity(count.min(1 << 28));
         let mut left = count;
         while left > 0 {

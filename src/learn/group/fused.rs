@@ -42,7 +42,9 @@ impl<W: Weight> TraceGroup<W> {
     ) -> Result<usize, LearnError> {
         let decay = self.chain.gamma_prev * self.lambda;
         let cols = self.columns.len();
-        let fusable = self.chain.has_prev
+        // A true-online group (`super::dutch`) has its own update, in two passes.
+        let fusable = self.dutch.is_none()
+            && self.chain.has_prev
             && !self.chain.fresh
             && self.sigma == Sigma::Identity
             && cumulants.len() == cols

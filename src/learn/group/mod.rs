@@ -18,7 +18,9 @@
 //! The bookkeeping matches [`crate::learn::set`]: [`TraceGroup::predict`] with this tick's features,
 //! then [`TraceGroup::learn`] with this tick's cumulants and discount.
 
+mod autostep;
 mod copy;
+mod dutch;
 mod epochs;
 mod fused;
 mod huge;
@@ -26,7 +28,9 @@ mod rows;
 mod state;
 pub mod weight;
 
+pub use autostep::AutostepGroup;
 pub use copy::snapshot_buffer;
+pub use dutch::DutchState;
 pub use state::GroupState;
 pub use weight::Weight;
 
@@ -58,6 +62,8 @@ pub struct TraceGroup<W> {
     acc: Vec<W>,
     /// The state of a snapshot whose weights are being copied ([`TraceGroup::begin_snapshot`]).
     pending: Option<Box<GroupState>>,
+    /// True online TD(λ) with a shared dutch trace (`learner = "true_online"`, [`dutch`]).
+    dutch: Option<DutchState>,
 }
 
 /// What links one tick to the next.
@@ -122,6 +128,7 @@ impl<W: Weight> TraceGroup<W> {
             },
             acc: vec![W::default(); cols],
             pending: None,
+            dutch: None,
         })
     }
 
@@ -219,6 +226,9 @@ impl<W: Weight> TraceGroup<W> {
                 got: cumulants.len().min(deltas.len()),
             });
         }
+        if self.dutch.is_some() {
+            return Ok(self.learn_dutch(gamma_t, cumulants, deltas));
+        }
         deltas.fill(f64::NAN);
         if self.chain.has_prev {
             let (stopped, grad) = self.deltas(gamma_t, cumulants, deltas);
@@ -313,6 +323,9 @@ impl<W: Weight> TraceGroup<W> {
         self.chain.step_prev.fill(0.0);
         self.chain.z = 0.0;
         self.rows.clear_traces();
+        if let Some(d) = &mut self.dutch {
+            d.clear();
+        }
     }
 
     /// Back to the initial weights, zero traces, no previous tick; stopped predictions learn again.
@@ -326,6 +339,12 @@ impl<W: Weight> TraceGroup<W> {
     /// Changes α of prediction `col` from the next update on (bounds are the caller's).
     pub fn set_alpha(&mut self, col: usize, alpha: f64) -> Result<(), LearnError> {
         super::bounds::check_alpha_positive("group", alpha)?;
+        if self.dutch.is_some() && self.columns.len() > 1 {
+            return Err(LearnError::SharedDutchTrace(
+                "the step size of one of its predictions cannot change alone (α is in the dutch trace)"
+                    .into(),
+            ));
+        }
         if let Some(c) = self.columns.get_mut(col) {
             c.alpha = alpha;
         }
@@ -374,6 +393,11 @@ impl<W: Weight> TraceGroup<W> {
         self.rows.set_dense(col, weights, traces);
         self.diverged[col] = false;
         self.set_previous(previous);
+        if let Some(d) = &mut self.dutch {
+            // The dense form holds no correction pending: V is the restored weights' value of x_{t−1}.
+            d.back_prev.fill(0.0);
+            d.overlap = 0;
+        }
         // The previous prediction under the restored weights, so that the next δ uses it exactly.
         if let Some((x_prev, _)) = previous {
             let coef_sum = self.rows.gather(x_prev, &mut self.acc);

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use super::epochs::{ClosedEpoch, Epochs, RING_EPOCHS};
 use super::rows::DeferredRows;
-use super::{Chain, TraceGroup, Weight};
+use super::{Chain, DutchState, TraceGroup, Weight};
 use crate::learn::LearnError;
 
 /// A closed epoch of a [`GroupState`].
@@ -49,6 +49,27 @@ pub struct GroupState {
     pub y_prev: Vec<f64>,
     pub step_prev: Vec<f64>,
     pub z: f64,
+    /// A true-online group's state per prediction (`learner = "true_online"`, `super::dutch`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dutch: Option<DutchState>,
+    /// An Autostep group's (`learner = "autostep"`, [`crate::learn::horde`]'s `AutostepGroup`): `coef`
+    /// is its trace (`p` = 1, no epochs) and its values are four blocks of `features × predictions`, each
+    /// prediction's features contiguous: the weights, the step sizes, h and v.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub autostep: bool,
+}
+
+impl GroupState {
+    /// How many values (weights, and an Autostep group's per-weight state) the state's weights hold
+    /// (`w0`'s length, or that of the weights beside a snapshot's state).
+    pub fn value_count(&self) -> usize {
+        let weights = self.coef.len().saturating_mul(self.a.len());
+        if self.autostep {
+            weights.saturating_mul(4)
+        } else {
+            weights
+        }
+    }
 }
 
 fn to_f64s<W: Weight>(v: &[W]) -> Vec<f64> {
@@ -144,6 +165,8 @@ impl<W: Weight> TraceGroup<W> {
             y_prev: self.chain.y_prev.clone(),
             step_prev: self.chain.step_prev.clone(),
             z: self.chain.z,
+            dutch: self.dutch.clone(),
+            autostep: false,
         }
     }
 
@@ -172,9 +195,15 @@ impl<W: Weight> TraceGroup<W> {
             && s.diverged.len() == cols
             && s.ring.len() <= RING_EPOCHS
             && s.ring.iter().all(|c| c.a_end.len() == cols);
+        if s.autostep {
+            return Err(bad(
+                "holds an Autostep group's state, this group learns another learner",
+            ));
+        }
         if !sizes_ok {
             return Err(bad("is sized for another group"));
         }
+        let dutch = self.checked_dutch(name, s.dutch.as_ref(), &s.alphas)?;
         let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
         let all_finite = [&s.w0, &s.coef, &s.a, &s.a_w, &s.y_prev, &s.step_prev]
             .iter()
@@ -264,6 +293,7 @@ impl<W: Weight> TraceGroup<W> {
             has_prev: s.x_prev.is_some(),
             fresh: false,
         };
+        self.dutch = dutch;
         Ok(())
     }
 }

@@ -2,17 +2,21 @@
 //! constructions shared, predictions expanded and put into trace groups, and only then the weights
 //! allocated.
 
-use super::super::group::{Column, TraceGroup, Weight};
+use super::super::group::{AutostepGroup, Column, TraceGroup, Weight};
 use super::super::inputs::{SignalNames, resolve};
 use super::super::spec::LearnerKind;
 use super::super::{LearnError, ParamBounds, Sigma};
+use super::groups::SlotGroup;
 use super::{
     Bank, FamilySpec, Horde, HordeShape, MAX_HORDE_PREDICTIONS, MAX_HORDE_WEIGHTS, PredictionInfo,
     Slot, Source, signals,
 };
 
 /// What puts predictions into one trace group: the same features, λ and discount (τ and its
-/// terminating stimulus), and a linear output (a logistic prediction is `own` group).
+/// terminating stimulus), the same kind of group (`learner`) and the same σ (a logistic prediction of
+/// the paper's learner, whose trace holds its own σ′, is `own` group; Autostep's trace holds no σ′, so
+/// its logistic predictions share one); for true online TD(λ) also the same α, which is in its dutch
+/// trace.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct GroupKey {
     bank: usize,
@@ -20,6 +24,38 @@ struct GroupKey {
     tau: u64,
     terminate: Option<usize>,
     own: Option<usize>,
+    kind: GroupKind,
+    /// α's bits for a true-online group, else 0.
+    alpha: u64,
+    /// A group has one σ.
+    logistic: bool,
+}
+
+/// Which group a family's learner runs in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum GroupKind {
+    /// The paper's deferred group: `paper`, `linear` (σ′ in the trace when logistic).
+    Paper,
+    /// The paper's group with the log-loss gradient's trace: `xent`.
+    Xent,
+    /// The deferred group with a dutch trace: `true_online`.
+    Dutch,
+    /// [`AutostepGroup`]: `autostep`.
+    Autostep,
+}
+
+impl GroupKind {
+    fn of(learner: LearnerKind, sigma: Sigma) -> Self {
+        match learner {
+            // With σ = identity the log-loss gradient is the paper's: the same group.
+            LearnerKind::Xent if sigma == Sigma::Identity => GroupKind::Paper,
+            LearnerKind::Xent => GroupKind::Xent,
+            LearnerKind::TrueOnline => GroupKind::Dutch,
+            LearnerKind::Autostep => GroupKind::Autostep,
+            // `gtd` is refused by `FamilySpec::bounds` before any group is planned.
+            LearnerKind::Td | LearnerKind::Linear | LearnerKind::Gtd => GroupKind::Paper,
+        }
+    }
 }
 
 /// A trace group's predictions, gathered before it is built.
@@ -81,12 +117,24 @@ impl<W: Weight> Horde<W> {
                 place[i] = (s, c);
             }
             let cols = plan.columns.len();
+            let (lambda, sigma, columns) = (first.lambda, first.sigma, plan.columns);
+            let group = match key.kind {
+                GroupKind::Paper | GroupKind::Xent => SlotGroup::Trace(
+                    TraceGroup::new(features, lambda, sigma, columns)?
+                        .with_unit_gradient(key.kind == GroupKind::Xent),
+                ),
+                GroupKind::Dutch => SlotGroup::Trace(
+                    TraceGroup::new(features, lambda, sigma, columns)?.with_dutch_traces()?,
+                ),
+                GroupKind::Autostep => {
+                    SlotGroup::Autostep(AutostepGroup::new(features, lambda, sigma, columns)?)
+                }
+            };
             slots.push(Slot {
                 bank: key.bank,
                 continuation: 1.0 - 1.0 / f64::from_bits(key.tau),
                 terminate: key.terminate,
-                group: TraceGroup::new(features, first.lambda, first.sigma, plan.columns)?
-                    .with_unit_gradient(first.learner == LearnerKind::Xent),
+                group,
                 sources: plan.sources,
                 predictions: plan.predictions,
                 cumulants: vec![0.0; cols],
@@ -114,6 +162,8 @@ fn blueprint(families: &[FamilySpec], names: &SignalNames) -> Result<Blueprint, 
     let mut keys: Vec<GroupKey> = Vec::new();
     let mut plans: Vec<GroupPlan> = Vec::new();
     let mut weights = 0usize;
+    // Autostep's step sizes, h and v (three per Autostep weight).
+    let mut values = 0usize;
     let mut family_bounds = Vec::with_capacity(families.len());
     for (fi, f) in families.iter().enumerate() {
         if families[..fi].iter().any(|g| g.name == f.name) {
@@ -162,14 +212,24 @@ fn blueprint(families: &[FamilySpec], names: &SignalNames) -> Result<Blueprint, 
                 max: MAX_HORDE_PREDICTIONS,
             });
         }
-        weights = weights.saturating_add(
-            bounds
-                .features
-                .saturating_mul(cumulants.len() * f.taus.len()),
-        );
+        let family_weights = bounds
+            .features
+            .saturating_mul(cumulants.len() * f.taus.len());
+        weights = weights.saturating_add(family_weights);
         if weights > MAX_HORDE_WEIGHTS {
             return Err(LearnError::TooManyFeaturesInAll {
                 total: weights,
+                max: MAX_HORDE_WEIGHTS,
+            });
+        }
+        // Autostep holds a step size, h and v beside each weight: in the same bound.
+        let kind = GroupKind::of(f.learner, f.sigma);
+        if kind == GroupKind::Autostep {
+            values = values.saturating_add(family_weights.saturating_mul(3));
+        }
+        if weights.saturating_add(values) > MAX_HORDE_WEIGHTS {
+            return Err(LearnError::AutostepStateTooLarge {
+                values: weights.saturating_add(values),
                 max: MAX_HORDE_WEIGHTS,
             });
         }
@@ -188,7 +248,15 @@ fn blueprint(families: &[FamilySpec], names: &SignalNames) -> Result<Blueprint, 
                     lambda: f.lambda.to_bits(),
                     tau: tau.to_bits(),
                     terminate,
-                    own: (f.sigma == Sigma::Logistic).then_some(index),
+                    own: (f.sigma == Sigma::Logistic && kind != GroupKind::Autostep)
+                        .then_some(index),
+                    kind,
+                    alpha: if kind == GroupKind::Dutch {
+                        f.alpha.to_bits()
+                    } else {
+                        0
+                    },
+                    logistic: f.sigma == Sigma::Logistic,
                 };
                 let slot = match keys.iter().position(|k| *k == key) {
                     Some(s) => s,

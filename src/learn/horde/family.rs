@@ -52,9 +52,11 @@ pub struct FamilySpec {
     pub terminate_on: Option<String>,
     /// The features every prediction of the family learns from (built once per tick for all).
     pub features: FeatureSpec,
-    /// The learner (default `"paper"`): `"paper"`, `"xent"` (the log-loss gradient, no σ′ in the trace) or
-    /// `"linear"` (σ = identity); the learners with state per weight (`"true_online"`, `"autostep"`) and
-    /// off-policy `"gtd"` are refused, as the Horde's deferred groups do not run them.
+    /// The learner (default `"paper"`): `"paper"`, `"xent"` (the log-loss gradient, no σ′ in the trace),
+    /// `"linear"` (σ = identity), `"true_online"` (dutch traces, σ = identity; its predictions share a
+    /// trace only with predictions of the same α) or `"autostep"` (a step size, h and v per weight: four
+    /// numbers per weight); off-policy `"gtd"` is refused (a Horde's predictions are about the behaviour
+    /// run, and its trace would hold each prediction's importance sampling ratio).
     #[serde(default, skip_serializing_if = "LearnerKind::is_td")]
     pub learner: LearnerKind,
 }
@@ -93,17 +95,17 @@ impl FamilySpec {
         check_alpha_positive(name, self.alpha)?;
         check_initial_weight(name, self.initial_weight)?;
         match self.learner {
-            LearnerKind::Td | LearnerKind::Xent => {}
-            LearnerKind::Linear => {
-                crate::learn::named::linear::check_identity(name, "linear", self.sigma)?
+            LearnerKind::Td | LearnerKind::Xent | LearnerKind::Autostep => {}
+            LearnerKind::Linear | LearnerKind::TrueOnline => {
+                crate::learn::named::linear::check_identity(name, self.learner.name(), self.sigma)?
             }
-            other => {
+            LearnerKind::Gtd => {
                 return Err(LearnError::OutOfBounds {
                     name: name.to_string(),
                     field: "learner".into(),
-                    value: format!("\"{}\"", other.name()),
-                    bound: "is not available in the Horde (its deferred groups run \"paper\", \"xent\" \
-                            and \"linear\")"
+                    value: "\"gtd\"".into(),
+                    bound: "is not available in the Horde (its predictions are about the behaviour run; \
+                            it runs \"paper\", \"xent\", \"linear\", \"true_online\" and \"autostep\")"
                         .into(),
                 });
             }
@@ -166,7 +168,7 @@ mod tests {
     }
 
     #[test]
-    fn a_family_names_its_learner_and_the_horde_refuses_the_ones_it_cannot_run() {
+    fn a_family_names_its_learner_and_the_horde_refuses_only_gtd() {
         let with = |learner: &str, sigma: &str| {
             toml::from_str::<FamilySpec>(&format!(
                 "{NEXTING}\nlearner = \"{learner}\"\nsigma = \"{sigma}\"\n"
@@ -177,19 +179,19 @@ mod tests {
         with("xent", "logistic").bounds(44).unwrap();
         with("paper", "logistic").bounds(44).unwrap();
         with("linear", "identity").bounds(44).unwrap();
-        assert!(
-            with("linear", "logistic")
-                .bounds(44)
-                .unwrap_err()
-                .to_string()
-                .contains("sigma")
-        );
-        for refused in ["true_online", "autostep", "gtd"] {
-            let e = with(refused, "identity")
+        with("true_online", "identity").bounds(44).unwrap();
+        with("autostep", "identity").bounds(44).unwrap();
+        with("autostep", "logistic").bounds(44).unwrap();
+        for linear_only in ["linear", "true_online"] {
+            let e = with(linear_only, "logistic")
                 .bounds(44)
                 .unwrap_err()
                 .to_string();
-            assert!(e.contains("learner") && e.contains(refused), "{e}");
+            assert!(e.contains("sigma"), "{e}");
+        }
+        for sigma in ["identity", "logistic"] {
+            let e = with("gtd", sigma).bounds(44).unwrap_err().to_string();
+            assert!(e.contains("learner") && e.contains("gtd"), "{e}");
         }
         // The default is not written (older readers keep working).
         let text = toml::to_string(&with("paper", "identity")).unwrap();

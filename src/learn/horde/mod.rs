@@ -4,8 +4,13 @@
 //! Predictions come in families ([`family`]): every cumulant ([`signals`]) at every timescale over one
 //! feature construction. The Horde builds each distinct feature construction once per tick, however
 //! many predictions read it, and puts predictions that share features, λ, the discount (τ and its
-//! terminating stimulus) and a linear output into one [`TraceGroup`]: one trace, one row of weights per
-//! feature, and a tick whose cost is the active features times the predictions, never all features.
+//! terminating stimulus) and a linear output into one [`TraceGroup`](super::group::TraceGroup): one
+//! trace, one row of weights per feature, and a tick whose cost is the active features times the
+//! predictions, never all features. A family's `learner` picks the group's kind (`groups.rs`):
+//! `paper`, `xent` and `linear` in the paper's group; `true_online` in the same deferred group with a
+//! shared dutch trace (its group also keyed by α, which is in that trace); `autostep` in an
+//! [`super::group::AutostepGroup`] (a step size, h and v per weight: four numbers per weight, and its
+//! logistic predictions share a trace too). Off-policy `gtd` is not run in a Horde.
 //!
 //! A tick is [`Horde::step`]: every prediction for this tick's features with the current weights, then
 //! the TD(λ) update of the transition into this tick, as in [`crate::learn::set`]; both in one pass over
@@ -13,6 +18,7 @@
 
 mod build;
 pub mod family;
+mod groups;
 pub mod signals;
 mod state;
 
@@ -21,7 +27,7 @@ pub use family::FamilySpec;
 pub use signals::{Source, TickSignals};
 pub use state::{HordeSnapshot, HordeState};
 
-use super::group::{TraceGroup, Weight};
+use super::group::Weight;
 use super::inputs::FeatureInputs;
 use super::tiles::TileCoder;
 use super::{FeatureSpec, LearnError};
@@ -51,7 +57,7 @@ struct Slot<W> {
     continuation: f64,
     /// The stimulus that ends the predictions (γ = 0 while it is on).
     terminate: Option<usize>,
-    group: TraceGroup<W>,
+    group: groups::SlotGroup<W>,
     sources: Vec<Source>,
     /// The index of each column's prediction.
     predictions: Vec<usize>,
@@ -153,16 +159,19 @@ impl<W: Weight> Horde<W> {
             for (r, &source) in slot.cumulants.iter_mut().zip(&slot.sources) {
                 *r = signals.value(source, |k| on.is_some_and(|o| o.get(k) == Some(&true)));
             }
-            // The slices are the group's size: this cannot fail. One pass over each active weight
-            // row (`learn::group`'s `fused`), the same result as `predict` then `learn`.
-            stopped += if fused {
-                slot.group
-                    .predict_and_learn(&bank.active, gamma, &slot.cumulants, &mut slot.deltas)
-            } else {
-                slot.group.predict(&bank.active);
-                slot.group.learn(gamma, &slot.cumulants, &mut slot.deltas)
-            }
-            .unwrap_or(0);
+            // The slices are the group's size: this cannot fail. The paper's group makes one pass
+            // over each active weight row (`learn::group`'s `fused`), the same result as `predict`
+            // then `learn`; the true-online and Autostep groups predict, then learn.
+            stopped += slot
+                .group
+                .step(
+                    &bank.active,
+                    gamma,
+                    &slot.cumulants,
+                    &mut slot.deltas,
+                    fused,
+                )
+                .unwrap_or(0);
         }
         self.stopped += stopped as u64;
         stopped
@@ -250,5 +259,7 @@ impl<W: Weight> Horde<W> {
     }
 }
 
+#[cfg(test)]
+mod learner_tests;
 #[cfg(test)]
 mod tests;

@@ -117,7 +117,7 @@ impl<W: Weight> Horde<W> {
     /// snapshot later allocates nothing: the Horde then holds its weights twice.
     pub fn prepare_snapshot_buffers(&mut self) {
         for slot in &mut self.slots {
-            let len = slot.group.weight_count();
+            let len = slot.group.value_count();
             if slot.spare.as_ref().is_none_or(|s| s.len() != len) {
                 slot.spare = Some(crate::learn::group::snapshot_buffer(len));
             }
@@ -128,7 +128,7 @@ impl<W: Weight> Horde<W> {
     /// are dropped).
     pub fn keep_snapshot_buffers(&mut self, snapshot: HordeSnapshot<W>) {
         for (slot, (_, weights)) in self.slots.iter_mut().zip(snapshot.groups) {
-            if weights.len() == slot.group.weight_count() {
+            if weights.len() == slot.group.value_count() {
                 slot.spare = Some(weights);
             }
         }

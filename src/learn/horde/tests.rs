@@ -6,7 +6,7 @@ use crate::learn::{
 };
 use crate::rng::Rng;
 
-fn names() -> SignalNames {
+pub(super) fn names() -> SignalNames {
     SignalNames {
         obs: (0..6).map(|i| format!("d{i}")).collect(),
         extra: vec!["elbow".into()],
@@ -14,13 +14,13 @@ fn names() -> SignalNames {
     }
 }
 
-fn family(text: &str) -> FamilySpec {
+pub(super) fn family(text: &str) -> FamilySpec {
     toml::from_str(text).unwrap()
 }
 
 /// `ticks` ticks of 6 persistent observation dimensions (raw = 100 × scaled), one extra input and a
 /// stall stimulus.
-fn stream(ticks: usize, seed: u64) -> Vec<(Vec<f64>, Vec<f64>, f64, bool)> {
+pub(super) fn stream(ticks: usize, seed: u64) -> Vec<(Vec<f64>, Vec<f64>, f64, bool)> {
     let mut rng = Rng::new(seed);
     let mut x: Vec<f64> = (0..6).map(|_| rng.next_f64()).collect();
     (0..ticks)

@@ -70,6 +70,16 @@ impl AutostepTd {
         self.params.sigma.value(dot(&self.weights, active))
     }
 
+    /// The weights.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// The eligibility trace.
+    pub fn traces(&self) -> &[f64] {
+        &self.traces
+    }
+
     /// The step sizes α_i.
     pub fn alphas(&self) -> &[f64] {
         &self.alphas

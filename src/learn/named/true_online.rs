@@ -43,6 +43,21 @@ impl TrueOnlineTd {
         }
     }
 
+    /// The weights.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// The dutch trace.
+    pub fn traces(&self) -> &[f64] {
+        &self.traces
+    }
+
+    /// `V_old`: the previous step's `V′` (0 at the start).
+    pub fn v_old(&self) -> f64 {
+        self.v_old
+    }
+
     /// wᵀx (linear output).
     pub fn predict(&self, active: &[usize]) -> f64 {
         dot(&self.weights, active)

@@ -1,9 +1,11 @@
 //! The Horde (`[horde]`) through the whole server: it learns and `/metrics` shows it
 //! ([`learning`]); its checkpoints are written with the run's and resumed, and a mismatching or
 //! corrupted one starts it afresh while the server runs on ([`resume`]); and control is exactly the
-//! same with a Horde, even one so large that it skips ticks ([`control`]).
+//! same with a Horde, even one so large that it skips ticks ([`control`]); every learner a family can
+//! name is checkpointed and resumed ([`learners`]).
 
 mod control;
+mod learners;
 mod learning;
 mod resume;
 

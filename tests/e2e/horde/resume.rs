@@ -35,7 +35,7 @@ fn config_in(dir: &Path, taus: &str) -> Config {
 
 /// Runs `cfg` for `ticks` records under the paused clock; returns the run's folder once shut down, and
 /// the records.
-async fn run_with_records(cfg: Config, ticks: usize) -> (PathBuf, Vec<TickRecord>) {
+pub(super) async fn run_with_records(cfg: Config, ticks: usize) -> (PathBuf, Vec<TickRecord>) {
     let (records, server) = run_sim(cfg, ticks).await;
     let run_dir = server.checkpoints().run_dir.clone().expect("autosave");
     server.shutdown().await;
@@ -43,11 +43,11 @@ async fn run_with_records(cfg: Config, ticks: usize) -> (PathBuf, Vec<TickRecord
 }
 
 /// Runs `cfg` for `ticks` records under the paused clock; returns the run's folder once shut down.
-async fn run(cfg: Config, ticks: usize) -> PathBuf {
+pub(super) async fn run(cfg: Config, ticks: usize) -> PathBuf {
     run_with_records(cfg, ticks).await.0
 }
 
-fn horde_files(dir: &Path) -> Vec<PathBuf> {
+pub(super) fn horde_files(dir: &Path) -> Vec<PathBuf> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .unwrap()
         .filter_map(|e| e.ok())
@@ -65,7 +65,7 @@ const BIAS: &str = "probe/bias@10";
 
 /// A Horde of `cfg`'s families that has learned every one of `records` in a row (what the server's
 /// Horde learns when it keeps up).
-fn learned_snapshot(cfg: &Config, records: &[TickRecord]) -> HordeSnapshot<f32> {
+pub(super) fn learned_snapshot(cfg: &Config, records: &[TickRecord]) -> HordeSnapshot<f32> {
     let mut horde: Horde<f32> =
         Horde::new(cfg.horde.families.clone(), &cfg.signal_names()).unwrap();
     for r in records {

@@ -154,3 +154,48 @@ fn a_write_the_disk_refuses_leaves_no_temporary_file() {
     assert_eq!(left, ["horde-77.bin"]);
     let _ = std::fs::remove_dir_all(&d);
 }
+
+#[test]
+fn true_online_and_autostep_state_reads_back_exactly() {
+    // A family of each new learner beside the paper's: V_old in the header, Autostep's step sizes, h
+    // and v after its weights (four blocks per group).
+    let mut families = horde().families().to_vec();
+    for (name, learner) in [("dutch", "true_online"), ("auto", "autostep")] {
+        let mut f = families[0].clone();
+        f.name = name.into();
+        f.learner = toml::from_str::<FamilySpec>(&format!(
+            "name = \"x\"\ncumulants = [\"bias\"]\ntaus = [2.0]\nlambda = 0.9\nalpha = 0.01\n\
+             learner = \"{learner}\"\nfeatures = {{ kind = \"one_dim\", all_obs = true, tiles = 4 }}"
+        ))
+        .unwrap()
+        .learner;
+        families.push(f);
+    }
+    let names = SignalNames {
+        obs: (0..5).map(|i| format!("d{i}")).collect(),
+        extra: vec![],
+        stimuli: vec!["stall".into()],
+    };
+    let mut h = Horde::<f32>::new(families.clone(), &names).unwrap();
+    for t in 0..300 {
+        let obs: Vec<f64> = (0..5).map(|d| ((t * (d + 1)) % 17) as f64 / 17.0).collect();
+        h.step(&TickSignals {
+            obs: &obs,
+            raw: &obs,
+            extra: &[],
+            stimuli: &[t % 40 == 0],
+        });
+    }
+    let snap = snapshot(&mut h);
+    assert!(snap.groups.iter().any(|(s, _)| s.dutch.is_some()));
+    let (state, values) = snap.groups.iter().find(|(s, _)| s.autostep).unwrap();
+    assert_eq!(values.len(), 4 * state.coef.len() * state.a.len());
+    let d = dir("learners");
+    let path = write_atomic(&d, 5, &snap).unwrap();
+    let (_, back) = read::<f32>(&path).unwrap();
+    assert_eq!(back, snap);
+    let mut fresh = Horde::<f32>::new(families, &names).unwrap();
+    fresh.restore_snapshot(&back).unwrap();
+    assert_eq!(fresh.state(), h.state());
+    let _ = std::fs::remove_dir_all(&d);
+}
