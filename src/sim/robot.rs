@@ -200,6 +200,13 @@ impl SimRobot {
         std::mem::take(&mut self.output)
     }
 
+    /// Like [`SimRobot::take_output`], giving the robot `spare` (emptied) to send into from now on: a
+    /// caller that hands back each step's buffer once it is done with it allocates nothing once warm.
+    pub fn swap_output(&mut self, mut spare: Vec<u8>) -> Vec<u8> {
+        spare.clear();
+        std::mem::replace(&mut self.output, spare)
+    }
+
     /// The physical truth.
     pub fn world(&self) -> &World {
         &self.world

@@ -9,6 +9,8 @@
 //! - [`results`]: where a study writes, never over earlier results; [`shard`]: a study in slices.
 
 pub(crate) mod design_notes;
+#[cfg(test)]
+mod drivers_agree;
 pub mod interaction;
 pub(crate) mod plot_style;
 pub mod results;

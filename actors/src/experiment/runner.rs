@@ -32,6 +32,9 @@ pub enum RunError {
     /// The server could not start.
     #[error("cannot start the server: {0}")]
     Server(String),
+    /// The stepped driver could not go on.
+    #[error("stepped run: {0}")]
+    Stepped(#[from] crate::pipeline::stepped::SteppedError),
     /// The feed closed before the run was complete.
     #[error("the tick feed closed after {0} records")]
     FeedClosed(u64),
@@ -58,6 +61,9 @@ pub(crate) struct RunRequest {
 pub(crate) trait Collect {
     /// What it makes of them.
     type Output;
+    /// Whether [`Collect::start`] uses the server (sends it commands or poses): such a run is driven by
+    /// the actors, the others by the stepped driver ([`crate::pipeline::stepped`]).
+    const DRIVES_THE_SERVER: bool = false;
     /// Called once the server runs, before the first record (e.g. to start a simulated operator).
     fn start(&mut self, _server: &Server) {}
     /// Called with every tick record, in order.
@@ -83,8 +89,33 @@ pub(crate) struct Finished<T> {
     pub(crate) wall_s: f64,
 }
 
-/// Runs `request` under a paused clock and hands every record to `collector`.
+/// How a run's tick graph is driven under the paused clock.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Driver {
+    /// The server's actors, each its own task.
+    Actors,
+    /// One loop stepping the same stages in order ([`crate::pipeline::stepped`]).
+    Stepped,
+}
+
+/// Runs `request` under a paused clock and hands every record to `collector`: stepped when the
+/// configuration and the collector allow it ([`Driver`]), on the actors otherwise. Both give the same
+/// records.
 pub(crate) fn run_paused<C: Collect>(
+    request: RunRequest,
+    collector: C,
+) -> Result<Finished<C::Output>, RunError> {
+    let driver = if !C::DRIVES_THE_SERVER && crate::pipeline::stepped::steppable(&request.config) {
+        Driver::Stepped
+    } else {
+        Driver::Actors
+    };
+    run_paused_on(driver, request, collector)
+}
+
+/// Runs `request` under a paused clock on `driver` and hands every record to `collector`.
+pub(crate) fn run_paused_on<C: Collect>(
+    driver: Driver,
     request: RunRequest,
     collector: C,
 ) -> Result<Finished<C::Output>, RunError> {
@@ -119,7 +150,10 @@ pub(crate) fn run_paused<C: Collect>(
         .build()
         .map_err(RunError::Runtime)?;
     let link = recorder.as_ref().map(|r| r.link.clone());
-    let outcome = rt.block_on(collect(config, ticks, link, collector));
+    let outcome = match driver {
+        Driver::Actors => rt.block_on(collect(config, ticks, link, collector)),
+        Driver::Stepped => rt.block_on(collect_stepped(config, ticks, link, collector)),
+    };
     drop(rt);
     let report = recorder.map(Recorder::join).unwrap_or_default();
     let (output, dropped, lagged) = outcome?;
@@ -164,6 +198,24 @@ async fn collect<C: Collect>(
     let dropped = server.feed().recorder_dropped();
     server.shutdown().await;
     Ok((output?, dropped, lagged))
+}
+
+async fn collect_stepped<C: Collect>(
+    config: Config,
+    ticks: u64,
+    recorder: Option<crate::storage::recorder::RecorderLink>,
+    mut collector: C,
+) -> Result<(C::Output, u64, u64), RunError> {
+    let mut stepper = crate::pipeline::stepped::Stepper::start(&config, recorder.as_ref()).await?;
+    // The recorder's queue is held by the feed and the event log from here on.
+    drop(recorder);
+    for _ in 0..ticks {
+        collector.record(stepper.tick()?);
+    }
+    let output = collector.finish().await;
+    let dropped = stepper.feed().recorder_dropped();
+    stepper.finish().await;
+    Ok((output?, dropped, 0))
 }
 
 /// Runs `run` on every spec, on `threads` OS threads, and returns the results in spec order.
