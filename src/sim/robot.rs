@@ -107,6 +107,8 @@ pub struct SimRobot {
     /// Fault injection: report packet 35 as mode + 1 (the firmware quirk of create_robot issue 64).
     mode_quirk: bool,
     stream_ids: Vec<u8>,
+    /// Reused for every stream frame: a copy of the ids it reports, and the frame's bytes.
+    frame_scratch: (Vec<u8>, Vec<u8>),
     stream_paused: bool,
     drive: DriveTarget,
     requested: Requested,
@@ -137,6 +139,7 @@ impl SimRobot {
             line_baud: None,
             mode_quirk: false,
             stream_ids: Vec::new(),
+            frame_scratch: (Vec::new(), Vec::new()),
             stream_paused: false,
             drive: DriveTarget::STOP,
             requested: Requested::default(),

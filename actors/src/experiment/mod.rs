@@ -1,7 +1,8 @@
 //! The paper's experiments, reproduced on the simulated Create through the real actor runtime.
 //!
 //! Every experiment is a folder that plans interleaved runs (run 0 reactive, run 1 Pavlovian, …), hands
-//! each to the one `runner` (the real server under a paused clock, on a pool of OS threads), and
+//! each to the one `runner` (the server's stages under a paused clock — on the actors, or stepped in order
+//! by [`stepped`] — on a pool of OS threads), and
 //! analyses, tabulates and plots what comes back:
 //!
 //! - [`stall`]: "Reducing Motor Stalls" (over-current observations and efficiency, Figures 1 and 2);
@@ -17,6 +18,7 @@ pub mod results;
 pub(crate) mod runner;
 pub mod shard;
 pub mod stall;
+pub mod stepped;
 pub(crate) mod tables;
 
 use pavlov::control::Mode;

@@ -1,10 +1,13 @@
-//! The one way an experiment runs: the real server on the simulated Create under tokio's paused clock, and
-//! one scheduler that spreads the runs over OS threads.
+//! The one way an experiment runs: the server's stages on the simulated Create under tokio's paused clock,
+//! and one scheduler that spreads the runs over OS threads.
 //!
 //! [`run_paused`] gives each run its own single-threaded runtime with the clock paused, so a 6-minute run
 //! takes as long as the computation does and the same seed always gives the same ticks. It starts the
 //! server (with the recorder when the run is recorded), lets a [`Collect`] see every tick record as it is
-//! published, and shuts the server down in order. [`run_all`] runs a list of runs on `threads` threads;
+//! published, and shuts the server down in order. A run whose collector sends the server nothing, on a
+//! line without faults, is instead stepped by one loop ([`crate::experiment::stepped`], [`Driver`]) that
+//! calls the same per-tick functions without the actors' channels and wakes; both drivers record the same
+//! ticks bit for bit. [`run_all`] runs a list of runs on `threads` threads;
 //! each run's outcome depends only on its own seed, never on the scheduling. An experiment is a folder
 //! that plans its runs, supplies a [`Collect`], and analyses what comes back.
 
@@ -34,7 +37,7 @@ pub enum RunError {
     Server(String),
     /// The stepped driver could not go on.
     #[error("stepped run: {0}")]
-    Stepped(#[from] crate::pipeline::stepped::SteppedError),
+    Stepped(#[from] crate::experiment::stepped::SteppedError),
     /// The feed closed before the run was complete.
     #[error("the tick feed closed after {0} records")]
     FeedClosed(u64),
@@ -62,7 +65,7 @@ pub(crate) trait Collect {
     /// What it makes of them.
     type Output;
     /// Whether [`Collect::start`] uses the server (sends it commands or poses): such a run is driven by
-    /// the actors, the others by the stepped driver ([`crate::pipeline::stepped`]).
+    /// the actors, the others by the stepped driver ([`crate::experiment::stepped`]).
     const DRIVES_THE_SERVER: bool = false;
     /// Called once the server runs, before the first record (e.g. to start a simulated operator).
     fn start(&mut self, _server: &Server) {}
@@ -94,7 +97,7 @@ pub(crate) struct Finished<T> {
 pub(crate) enum Driver {
     /// The server's actors, each its own task.
     Actors,
-    /// One loop stepping the same stages in order ([`crate::pipeline::stepped`]).
+    /// One loop stepping the same stages in order ([`crate::experiment::stepped`]).
     Stepped,
 }
 
@@ -105,7 +108,8 @@ pub(crate) fn run_paused<C: Collect>(
     request: RunRequest,
     collector: C,
 ) -> Result<Finished<C::Output>, RunError> {
-    let driver = if !C::DRIVES_THE_SERVER && crate::pipeline::stepped::steppable(&request.config) {
+    let driver = if !C::DRIVES_THE_SERVER && crate::experiment::stepped::steppable(&request.config)
+    {
         Driver::Stepped
     } else {
         Driver::Actors
@@ -206,7 +210,8 @@ async fn collect_stepped<C: Collect>(
     recorder: Option<crate::storage::recorder::RecorderLink>,
     mut collector: C,
 ) -> Result<(C::Output, u64, u64), RunError> {
-    let mut stepper = crate::pipeline::stepped::Stepper::start(&config, recorder.as_ref()).await?;
+    let mut stepper =
+        crate::experiment::stepped::Stepper::start(&config, recorder.as_ref()).await?;
     // The recorder's queue is held by the feed and the event log from here on.
     drop(recorder);
     for _ in 0..ticks {

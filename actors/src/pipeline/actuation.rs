@@ -19,6 +19,7 @@ use pavlov::oi::Model;
 use pavlov::oi::command::Command;
 use pavlov::record::TickRecord;
 use tokio::sync::{mpsc, watch};
+use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
 use pavlov::event::EventKind;
@@ -37,6 +38,8 @@ pub(crate) struct Actuation {
     last_written: Option<Action>,
     last_stop: Option<pavlov::record::SafetyStop>,
     stats: ActuationStats,
+    /// The command being written, encoded (one buffer, reused).
+    encoded: Vec<u8>,
 }
 
 impl Actuation {
@@ -49,6 +52,7 @@ impl Actuation {
             last_written: None,
             last_stop: None,
             stats: ActuationStats::default(),
+            encoded: Vec::with_capacity(8),
         }
     }
 
@@ -57,13 +61,10 @@ impl Actuation {
             right: action.right_mm_s,
             left: action.left_mm_s,
         };
-        match cmd.encode(self.model) {
-            Ok(bytes) => {
-                let req = WriteRequest {
-                    bytes,
-                    tick_deadline: tick.map(|t| t.deadline),
-                };
-                if !writer.offer(req) {
+        self.encoded.clear();
+        match cmd.encode_into(self.model, &mut self.encoded) {
+            Ok(()) => {
+                if !writer.offer(&self.encoded, tick.map(|t| t.deadline)) {
                     self.stats.writer_full += 1;
                 } else {
                     self.stats.commands += 1;
@@ -177,14 +178,19 @@ impl Actuation {
 }
 
 /// Where actuation's commands go: the link writer's queue in the actors, the simulated robot's input in
-/// the stepped virtual-time driver ([`crate::pipeline::stepped`]).
+/// the stepped virtual-time driver ([`crate::experiment::stepped`]).
 pub(crate) trait CommandQueue {
-    /// Takes `req` without waiting; false when it cannot be taken now (the command is lost and counted).
-    fn offer(&mut self, req: WriteRequest) -> bool;
+    /// Takes the encoded command `bytes` (of the tick due at `tick_deadline`, if a tick's) without
+    /// waiting; false when it cannot be taken now (the command is lost and counted).
+    fn offer(&mut self, bytes: &[u8], tick_deadline: Option<Instant>) -> bool;
 }
 
 impl CommandQueue for mpsc::Sender<WriteRequest> {
-    fn offer(&mut self, req: WriteRequest) -> bool {
+    fn offer(&mut self, bytes: &[u8], tick_deadline: Option<Instant>) -> bool {
+        let req = WriteRequest {
+            bytes: bytes.to_vec(),
+            tick_deadline,
+        };
         self.try_send(req).is_ok()
     }
 }
@@ -276,7 +282,6 @@ pub(crate) async fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tokio::time::Instant;
 
     fn tick(seq: u64) -> Tick {
         let now = Instant::now();

@@ -65,7 +65,7 @@ fn apply(
 }
 
 /// Gating's decision on learning's output `p`; `engaged` is whether the fixed response held the previous
-/// tick (a change is logged). The actor and the stepped virtual-time driver ([`crate::pipeline::stepped`])
+/// tick (a change is logged). The actor and the stepped virtual-time driver ([`crate::experiment::stepped`])
 /// both call it, so there is one per-tick path.
 pub(crate) fn decide(stage: &mut GatingStage, p: Learned, engaged: &mut bool) -> Decision {
     let last_seq = p.observation.tick.seq;

@@ -309,7 +309,7 @@ impl Learning {
     /// fresh enough to learn from ([`Learning::learn`], called after the output has gone on). `pose` is
     /// the newest skeleton (read only when the stimulus is an elbow's); `followed` is actuation's last record (its tick, whether its command was the
     /// default policy's, its behaviour probability). The actor and the stepped virtual-time driver
-    /// ([`crate::pipeline::stepped`]) both call it, so there is one per-tick path.
+    /// ([`crate::experiment::stepped`]) both call it, so there is one per-tick path.
     pub(crate) fn act(
         &mut self,
         obs: Observation,

@@ -19,7 +19,7 @@
 //!   the tests, without blocking.
 //!
 //! In virtual time (experiments, tests) the same stages can instead be stepped in order by one loop,
-//! [`stepped`], which calls the per-tick functions these actors call, without their channels and wakes.
+//! `crate::experiment::stepped`, which calls the per-tick functions these actors call, without their channels and wakes.
 //!
 //! Every channel on the tick path is bounded and written with `try_send`: a stage that falls behind loses
 //! its oldest input (and actuation's watchdog stops the wheels), it never makes an earlier stage wait.
@@ -31,7 +31,6 @@ pub(crate) mod learning;
 pub(crate) mod router;
 pub(crate) mod sensor_ingest;
 pub mod skeleton_ingest;
-pub mod stepped;
 pub(crate) mod ticker;
 
 use std::time::Duration;
@@ -99,7 +98,7 @@ pub(crate) struct Pipeline {
     pub(crate) snapshots: mpsc::Sender<oneshot::Sender<StartState>>,
 }
 
-/// Gating and actuation for `config`, as the tick graph runs them (the actors or [`stepped`]).
+/// Gating and actuation for `config`, as the tick graph runs them (the actors or `crate::experiment::stepped`).
 pub(crate) fn stages(config: &Config) -> (GatingStage, Actuation) {
     let gating = GatingStage::new(
         config.control.mode,

@@ -69,7 +69,7 @@ pub(crate) struct IngestChannels {
 
 /// What the ingest keeps between ticks: the newest frame and what is summed or latched over every frame
 /// since the previous tick. The actor and the stepped virtual-time driver
-/// ([`crate::pipeline::stepped`]) both run the ingest through it, so there is one per-tick path.
+/// ([`crate::experiment::stepped`]) both run the ingest through it, so there is one per-tick path.
 pub(crate) struct IngestState {
     newest: Option<(SensorValues, Instant)>,
     distance: i32,

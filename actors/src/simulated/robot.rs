@@ -137,7 +137,7 @@ impl Stepped {
 /// The robot sends its next output into `spare` (taken): hand each step's buffer back with
 /// [`Stepped::recycle`] and a step allocates nothing once warm (without link faults, whose injector
 /// passes the buffer through). The simulator task and the stepped virtual-time driver
-/// ([`crate::pipeline::stepped`]) both step the robot through it.
+/// ([`crate::experiment::stepped`]) both step the robot through it.
 pub(crate) fn step_robot(
     robot: &mut SimRobot,
     faults: &mut FaultInjector,

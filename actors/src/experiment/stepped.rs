@@ -40,15 +40,15 @@ use pavlov::skeleton::PoseTracker;
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::Instant;
 
-use super::actuation::{Actuation, CommandQueue, followed_of};
-use super::gating;
-use super::learning::Learning;
-use super::sensor_ingest::IngestState;
-use super::ticker::Tick;
 use crate::bus::{EventLog, StartState, TickFeed};
 use crate::link::LinkError;
 use crate::link::supervisor::Supervisor;
-use crate::link::writer::{WriteRequest, WriterControl};
+use crate::link::writer::WriterControl;
+use crate::pipeline::actuation::{Actuation, CommandQueue, followed_of};
+use crate::pipeline::gating;
+use crate::pipeline::learning::Learning;
+use crate::pipeline::sensor_ingest::IngestState;
+use crate::pipeline::ticker::Tick;
 use crate::server::{ServerError, build_learning, feed_and_events};
 use crate::simulated::robot::{SIM_STEP, host_to_robot, step_robot};
 use crate::storage::recorder::{RecorderInput, RecorderLink};
@@ -100,8 +100,8 @@ impl Wire {
 }
 
 impl CommandQueue for Wire {
-    fn offer(&mut self, req: WriteRequest) -> bool {
-        self.send(&req.bytes);
+    fn offer(&mut self, bytes: &[u8], _tick_deadline: Option<Instant>) -> bool {
+        self.send(bytes);
         true
     }
 }
@@ -184,7 +184,7 @@ impl Stepper {
         let supervisor = Supervisor::new(config, None, control_tx, t0).with_events(events.clone());
         let initial = Box::new(learning.initial_start_state(&events));
         learning.attach_events(events.clone());
-        let (gating, actuation) = super::stages(config);
+        let (gating, actuation) = crate::pipeline::stages(config);
         let (snapshots_tx, snapshots) = mpsc::channel(2);
         if let Some(r) = recorder {
             let attach = RecorderInput::Attach {
