@@ -48,18 +48,16 @@ fn scratch(name: &str) -> PathBuf {
     dir
 }
 
-/// Runs `config` for `ticks` on `driver`, recorded into a scratch folder; returns the run and the
-/// recording's ticks (as protobuf messages) and events.
-fn run(
-    driver: Driver,
-    config: Config,
-    ticks: u64,
-    name: &str,
-) -> (
+/// What a run made: the run (with the collector's hash), and its recording's ticks (as protobuf messages)
+/// and events.
+type Made = (
     Finished<(String, u64)>,
     Vec<Vec<u8>>,
     Vec<pavlov::event::Event>,
-) {
+);
+
+/// Runs `config` for `ticks` on `driver`, recorded into a scratch folder.
+fn run(driver: Driver, config: Config, ticks: u64, name: &str) -> Made {
     let dir = scratch(name);
     let request = RunRequest {
         config,
