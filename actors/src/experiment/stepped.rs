@@ -29,6 +29,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use futures_util::future::BoxFuture;
 use pavlov::agent::GatingStage;
 use pavlov::config::Config;
 use pavlov::oi::handshake;
@@ -41,9 +42,10 @@ use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::Instant;
 
 use crate::bus::{EventLog, StartState, TickFeed};
-use crate::link::LinkError;
+use crate::link::opener::LinkOpener;
 use crate::link::supervisor::Supervisor;
 use crate::link::writer::WriterControl;
+use crate::link::{LinkError, LinkReader, LinkWriter};
 use crate::pipeline::actuation::{Actuation, CommandQueue, followed_of};
 use crate::pipeline::gating;
 use crate::pipeline::learning::Learning;
@@ -103,6 +105,31 @@ impl CommandQueue for Wire {
     fn offer(&mut self, bytes: &[u8], _tick_deadline: Option<Instant>) -> bool {
         self.send(bytes);
         true
+    }
+}
+
+/// The stepped run's stand-in for the simulator's plug. Supervision is built with it, as the server's is
+/// with [`crate::simulated::device::SimDevice`], so it decides exactly as it would on the actors; but a
+/// reopen (which reconnects a running simulator task) cannot be made here: the stepper stops the run at
+/// the close that begins one ([`SteppedError::Reopen`]).
+struct NoReopen;
+
+impl LinkOpener for NoReopen {
+    fn open(&mut self) -> BoxFuture<'static, Result<(LinkReader, LinkWriter), LinkError>> {
+        Box::pin(async {
+            Err(LinkError::Io(std::io::Error::new(
+                std::io::ErrorKind::Unsupported,
+                "a stepped run cannot reopen its link",
+            )))
+        })
+    }
+
+    fn describe(&self) -> String {
+        "the stepped simulated Create".into()
+    }
+
+    fn rescue_baud(&mut self, _rates: Vec<u32>) -> BoxFuture<'static, ()> {
+        Box::pin(async {})
     }
 }
 
@@ -181,7 +208,9 @@ impl Stepper {
 
         let (feed, events) = feed_and_events(recorder);
         let (control_tx, control) = mpsc::channel(8);
-        let supervisor = Supervisor::new(config, None, control_tx, t0).with_events(events.clone());
+        let opener: Box<dyn LinkOpener> = Box::new(NoReopen);
+        let supervisor =
+            Supervisor::new(config, Some(opener), control_tx, t0).with_events(events.clone());
         let initial = Box::new(learning.initial_start_state(&events));
         learning.attach_events(events.clone());
         let (gating, actuation) = crate::pipeline::stages(config);
