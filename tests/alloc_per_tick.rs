@@ -1,5 +1,5 @@
 //! Heap allocations per simulated tick on the stepped virtual-time path
-//! (`pavlov_actors::experiment::stepped`), counted by a counting global allocator over steady-state ticks
+//! (`actors/src/experiment/stepped.rs`), counted by a counting global allocator over steady-state ticks
 //! of the stall study's configuration. The bound is what the path guarantees once warm: every buffer on
 //! it is reused, and what is still allocated per tick is listed in the book (performance.md, "Virtual
 //! time"). This binary holds one test so that no other test allocates while it counts.
@@ -8,7 +8,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use pavlov::config::Config;
-use pavlov_actors::experiment::stepped::bench_support::SteppedRun;
+use pavlov_actors::experiment::stepped_bench_support::SteppedRun;
 
 /// Counts every allocation and reallocation, then hands it to the system allocator.
 struct Counting;
