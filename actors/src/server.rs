@@ -188,15 +188,8 @@ impl ServerBuilder {
         let obs_names = learning.obs_names();
         let horde = learning.horde_view();
         let params_at_start = learning.params_in_force();
-        let (feed, events, recorder_commands) = match &recorder {
-            Some(r) => {
-                let feed = TickFeed::new().with_recorder(r.input.clone());
-                let dropped = feed.recorder_dropped_counter();
-                let events = EventLog::new().with_recorder(r.input.clone(), dropped);
-                (feed, events, Some(r.commands.clone()))
-            }
-            None => (TickFeed::new(), EventLog::new(), None),
-        };
+        let (feed, events) = feed_and_events(recorder.as_ref());
+        let recorder_commands = recorder.as_ref().map(|r| r.commands.clone());
         let ingest = IngestLink {
             reader,
             parser,
@@ -274,6 +267,19 @@ impl ServerBuilder {
             writer,
             stopper,
         })
+    }
+}
+
+/// The tick feed and the event log, both handing what they publish to `recorder` too when there is one.
+pub(crate) fn feed_and_events(recorder: Option<&RecorderLink>) -> (TickFeed, EventLog) {
+    match recorder {
+        Some(r) => {
+            let feed = TickFeed::new().with_recorder(r.input.clone());
+            let dropped = feed.recorder_dropped_counter();
+            let events = EventLog::new().with_recorder(r.input.clone(), dropped);
+            (feed, events)
+        }
+        None => (TickFeed::new(), EventLog::new()),
     }
 }
 
@@ -488,7 +494,7 @@ pub struct CheckpointStart {
 /// Learning for `config`: resumed from `[checkpoint] resume_from`, or from the newest valid checkpoint
 /// if `[checkpoint] resume`, and checkpointing into a new run folder if `[checkpoint] autosave`. What
 /// was resumed, skipped and overridden is logged.
-fn build_learning(config: &Config) -> Result<(Learning, CheckpointStart), ServerError> {
+pub(crate) fn build_learning(config: &Config) -> Result<(Learning, CheckpointStart), ServerError> {
     let mut learning = Learning::new(config).map_err(|e| ServerError::Learning(e.to_string()))?;
     let c = &config.checkpoint;
     let mut restore = |cp: &Checkpoint| learning.resume(cp).map_err(|e| e.to_string());

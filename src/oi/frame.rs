@@ -62,16 +62,31 @@ pub fn byte_sum(bytes: &[u8]) -> u8 {
 
 /// The robot's side: one whole frame for `ids` with `values` (absent values are sent as 0).
 pub fn encode_stream_frame(ids: &[u8], values: &SensorValues) -> Result<Vec<u8>, OiError> {
+    let mut frame = Vec::with_capacity(stream_payload_len(ids)? + 3);
+    encode_stream_frame_into(ids, values, &mut frame)?;
+    Ok(frame)
+}
+
+/// Like [`encode_stream_frame`], into `frame` (cleared first; left empty on error): a caller that keeps
+/// the buffer encodes every frame without allocating.
+pub fn encode_stream_frame_into(
+    ids: &[u8],
+    values: &SensorValues,
+    frame: &mut Vec<u8>,
+) -> Result<(), OiError> {
+    frame.clear();
     let n = stream_payload_len(ids)?;
-    let mut frame = Vec::with_capacity(n + 3);
     frame.push(STREAM_HEADER);
     frame.push(n as u8); // stream_payload_len guarantees n <= 255
     for &id in ids {
         frame.push(id);
-        encode_data(id, values, &mut frame)?;
+        if let Err(e) = encode_data(id, values, frame) {
+            frame.clear();
+            return Err(e);
+        }
     }
-    frame.push(checksum_for(&frame));
-    Ok(frame)
+    frame.push(checksum_for(frame));
+    Ok(())
 }
 
 /// True when the bytes of a whole frame (header through checksum) sum to 0 mod 256.

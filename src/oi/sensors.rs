@@ -9,11 +9,39 @@ use serde::{Deserialize, Serialize};
 /// The number of packet-id slots: ids 0..=58 (only 7..=58 hold single packets).
 pub const PACKET_SLOTS: usize = 59;
 
-/// Raw values of single sensor packets 7–58, each present or absent.
+/// Raw values of single sensor packets 7–58, each present or absent. Held inline (no heap), so a
+/// snapshot is made, copied and dropped without allocating: the parser makes one per frame and every
+/// tick's record holds one.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SensorValues {
-    values: Vec<i32>,
+    #[serde(with = "slots_serde")]
+    values: [i32; PACKET_SLOTS],
     present: u64,
+}
+
+/// Serde for the slots as a sequence of [`PACKET_SLOTS`] numbers, as when they were a `Vec` (serde's
+/// derive stops at arrays of 32).
+mod slots_serde {
+    use serde::de::Error;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    use super::PACKET_SLOTS;
+
+    pub(super) fn serialize<S: Serializer>(
+        slots: &[i32; PACKET_SLOTS],
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        s.collect_seq(slots.iter())
+    }
+
+    pub(super) fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<[i32; PACKET_SLOTS], D::Error> {
+        let v = Vec::<i32>::deserialize(d)?;
+        let n = v.len();
+        v.try_into()
+            .map_err(|_| D::Error::invalid_length(n, &"one value per packet-id slot (59)"))
+    }
 }
 
 impl Default for SensorValues {
@@ -26,7 +54,7 @@ impl SensorValues {
     /// An empty snapshot: no packet present.
     pub fn new() -> Self {
         SensorValues {
-            values: vec![0; PACKET_SLOTS],
+            values: [0; PACKET_SLOTS],
             present: 0,
         }
     }

@@ -305,14 +305,24 @@ impl FaultInjector {
             text.push_str(&text::random_line(robot, &mut self.text_rng));
         }
         self.counters.text_bytes += text.len() as u64;
-        let mut wire = text.into_bytes();
-        wire.extend_from_slice(&out);
+        // Without text the robot's own buffer goes on to the line (a step allocates nothing).
+        let wire = if text.is_empty() {
+            out
+        } else {
+            let mut wire = text.into_bytes();
+            wire.extend_from_slice(&out);
+            wire
+        };
         let rates = ByteRates {
             drop: self.spec.drop,
             flip: self.spec.flip,
             duplicate: self.spec.duplicate,
         };
         self.counters.bytes_seen += wire.len() as u64;
+        if rates.is_none() {
+            // `corrupt` would return a copy, drawing and counting nothing.
+            return wire;
+        }
         let mut tally = ByteTally::default();
         let wire = bytes::corrupt(&wire, rates, &mut self.byte_rng, &mut tally);
         self.counters.dropped_bytes += tally.dropped;

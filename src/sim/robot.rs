@@ -107,6 +107,8 @@ pub struct SimRobot {
     /// Fault injection: report packet 35 as mode + 1 (the firmware quirk of create_robot issue 64).
     mode_quirk: bool,
     stream_ids: Vec<u8>,
+    /// Reused for every stream frame: a copy of the ids it reports, and the frame's bytes.
+    frame_scratch: (Vec<u8>, Vec<u8>),
     stream_paused: bool,
     drive: DriveTarget,
     requested: Requested,
@@ -137,6 +139,7 @@ impl SimRobot {
             line_baud: None,
             mode_quirk: false,
             stream_ids: Vec::new(),
+            frame_scratch: (Vec::new(), Vec::new()),
             stream_paused: false,
             drive: DriveTarget::STOP,
             requested: Requested::default(),
@@ -198,6 +201,13 @@ impl SimRobot {
     /// Bytes the robot has sent since the last call.
     pub fn take_output(&mut self) -> Vec<u8> {
         std::mem::take(&mut self.output)
+    }
+
+    /// Like [`SimRobot::take_output`], giving the robot `spare` (emptied) to send into from now on: a
+    /// caller that hands back each step's buffer once it is done with it allocates nothing once warm.
+    pub fn swap_output(&mut self, mut spare: Vec<u8>) -> Vec<u8> {
+        spare.clear();
+        std::mem::replace(&mut self.output, spare)
     }
 
     /// The physical truth.

@@ -1,7 +1,8 @@
 //! The paper's experiments, reproduced on the simulated Create through the real actor runtime.
 //!
 //! Every experiment is a folder that plans interleaved runs (run 0 reactive, run 1 Pavlovian, …), hands
-//! each to the one `runner` (the real server under a paused clock, on a pool of OS threads), and
+//! each to the one `runner` (the server's stages under a paused clock — on the actors, or stepped in order
+//! by `stepped` — on a pool of OS threads), and
 //! analyses, tabulates and plots what comes back:
 //!
 //! - [`stall`]: "Reducing Motor Stalls" (over-current observations and efficiency, Figures 1 and 2);
@@ -9,12 +10,15 @@
 //! - [`results`]: where a study writes, never over earlier results; [`shard`]: a study in slices.
 
 pub(crate) mod design_notes;
+#[cfg(test)]
+mod drivers_agree;
 pub mod interaction;
 pub(crate) mod plot_style;
 pub mod results;
 pub(crate) mod runner;
 pub mod shard;
 pub mod stall;
+pub(crate) mod stepped;
 pub(crate) mod tables;
 
 use pavlov::control::Mode;
@@ -49,4 +53,11 @@ pub(crate) fn progress_bar(runs: usize, visible: bool) -> indicatif::ProgressBar
         bar.set_style(style.progress_chars("=> "));
     }
     bar
+}
+
+/// What the allocation test (`tests/alloc_per_tick.rs`) drives: a stepped run, tick by tick.
+#[doc(hidden)]
+pub mod stepped_bench_support {
+    pub use super::stepped::SteppedError;
+    pub use super::stepped::bench_support::SteppedRun;
 }

@@ -1,10 +1,13 @@
-//! The one way an experiment runs: the real server on the simulated Create under tokio's paused clock, and
-//! one scheduler that spreads the runs over OS threads.
+//! The one way an experiment runs: the server's stages on the simulated Create under tokio's paused clock,
+//! and one scheduler that spreads the runs over OS threads.
 //!
 //! [`run_paused`] gives each run its own single-threaded runtime with the clock paused, so a 6-minute run
 //! takes as long as the computation does and the same seed always gives the same ticks. It starts the
 //! server (with the recorder when the run is recorded), lets a [`Collect`] see every tick record as it is
-//! published, and shuts the server down in order. [`run_all`] runs a list of runs on `threads` threads;
+//! published, and shuts the server down in order. A run whose collector sends the server nothing, on a
+//! line without faults, is instead stepped by one loop ([`crate::experiment::stepped`], [`Driver`]) that
+//! calls the same per-tick functions without the actors' channels and wakes; both drivers record the same
+//! ticks bit for bit. [`run_all`] runs a list of runs on `threads` threads;
 //! each run's outcome depends only on its own seed, never on the scheduling. An experiment is a folder
 //! that plans its runs, supplies a [`Collect`], and analyses what comes back.
 
@@ -32,6 +35,9 @@ pub enum RunError {
     /// The server could not start.
     #[error("cannot start the server: {0}")]
     Server(String),
+    /// The stepped driver could not go on.
+    #[error("stepped run: {0}")]
+    Stepped(#[from] crate::experiment::stepped::SteppedError),
     /// The feed closed before the run was complete.
     #[error("the tick feed closed after {0} records")]
     FeedClosed(u64),
@@ -58,6 +64,9 @@ pub(crate) struct RunRequest {
 pub(crate) trait Collect {
     /// What it makes of them.
     type Output;
+    /// Whether [`Collect::start`] uses the server (sends it commands or poses): such a run is driven by
+    /// the actors, the others by the stepped driver ([`crate::experiment::stepped`]).
+    const DRIVES_THE_SERVER: bool = false;
     /// Called once the server runs, before the first record (e.g. to start a simulated operator).
     fn start(&mut self, _server: &Server) {}
     /// Called with every tick record, in order.
@@ -83,8 +92,34 @@ pub(crate) struct Finished<T> {
     pub(crate) wall_s: f64,
 }
 
-/// Runs `request` under a paused clock and hands every record to `collector`.
+/// How a run's tick graph is driven under the paused clock.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Driver {
+    /// The server's actors, each its own task.
+    Actors,
+    /// One loop stepping the same stages in order ([`crate::experiment::stepped`]).
+    Stepped,
+}
+
+/// Runs `request` under a paused clock and hands every record to `collector`: stepped when the
+/// configuration and the collector allow it ([`Driver`]), on the actors otherwise. Both give the same
+/// records.
 pub(crate) fn run_paused<C: Collect>(
+    request: RunRequest,
+    collector: C,
+) -> Result<Finished<C::Output>, RunError> {
+    let driver = if !C::DRIVES_THE_SERVER && crate::experiment::stepped::steppable(&request.config)
+    {
+        Driver::Stepped
+    } else {
+        Driver::Actors
+    };
+    run_paused_on(driver, request, collector)
+}
+
+/// Runs `request` under a paused clock on `driver` and hands every record to `collector`.
+pub(crate) fn run_paused_on<C: Collect>(
+    driver: Driver,
     request: RunRequest,
     collector: C,
 ) -> Result<Finished<C::Output>, RunError> {
@@ -119,7 +154,10 @@ pub(crate) fn run_paused<C: Collect>(
         .build()
         .map_err(RunError::Runtime)?;
     let link = recorder.as_ref().map(|r| r.link.clone());
-    let outcome = rt.block_on(collect(config, ticks, link, collector));
+    let outcome = match driver {
+        Driver::Actors => rt.block_on(collect(config, ticks, link, collector)),
+        Driver::Stepped => rt.block_on(collect_stepped(config, ticks, link, collector)),
+    };
     drop(rt);
     let report = recorder.map(Recorder::join).unwrap_or_default();
     let (output, dropped, lagged) = outcome?;
@@ -164,6 +202,25 @@ async fn collect<C: Collect>(
     let dropped = server.feed().recorder_dropped();
     server.shutdown().await;
     Ok((output?, dropped, lagged))
+}
+
+async fn collect_stepped<C: Collect>(
+    config: Config,
+    ticks: u64,
+    recorder: Option<crate::storage::recorder::RecorderLink>,
+    mut collector: C,
+) -> Result<(C::Output, u64, u64), RunError> {
+    let mut stepper =
+        crate::experiment::stepped::Stepper::start(&config, recorder.as_ref()).await?;
+    // The recorder's queue is held by the feed and the event log from here on.
+    drop(recorder);
+    for _ in 0..ticks {
+        collector.record(stepper.tick()?);
+    }
+    let output = collector.finish().await;
+    let dropped = stepper.feed().recorder_dropped();
+    stepper.finish().await;
+    Ok((output?, dropped, 0))
 }
 
 /// Runs `run` on every spec, on `threads` OS threads, and returns the results in spec order.

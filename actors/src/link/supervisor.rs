@@ -76,16 +76,20 @@ impl Supervisor {
     }
 
     fn now_ms(&self) -> u64 {
-        Instant::now()
-            .saturating_duration_since(self.base)
+        self.ms_at(Instant::now())
+    }
+
+    /// Milliseconds from the start-up sequence to `at`.
+    fn ms_at(&self, at: Instant) -> u64 {
+        at.saturating_duration_since(self.base)
             .as_millis()
             .min(u128::from(u64::MAX)) as u64
     }
 
-    /// A valid frame arrived.
-    pub(crate) fn on_frame(&mut self, values: &SensorValues) {
+    /// A valid frame arrived `at` (the time its bytes were read).
+    pub(crate) fn on_frame(&mut self, values: &SensorValues, at: Instant) {
         let before = (self.monitor.state(), self.monitor.trip());
-        self.monitor.on_frame(self.now_ms(), values);
+        self.monitor.on_frame(self.ms_at(at), values);
         self.log_change(before);
     }
 
@@ -102,11 +106,11 @@ impl Supervisor {
         self
     }
 
-    /// Once per tick (`seq`): acts on what the monitor asks.
-    pub(crate) fn on_tick(&mut self, seq: u64) {
+    /// Once per tick (`seq`, taken `at`): acts on what the monitor asks.
+    pub(crate) fn on_tick(&mut self, seq: u64, at: Instant) {
         self.last_tick = Some(seq);
         let before = (self.monitor.state(), self.monitor.trip());
-        let now = self.now_ms();
+        let now = self.ms_at(at);
         match self.monitor.on_tick(now) {
             None => {}
             Some(LinkAction::Resync { with_mode }) => {

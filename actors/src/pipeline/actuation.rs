@@ -19,6 +19,7 @@ use pavlov::oi::Model;
 use pavlov::oi::command::Command;
 use pavlov::record::TickRecord;
 use tokio::sync::{mpsc, watch};
+use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
 use pavlov::event::EventKind;
@@ -37,6 +38,8 @@ pub(crate) struct Actuation {
     last_written: Option<Action>,
     last_stop: Option<pavlov::record::SafetyStop>,
     stats: ActuationStats,
+    /// The command being written, encoded (one buffer, reused).
+    encoded: Vec<u8>,
 }
 
 impl Actuation {
@@ -49,21 +52,19 @@ impl Actuation {
             last_written: None,
             last_stop: None,
             stats: ActuationStats::default(),
+            encoded: Vec::with_capacity(8),
         }
     }
 
-    fn write(&mut self, action: Action, tick: Option<&Tick>, writer: &mpsc::Sender<WriteRequest>) {
+    fn write(&mut self, action: Action, tick: Option<&Tick>, writer: &mut impl CommandQueue) {
         let cmd = Command::DriveDirect {
             right: action.right_mm_s,
             left: action.left_mm_s,
         };
-        match cmd.encode(self.model) {
-            Ok(bytes) => {
-                let req = WriteRequest {
-                    bytes,
-                    tick_deadline: tick.map(|t| t.deadline),
-                };
-                if writer.try_send(req).is_err() {
+        self.encoded.clear();
+        match cmd.encode_into(self.model, &mut self.encoded) {
+            Ok(()) => {
+                if !writer.offer(&self.encoded, tick.map(|t| t.deadline)) {
                     self.stats.writer_full += 1;
                 } else {
                     self.stats.commands += 1;
@@ -79,7 +80,7 @@ impl Actuation {
         &mut self,
         d: Decision,
         estop: bool,
-        writer: &mpsc::Sender<WriteRequest>,
+        writer: &mut impl CommandQueue,
     ) -> TickRecord {
         let obs = &d.learned.observation;
         let stop = safety::stop_reason(
@@ -130,7 +131,7 @@ impl Actuation {
     }
 
     /// Called on every tick: stops the wheels when the pipeline has not delivered a decision in time.
-    pub(crate) fn on_tick(&mut self, tick: &Tick, writer: &mpsc::Sender<WriteRequest>) -> bool {
+    pub(crate) fn on_tick(&mut self, tick: &Tick, writer: &mut impl CommandQueue) -> bool {
         let behind = safety::pipeline_stalled(
             tick.seq,
             self.last_decision_seq,
@@ -148,10 +149,60 @@ impl Actuation {
         behind
     }
 
+    /// The watchdog on tick `tick` ([`Actuation::on_tick`]), announcing a stall it detects on `events`;
+    /// true when it counted a new stall.
+    pub(crate) fn watchdog(
+        &mut self,
+        tick: &Tick,
+        writer: &mut impl CommandQueue,
+        events: &EventLog,
+    ) -> bool {
+        let stalls = self.stats.pipeline_stalls;
+        self.on_tick(tick, writer);
+        let stalled = self.stats.pipeline_stalls > stalls;
+        if stalled {
+            events.emit(
+                self.last_decision_seq,
+                EventKind::PipelineStall {
+                    ticks: self.safety.max_action_age_ticks,
+                },
+            );
+        }
+        stalled
+    }
+
     /// Counters so far.
     pub(crate) fn stats(&self) -> ActuationStats {
         self.stats
     }
+}
+
+/// Where actuation's commands go: the link writer's queue in the actors, the simulated robot's input in
+/// the stepped virtual-time driver ([`crate::experiment::stepped`]).
+pub(crate) trait CommandQueue {
+    /// Takes the encoded command `bytes` (of the tick due at `tick_deadline`, if a tick's) without
+    /// waiting; false when it cannot be taken now (the command is lost and counted).
+    fn offer(&mut self, bytes: &[u8], tick_deadline: Option<Instant>) -> bool;
+}
+
+impl CommandQueue for mpsc::Sender<WriteRequest> {
+    fn offer(&mut self, bytes: &[u8], tick_deadline: Option<Instant>) -> bool {
+        let req = WriteRequest {
+            bytes: bytes.to_vec(),
+            tick_deadline,
+        };
+        self.try_send(req).is_ok()
+    }
+}
+
+/// What learning needs of `record` on the next tick: its tick, whether its command was the default
+/// policy's, and its behaviour probability.
+pub(crate) fn followed_of(record: &TickRecord) -> (u64, bool, f64) {
+    (
+        record.seq,
+        followed_default(record.command, record.default_action),
+        record.behaviour_prob,
+    )
 }
 
 /// The channels actuation reads and writes.
@@ -185,7 +236,7 @@ pub(crate) async fn run(
         mut decisions,
         mut ticks,
         mut estop,
-        writer,
+        mut writer,
         feed,
         stats,
         events,
@@ -201,12 +252,8 @@ pub(crate) async fn run(
             d = decisions.recv() => {
                 let Some(d) = d else { break };
                 let latched = *estop.borrow();
-                let record = actuation.on_decision(d, latched, &writer);
-                followed.send_replace(Some((
-                    record.seq,
-                    followed_default(record.command, record.default_action),
-                    record.behaviour_prob,
-                )));
+                let record = actuation.on_decision(d, latched, &mut writer);
+                followed.send_replace(Some(followed_of(&record)));
                 feed.publish(Arc::new(record));
                 stats.send_replace(actuation.stats());
             }
@@ -214,34 +261,27 @@ pub(crate) async fn run(
                 if changed.is_err() { break; }
                 if *estop.borrow_and_update() {
                     // Do not wait for the next decision: stop the wheels the moment the e-stop latches.
-                    actuation.write(Action::STOP, None, &writer);
+                    actuation.write(Action::STOP, None, &mut writer);
                 }
             }
             changed = ticks.changed() => {
                 if changed.is_err() { break; }
                 let tick = *ticks.borrow_and_update();
-                if let Some(tick) = tick {
-                    let stalls = actuation.stats().pipeline_stalls;
-                    actuation.on_tick(&tick, &writer);
-                    if actuation.stats().pipeline_stalls > stalls {
-                        events.emit(
-                            actuation.last_decision_seq,
-                            EventKind::PipelineStall { ticks: actuation.safety.max_action_age_ticks },
-                        );
-                        stats.send_replace(actuation.stats());
-                    }
+                if let Some(tick) = tick
+                    && actuation.watchdog(&tick, &mut writer, &events)
+                {
+                    stats.send_replace(actuation.stats());
                 }
             }
         }
     }
     // Stop now; the writer adds pause + Passive when its queue closes.
-    actuation.write(Action::STOP, None, &writer);
+    actuation.write(Action::STOP, None, &mut writer);
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tokio::time::Instant;
 
     fn tick(seq: u64) -> Tick {
         let now = Instant::now();
@@ -254,19 +294,19 @@ mod tests {
 
     #[tokio::test]
     async fn a_stalled_pipeline_stops_the_wheels_once_after_three_ticks() {
-        let (tx, mut rx) = mpsc::channel(16);
+        let (mut tx, mut rx) = mpsc::channel(16);
         let mut a = Actuation::new(Model::Create1, SafetyConfig::default());
-        a.write(Action::new(100, 100), None, &tx);
+        a.write(Action::new(100, 100), None, &mut tx);
         a.last_decision_seq = Some(10);
         assert_eq!(rx.recv().await.unwrap().bytes, vec![145, 0, 100, 0, 100]);
         assert!(
-            !a.on_tick(&tick(13), &tx),
+            !a.on_tick(&tick(13), &mut tx),
             "3 ticks without a decision is still in time"
         );
         assert!(rx.try_recv().is_err());
-        assert!(a.on_tick(&tick(14), &tx));
+        assert!(a.on_tick(&tick(14), &mut tx));
         assert_eq!(rx.try_recv().unwrap().bytes, vec![145, 0, 0, 0, 0]);
-        assert!(a.on_tick(&tick(15), &tx));
+        assert!(a.on_tick(&tick(15), &mut tx));
         assert!(
             rx.try_recv().is_err(),
             "the stop is written once, not flooded"
@@ -276,10 +316,10 @@ mod tests {
 
     #[tokio::test]
     async fn no_decision_at_all_also_counts_as_stalled() {
-        let (tx, mut rx) = mpsc::channel(16);
+        let (mut tx, mut rx) = mpsc::channel(16);
         let mut a = Actuation::new(Model::Create2, SafetyConfig::default());
-        assert!(!a.on_tick(&tick(2), &tx));
-        assert!(a.on_tick(&tick(3), &tx));
+        assert!(!a.on_tick(&tick(2), &mut tx));
+        assert!(a.on_tick(&tick(3), &mut tx));
         assert_eq!(rx.try_recv().unwrap().bytes, vec![145, 0, 0, 0, 0]);
     }
 }

@@ -64,6 +64,24 @@ fn apply(
     }
 }
 
+/// Gating's decision on learning's output `p`; `engaged` is whether the fixed response held the previous
+/// tick (a change is logged). The actor and the stepped virtual-time driver ([`crate::experiment::stepped`])
+/// both call it, so there is one per-tick path.
+pub(crate) fn decide(stage: &mut GatingStage, p: Learned, engaged: &mut bool) -> Decision {
+    let last_seq = p.observation.tick.seq;
+    let o = &p.output;
+    let gate = stage.decide(last_seq, o.stimulus, &o.gate_inputs);
+    if gate.gate != *engaged {
+        *engaged = gate.gate;
+        tracing::debug!(
+            tick = last_seq, engaged = gate.gate, stimulus = o.stimulus, prediction = ?o.gate_value,
+            threshold = o.gate_threshold, rule = ?gate.rule, "the fixed response {}",
+            if gate.gate { "took over" } else { "let go" }
+        );
+    }
+    Decision { learned: p, gate }
+}
+
 /// The channels gating reads and writes.
 pub(crate) struct GatingChannels {
     /// Learning's output.
@@ -118,19 +136,8 @@ pub(crate) async fn run(
             }
             p = learned.recv() => {
                 let Some(p) = p else { break };
-                let last_seq = p.observation.tick.seq;
-                after = Some(last_seq);
-                let o = &p.output;
-                let gate = stage.decide(last_seq, o.stimulus, &o.gate_inputs);
-                if gate.gate != engaged {
-                    engaged = gate.gate;
-                    tracing::debug!(
-                        tick = last_seq, engaged, stimulus = o.stimulus, prediction = ?o.gate_value,
-                        threshold = o.gate_threshold, rule = ?gate.rule, "the fixed response {}",
-                        if engaged { "took over" } else { "let go" }
-                    );
-                }
-                if out.try_send(Decision { learned: p, gate }).is_err() {
+                after = Some(p.observation.tick.seq);
+                if out.try_send(decide(&mut stage, p, &mut engaged)).is_err() {
                     tracing::debug!("actuation is behind; a decision was dropped");
                 }
             }

@@ -211,7 +211,7 @@ impl Learning {
     }
 
     /// The learner's complete state now, between two ticks, for a recording that begins here.
-    fn start_state(&self) -> StartState {
+    pub(crate) fn start_state(&self) -> StartState {
         StartState {
             after: self.after,
             events_before: self.events.as_ref().map_or(0, EventLog::next_id),
@@ -230,7 +230,7 @@ impl Learning {
     }
 
     /// Writes the final checkpoint and waits until every checkpoint is on disk.
-    async fn finish(mut self, seq: u64) {
+    pub(crate) async fn finish(mut self, seq: u64) {
         let divergences = self.stage.divergences();
         if divergences > 0 {
             tracing::warn!(
@@ -295,6 +295,85 @@ impl Learning {
     /// Names of the observation vector's dimensions.
     pub(crate) fn obs_names(&self) -> Vec<String> {
         self.stage.layout().names().map(str::to_string).collect()
+    }
+
+    /// Announces changes on `events` from now on (the Horde too).
+    pub(crate) fn attach_events(&mut self, events: EventLog) {
+        if let Some(horde) = &self.horde {
+            horde.attach_events(events.clone());
+        }
+        self.events = Some(events);
+    }
+
+    /// Acts on `obs`: the tick's stimulus and predictions for gating, and whether the observation is
+    /// fresh enough to learn from ([`Learning::learn`], called after the output has gone on). `pose` is
+    /// the newest skeleton (read only when the stimulus is an elbow's); `followed` is actuation's last record (its tick, whether its command was the
+    /// default policy's, its behaviour probability). The actor and the stepped virtual-time driver
+    /// ([`crate::experiment::stepped`]) both call it, so there is one per-tick path.
+    pub(crate) fn act(
+        &mut self,
+        obs: Observation,
+        started: Instant,
+        pose: &watch::Receiver<PoseTracker>,
+        followed: Option<(u64, bool, f64)>,
+    ) -> (Learned, bool) {
+        let seq = obs.tick.seq;
+        self.after = Some(seq);
+        let since = obs.tick.deadline.saturating_duration_since(started);
+        let now_ms = since.as_millis() as u64;
+        let elbow = self.elbows.as_mut().map(|t| t.step(&pose.borrow(), now_ms));
+        let forced_stimulus = seq < self.request_until;
+        // ρ of the transition into this tick: the previous tick's record, if actuation made one, says
+        // whether π was followed; no record (a dropped decision, the watchdog's stop) means it was not.
+        let (previous_followed_default, previous_behaviour_prob) = match followed {
+            Some((s, true, b)) if s.checked_add(1) == Some(seq) => (true, b),
+            _ => (false, 1.0),
+        };
+        let output = self.stage.act(LearnInput {
+            values: obs.values.as_ref(),
+            elbow,
+            forced_stimulus,
+            previous_followed_default,
+            previous_behaviour_prob,
+        });
+        let fresh = observation_is_fresh(obs.link.state, obs.age_ticks, self.max_obs_age_ticks);
+        let p = Learned {
+            t_ms: since.as_secs_f64() * 1000.0,
+            observation: obs,
+            output,
+            forced_stimulus,
+        };
+        (p, fresh)
+    }
+
+    /// Learns from tick `seq` (when its observation was `fresh`) and checkpoints when one is due.
+    pub(crate) fn learn(&mut self, seq: u64, fresh: bool) {
+        if fresh {
+            if let Some(h) = &mut self.horde {
+                h.offer(seq, &self.stage.signals());
+            }
+            match self.stage.learn() {
+                Ok(report) => {
+                    for name in &report.newly_diverged {
+                        tracing::error!(
+                            prediction = %name,
+                            divergences = report.divergences,
+                            "prediction `{name}` diverged: its weights were about to become \
+                             non-finite, so it stopped learning, keeps its last finite weights and \
+                             no longer drives the gate (the stimulus alone does) until reset_weights"
+                        );
+                    }
+                }
+                Err(e) => tracing::error!("learning step failed: {e}"),
+            }
+        } else {
+            self.skipped_stale += 1;
+            tracing::debug!(
+                tick = seq,
+                "not learning from a stale observation or a link that is not up"
+            );
+        }
+        self.autosave_if_due(seq);
     }
 
     fn apply(&mut self, cmd: LearningCommand, seq: u64) -> Outcome {
@@ -384,10 +463,7 @@ pub(crate) async fn run(
         mut snapshots,
         followed,
     } = channels;
-    if let Some(horde) = &learning.horde {
-        horde.attach_events(events.clone());
-    }
-    learning.events = Some(events);
+    learning.attach_events(events);
     let mut seq = 0;
     // One wait for the cancellation, polled again on every pass (not a new one per pass).
     let cancelled = cancel.cancelled();
@@ -405,58 +481,12 @@ pub(crate) async fn run(
             o = observations.recv() => {
                 let Some(obs) = o else { break };
                 seq = obs.tick.seq;
-                learning.after = Some(seq);
-                let since = obs.tick.deadline.saturating_duration_since(started);
-                let now_ms = since.as_millis() as u64;
-                let elbow = learning.elbows.as_mut().map(|t| t.step(&pose.borrow(), now_ms));
-                let forced_stimulus = seq < learning.request_until;
-                // ρ of the transition into this tick: the previous tick's record, if actuation made
-                // one, says whether π was followed; no record (a dropped decision, the watchdog's stop)
-                // means it was not.
-                let (previous_followed_default, previous_behaviour_prob) = match *followed.borrow() {
-                    Some((s, true, b)) if s.checked_add(1) == Some(seq) => (true, b),
-                    _ => (false, 1.0),
-                };
-                let output = learning.stage.act(LearnInput {
-                    values: obs.values.as_ref(),
-                    elbow,
-                    forced_stimulus,
-                    previous_followed_default,
-                    previous_behaviour_prob,
-                });
-                let fresh = observation_is_fresh(obs.link.state, obs.age_ticks, learning.max_obs_age_ticks);
-                let p = Learned {
-                    t_ms: since.as_secs_f64() * 1000.0,
-                    observation: obs,
-                    output,
-                    forced_stimulus,
-                };
+                let followed = *followed.borrow();
+                let (p, fresh) = learning.act(obs, started, &pose, followed);
                 if out.try_send(p).is_err() {
                     tracing::debug!("gating is behind; a prediction was dropped");
                 }
-                if fresh {
-                    if let Some(h) = &mut learning.horde {
-                        h.offer(seq, &learning.stage.signals());
-                    }
-                    match learning.stage.learn() {
-                        Ok(report) => {
-                            for name in &report.newly_diverged {
-                                tracing::error!(
-                                    prediction = %name,
-                                    divergences = report.divergences,
-                                    "prediction `{name}` diverged: its weights were about to become \
-                                     non-finite, so it stopped learning, keeps its last finite weights and \
-                                     no longer drives the gate (the stimulus alone does) until reset_weights"
-                                );
-                            }
-                        }
-                        Err(e) => tracing::error!("learning step failed: {e}"),
-                    }
-                } else {
-                    learning.skipped_stale += 1;
-                    tracing::debug!(tick = seq, "not learning from a stale observation or a link that is not up");
-                }
-                learning.autosave_if_due(seq);
+                learning.learn(seq, fresh);
             }
         }
     }

@@ -18,6 +18,9 @@
 //! - the feed (`crate::bus::feed`, on the bus): every tick record out to the dashboard, the recorder and
 //!   the tests, without blocking.
 //!
+//! In virtual time (experiments, tests) the same stages can instead be stepped in order by one loop,
+//! `crate::experiment::stepped`, which calls the per-tick functions these actors call, without their channels and wakes.
+//!
 //! Every channel on the tick path is bounded and written with `try_send`: a stage that falls behind loses
 //! its oldest input (and actuation's watchdog stops the wheels), it never makes an earlier stage wait.
 
@@ -95,6 +98,21 @@ pub(crate) struct Pipeline {
     pub(crate) snapshots: mpsc::Sender<oneshot::Sender<StartState>>,
 }
 
+/// Gating and actuation for `config`, as the tick graph runs them (the actors or `crate::experiment::stepped`).
+pub(crate) fn stages(config: &Config) -> (GatingStage, Actuation) {
+    let gating = GatingStage::new(
+        config.control.mode,
+        config.control.default_policy,
+        config.control.response,
+        config.rule_table(),
+    )
+    .with_stochastic_gate(pavlov::agent::StochasticGate::from_config(config));
+    (
+        gating,
+        Actuation::new(config.robot.model, config.safety.clone()),
+    )
+}
+
 /// Starts every actor of the tick graph for `config`; they stop when `cancel` fires.
 pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &CancellationToken) -> Pipeline {
     let PipelineParts {
@@ -107,14 +125,7 @@ pub(crate) fn spawn(config: &Config, parts: PipelineParts, cancel: &Cancellation
         events,
     } = parts;
     let period = Duration::from_millis(config.tick.period_ms);
-    let gating = GatingStage::new(
-        config.control.mode,
-        config.control.default_policy,
-        config.control.response,
-        config.rule_table(),
-    )
-    .with_stochastic_gate(pavlov::agent::StochasticGate::from_config(config));
-    let actuation = Actuation::new(config.robot.model, config.safety.clone());
+    let (gating, actuation) = stages(config);
 
     let (tick_tx, tick_rx) = watch::channel(None);
     let (obs_tx, obs_rx) = mpsc::channel(STAGE_CAPACITY);

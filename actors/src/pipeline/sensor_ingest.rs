@@ -67,6 +67,89 @@ pub(crate) struct IngestChannels {
     pub(crate) heartbeat: SharedTickStats,
 }
 
+/// What the ingest keeps between ticks: the newest frame and what is summed or latched over every frame
+/// since the previous tick. The actor and the stepped virtual-time driver
+/// ([`crate::experiment::stepped`]) both run the ingest through it, so there is one per-tick path.
+pub(crate) struct IngestState {
+    newest: Option<(SensorValues, Instant)>,
+    distance: i32,
+    angle: i32,
+    events: EventLatch,
+    period: Duration,
+}
+
+impl IngestState {
+    /// Nothing seen yet, for ticks of `period`.
+    pub(crate) fn new(period: Duration) -> Self {
+        IngestState {
+            newest: None,
+            distance: 0,
+            angle: 0,
+            events: EventLatch::new(),
+            period,
+        }
+    }
+
+    /// Feeds `bytes` read from the link `at` through the parser; every complete frame goes to supervision.
+    pub(crate) fn on_bytes(
+        &mut self,
+        bytes: &[u8],
+        at: Instant,
+        parser: &mut StreamParser,
+        supervisor: &mut Supervisor,
+    ) {
+        let bad_before = parser.stats().bad_frames;
+        let newest = &mut self.newest;
+        let (distance, angle, events) = (&mut self.distance, &mut self.angle, &mut self.events);
+        parser.feed(bytes, |frame| {
+            *distance = distance.saturating_add(frame.get_or_zero(id::DISTANCE));
+            *angle = angle.saturating_add(frame.get_or_zero(id::ANGLE));
+            supervisor.on_frame(&frame, at);
+            events.fold(&frame);
+            *newest = Some((frame, at));
+        });
+        let stats = parser.stats();
+        if stats.bad_frames > bad_before {
+            tracing::debug!(
+                bad_frames = stats.bad_frames,
+                skipped_bytes = stats.skipped_bytes,
+                "rejected a damaged sensor frame"
+            );
+        }
+    }
+
+    /// Tick `tick`, taken `at`: supervision sees it, and the observation of everything since the previous
+    /// tick is returned.
+    pub(crate) fn on_tick(
+        &mut self,
+        tick: Tick,
+        at: Instant,
+        parser: &StreamParser,
+        supervisor: &mut Supervisor,
+    ) -> Observation {
+        supervisor.on_tick(tick.seq, at);
+        let period = self.period;
+        let age_ticks = self.newest.as_ref().map(|(_, at)| {
+            let age = tick.deadline.saturating_duration_since(*at);
+            (age.as_micros() / period.as_micros().max(1)) as u32
+        });
+        let events = &mut self.events;
+        let values = self.newest.as_ref().map(|(v, _)| {
+            let mut v = v.clone();
+            events.apply_and_clear(&mut v);
+            v
+        });
+        Observation {
+            tick,
+            values,
+            age_ticks,
+            distance_mm: std::mem::take(&mut self.distance),
+            angle_deg: std::mem::take(&mut self.angle),
+            link: supervisor.status(parser.stats()),
+        }
+    }
+}
+
 /// Runs until `cancel` fires or the tick channel closes.
 pub(crate) async fn run(
     link: IngestLink,
@@ -87,9 +170,7 @@ pub(crate) async fn run(
     } = channels;
     let mut reader = Some(reader);
     let mut buf = vec![0u8; 4096];
-    let mut newest: Option<(SensorValues, Instant)> = None;
-    let (mut distance, mut angle) = (0i32, 0i32);
-    let mut events = EventLatch::new();
+    let mut state = IngestState::new(period);
     let mut commands_open = true;
     // One wait for the cancellation, polled again on every pass (not a new one per pass).
     let cancelled = cancel.cancelled();
@@ -103,31 +184,15 @@ pub(crate) async fn run(
                     break;
                 }
                 let Some(tick) = *ticks.borrow_and_update() else { continue };
+                let now = Instant::now();
                 if let Ok(mut stats) = heartbeat.lock() {
-                    stats.last_taken = Some(Instant::now());
+                    stats.last_taken = Some(now);
                 }
-                supervisor.on_tick(tick.seq);
+                let obs = state.on_tick(tick, now, &parser, &mut supervisor);
                 if supervisor.reopening() {
                     // The old port is being closed and reopened; its reader goes with it.
                     reader = None;
                 }
-                let age_ticks = newest.as_ref().map(|(_, at)| {
-                    let age = tick.deadline.saturating_duration_since(*at);
-                    (age.as_micros() / period.as_micros().max(1)) as u32
-                });
-                let values = newest.as_ref().map(|(v, _)| {
-                    let mut v = v.clone();
-                    events.apply_and_clear(&mut v);
-                    v
-                });
-                let obs = Observation {
-                    tick,
-                    values,
-                    age_ticks,
-                    distance_mm: std::mem::take(&mut distance),
-                    angle_deg: std::mem::take(&mut angle),
-                    link: supervisor.status(parser.stats()),
-                };
                 if out.try_send(obs).is_err() {
                     tracing::debug!("learning is behind; observation for tick {} dropped", tick.seq);
                 }
@@ -154,24 +219,7 @@ pub(crate) async fn run(
                     reader = None;
                     supervisor.on_lost();
                 }
-                Ok(n) => {
-                    let now = Instant::now();
-                    let bad_before = parser.stats().bad_frames;
-                    parser.feed(&buf[..n], |frame| {
-                        distance = distance.saturating_add(frame.get_or_zero(id::DISTANCE));
-                        angle = angle.saturating_add(frame.get_or_zero(id::ANGLE));
-                        supervisor.on_frame(&frame);
-                        events.fold(&frame);
-                        newest = Some((frame, now));
-                    });
-                    let stats = parser.stats();
-                    if stats.bad_frames > bad_before {
-                        tracing::debug!(
-                            bad_frames = stats.bad_frames, skipped_bytes = stats.skipped_bytes,
-                            "rejected a damaged sensor frame"
-                        );
-                    }
-                }
+                Ok(n) => state.on_bytes(&buf[..n], Instant::now(), &mut parser, &mut supervisor),
             }
         }
     }

@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use futures_util::FutureExt;
 
-use pavlov::sim::faults::{FaultInjector, LinkFault};
+use pavlov::sim::faults::{FaultInjector, LinkFault, StepOutcome};
 use pavlov::sim::robot::SimRobot;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, ReadHalf, WriteHalf};
 use tokio::sync::{mpsc, watch};
@@ -108,6 +108,68 @@ fn link_flows(outcome: LinkFault) -> bool {
     matches!(outcome, LinkFault::Normal)
 }
 
+/// One 15 ms step of the robot on its line.
+pub(crate) struct Stepped {
+    /// What the fault injector made of the step's output, and what the line does.
+    pub(crate) outcome: StepOutcome,
+    /// Whether bytes flow on the line this step (no hang, no unplug).
+    pub(crate) flowing: bool,
+    /// Whether the host's side runs at the robot's rate (a UART at another rate sees noise).
+    pub(crate) rates_match: bool,
+}
+
+impl Stepped {
+    /// The bytes that reach the host from this step, if any.
+    pub(crate) fn to_host(&self) -> Option<&[u8]> {
+        (self.flowing && self.rates_match && !self.outcome.bytes.is_empty())
+            .then_some(self.outcome.bytes.as_slice())
+    }
+}
+
+impl Stepped {
+    /// Hands this step's buffer back to be sent into again (see [`step_robot`]).
+    pub(crate) fn recycle(self, spare: &mut Vec<u8>) {
+        *spare = self.outcome.bytes;
+    }
+}
+
+/// Steps `robot` by 15 ms through `faults`, with the host's side at `host_baud` (`None`: not modelled).
+/// The robot sends its next output into `spare` (taken): hand each step's buffer back with
+/// [`Stepped::recycle`] and a step allocates nothing once warm (without link faults, whose injector
+/// passes the buffer through). The simulator task and the stepped virtual-time driver
+/// ([`crate::experiment::stepped`]) both step the robot through it.
+pub(crate) fn step_robot(
+    robot: &mut SimRobot,
+    faults: &mut FaultInjector,
+    host_baud: Option<u32>,
+    spare: &mut Vec<u8>,
+) -> Stepped {
+    robot.step();
+    let out = robot.swap_output(std::mem::take(spare));
+    let outcome = faults.after_step(robot, out);
+    let flowing = link_flows(outcome.link);
+    Stepped {
+        rates_match: host_baud.is_none_or(|b| b == robot.oi_baud()),
+        flowing,
+        outcome,
+    }
+}
+
+/// Hands bytes the host sent to `robot` through `faults`; while the line hangs (`flowing` false), or the
+/// rates differ, they are lost.
+pub(crate) fn host_to_robot(
+    robot: &mut SimRobot,
+    faults: &mut FaultInjector,
+    host_baud: Option<u32>,
+    flowing: bool,
+    bytes: &[u8],
+) {
+    if flowing && host_baud.is_none_or(|b| b == robot.oi_baud()) {
+        let bytes = faults.host_bytes(bytes);
+        robot.receive(&bytes);
+    }
+}
+
 async fn drive_sim<S>(
     mut robot: SimRobot,
     mut plug: Plug<S>,
@@ -124,6 +186,7 @@ where
     let mut plugged = true;
     let mut step = tokio::time::interval(SIM_STEP);
     let mut buf = vec![0u8; 4096];
+    let mut spare = Vec::new();
     let mut reading = true;
     let mut flowing = true;
     // One wait for the cancellation, polled again on every pass (not a new one per pass).
@@ -147,13 +210,7 @@ where
                 }
             },
             n = read_conn(&mut conn, &mut buf), if reading && conn.is_some() => match n {
-                Ok(n) if n > 0 => {
-                    // While the line hangs, or the rates differ, what the host sends is lost.
-                    if flowing && host_baud.is_none_or(|b| b == robot.oi_baud()) {
-                        let bytes = faults.host_bytes(&buf[..n]);
-                        robot.receive(&bytes);
-                    }
-                }
+                Ok(n) if n > 0 => host_to_robot(&mut robot, &mut faults, host_baud, flowing, &buf[..n]),
                 other => {
                     if let Err(e) = other {
                         tracing::debug!("simulator link read: {e}");
@@ -172,29 +229,23 @@ where
             },
             _ = step.tick() => {
                 reading = true;
-                robot.step();
-                let out = robot.take_output();
-                let outcome = faults.after_step(&mut robot, out);
-                flowing = link_flows(outcome.link);
-                let baud_mismatch = host_baud.is_some_and(|b| b != robot.oi_baud());
-                if outcome.link == LinkFault::Eof {
+                let stepped = step_robot(&mut robot, &mut faults, host_baud, &mut spare);
+                flowing = stepped.flowing;
+                if stepped.outcome.link == LinkFault::Eof && eof == EndOfFile::Stop {
                     // Unplug: the host reads end-of-file and must reconnect through the device. A PTY
                     // cannot signal end-of-file without destroying the device: it hangs this step instead.
-                    if eof == EndOfFile::Stop {
-                        conn = None;
-                    }
-                    flowing = false;
+                    conn = None;
                 }
                 // A UART transmits whether or not anyone listens: when the host is not reading and the
                 // buffer is full, the bytes are lost instead of stalling the robot's clock.
-                if flowing
-                    && !baud_mismatch
-                    && !outcome.bytes.is_empty()
+                if let Some(bytes) = stepped.to_host()
                     && let Some((_, tx)) = conn.as_mut()
-                    && let Some(Err(e)) = tx.write(&outcome.bytes).now_or_never()
+                    && let Some(Err(e)) = tx.write(bytes).now_or_never()
                 {
                     tracing::debug!("simulator link write: {e}");
                 }
+                let baud_mismatch = !stepped.rates_match;
+                stepped.recycle(&mut spare);
                 let world = robot.world();
                 status.send_replace(SimStatus {
                     oi_mode: robot.oi_mode().code(),

@@ -6,7 +6,7 @@
 //! accumulated and starts afresh [C1 p18–19; C2 p27].
 
 use crate::oi::SensorValues;
-use crate::oi::frame::encode_stream_frame;
+use crate::oi::frame::encode_stream_frame_into;
 use crate::oi::packets::{available_on, encode_data, group_members, id};
 use crate::sim::world::{LEFT, RIGHT};
 
@@ -149,14 +149,17 @@ impl SimRobot {
         if self.stream_ids.is_empty() || self.stream_paused || self.mode == super::OiMode::Off {
             return;
         }
-        let ids = self.stream_ids.clone();
+        let (mut ids, mut frame) = std::mem::take(&mut self.frame_scratch);
+        ids.clear();
+        ids.extend_from_slice(&self.stream_ids);
         let values = self.report_values(&ids);
-        match encode_stream_frame(&ids, &values) {
-            Ok(frame) => {
+        match encode_stream_frame_into(&ids, &values, &mut frame) {
+            Ok(()) => {
                 self.transmit(&frame);
                 self.counters.frames_sent += 1;
             }
             Err(_) => self.counters.rejected_requests += 1,
         }
+        self.frame_scratch = (ids, frame);
     }
 }

@@ -95,6 +95,8 @@ struct InteractionCollector {
 impl Collect for InteractionCollector {
     type Output = (Reduced, Vec<CommandWindow>);
 
+    const DRIVES_THE_SERVER: bool = true;
+
     fn start(&mut self, server: &Server) {
         if let Some(human) = self.human.take() {
             self.driver = Some(tokio::spawn(crate::simulated::human::drive_pose(
