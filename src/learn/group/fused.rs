@@ -22,7 +22,7 @@
 //! weights rewritten, after this tick's sums read it). On such a tick — once every few tens of ticks —
 //! and for a logistic group (one column), `predict` and `learn` run as they are.
 
-use super::weight::{Weight, accumulate, add_scaled};
+use super::weight::{Weight, accumulate, accumulate_and_add_scaled, add_scaled};
 use super::{LearnError, Sigma, TraceGroup};
 
 /// Columns per block: 512 `f32` are 2 KiB a row, so a block of a Horde's 484 active rows is 1 MB and
@@ -75,7 +75,7 @@ impl<W: Weight> TraceGroup<W> {
     /// marks them and returns the sum of their coefficients.
     fn gather_rows(&mut self, active: &[usize]) -> f64 {
         let rows = &mut self.rows;
-        rows.mark = rows.mark.wrapping_add(1);
+        rows.next_mark();
         let mut coef_sum = 0.0;
         for &f in active {
             if f >= rows.coef.len() {
@@ -112,6 +112,7 @@ impl<W: Weight> TraceGroup<W> {
             rows.coef_bound = rows.coef_bound.max(rows.coef[f].abs());
             touched = true;
             read += usize::from(rows.marks[f] == rows.mark);
+            rows.touched[f] = rows.mark;
             rows.preserve(f);
         }
         if touched {
@@ -121,28 +122,111 @@ impl<W: Weight> TraceGroup<W> {
     }
 
     /// The sums of this tick's rows into `acc`, and the touch `W0 += minus_d·A` of the previous tick's,
-    /// a block of [`CHUNK`] columns at a time.
+    /// a block of [`CHUNK`] columns at a time (see [`Pass`]).
     fn sum_and_touch(&mut self, minus_d: W) {
-        let cols = self.columns.len();
-        let features = self.rows.features();
-        let (w0, a_w) = (&mut self.rows.w0, &self.rows.epochs.a_w);
         self.acc.fill(W::default());
+        let rows = &mut self.rows;
+        let pass = Pass {
+            cols: self.columns.len(),
+            x_now: &self.chain.x_now,
+            x_prev: &self.chain.x_prev,
+            marks: &rows.marks,
+            touched: &rows.touched,
+            mark: rows.mark,
+            a_w: &rows.epochs.a_w,
+            minus_d,
+        };
+        pass.run(&mut rows.w0, &mut self.acc);
+    }
+}
+
+/// One tick's pass over a group's active rows. For each block of [`CHUNK`] columns: this tick's rows
+/// in their order, each added into the sums and, if the previous tick's features include it (most
+/// do: features persist), touched in the same loop, so that its block is read once; then the
+/// previous tick's rows that this tick does not read, touched. A row's sum reads its weights before
+/// its touch writes them, the sums add the rows in the same order, and a row's touch is the same
+/// operation whenever it comes (no row is in `x_prev` twice): the result is bit for bit that of
+/// summing every row and then touching every row.
+struct Pass<'a, W> {
+    cols: usize,
+    x_now: &'a [usize],
+    x_prev: &'a [usize],
+    /// `marks[f] == mark`: row `f` is among this tick's.
+    marks: &'a [u32],
+    /// `touched[f] == mark`: row `f` is among the previous tick's.
+    touched: &'a [u32],
+    mark: u32,
+    a_w: &'a [W],
+    minus_d: W,
+}
+
+impl<W: Weight> Pass<'_, W> {
+    /// Runs the pass, with the instructions of the widest vectors the CPU has where it is known to
+    /// have them: the same operations element by element (Rust never fuses a multiply and an add on
+    /// its own), so the same bits.
+    fn run(&self, w0: &mut [W], acc: &mut [W]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (just checked), the only requirement of a `target_feature`
+            // function.
+            unsafe { self.run_avx2(w0, acc) };
+            return;
+        }
+        self.run_portable(w0, acc);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn run_avx2(&self, w0: &mut [W], acc: &mut [W]) {
+        self.run_portable(w0, acc);
+    }
+
+    #[inline(always)]
+    fn run_portable(&self, w0: &mut [W], acc: &mut [W]) {
+        let (cols, features) = (self.cols, self.marks.len());
         let mut start = 0;
         while start < cols {
             let end = (start + CHUNK).min(cols);
-            let acc = &mut self.acc[start..end];
-            for &f in &self.chain.x_now {
-                if f < features {
-                    accumulate(acc, &w0[f * cols + start..f * cols + end]);
+            let acc = &mut acc[start..end];
+            let a = &self.a_w[start..end];
+            let block = |f: usize| f * cols + start..f * cols + end;
+            for (k, &f) in self.x_now.iter().enumerate() {
+                if f >= features {
+                    continue;
+                }
+                if let Some(&next) = self.x_now.get(k + 1) {
+                    prefetch(w0, block(next.min(features - 1)));
+                }
+                if self.touched[f] == self.mark {
+                    accumulate_and_add_scaled(acc, &mut w0[block(f)], self.minus_d, a);
+                } else {
+                    accumulate(acc, &w0[block(f)]);
                 }
             }
-            let a = &a_w[start..end];
-            for &f in &self.chain.x_prev {
-                if f < features {
-                    add_scaled(&mut w0[f * cols + start..f * cols + end], minus_d, a);
+            for &f in self.x_prev {
+                if f < features && self.marks[f] != self.mark {
+                    add_scaled(&mut w0[block(f)], self.minus_d, a);
                 }
             }
             start = end;
+        }
+    }
+}
+
+/// Asks for the cache lines of `w[range]` ahead of their use (the rows of a tick are scattered over the
+/// matrix: the hardware's prefetcher finds each row only after its first lines have missed).
+#[inline(always)]
+fn prefetch<W>(w: &[W], range: std::ops::Range<usize>) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let row = &w[range];
+        let bytes = std::mem::size_of_val(row);
+        let base = row.as_ptr().cast::<i8>();
+        for line in (0..bytes).step_by(64) {
+            // SAFETY: `base + line` lies within `row` (line < its size in bytes); a prefetch only
+            // hints the cache and never faults, reads into a register or writes.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(base.add(line)) };
         }
     }
 }

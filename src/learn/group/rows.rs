@@ -26,6 +26,8 @@ pub(crate) struct DeferredRows<W> {
     /// The rows the last `gather` read carry its mark.
     pub marks: Vec<u32>,
     pub mark: u32,
+    /// The rows a one-pass tick touches (`super::fused`) carry that tick's `mark` here.
+    pub touched: Vec<u32>,
     /// A copy of `W0` in progress: every write preserves the row first.
     pub copy: Option<RowCopy<W>>,
 }
@@ -49,6 +51,7 @@ impl<W: Weight> DeferredRows<W> {
             coef_bound: 0.0,
             marks: vec![0; features],
             mark: 0,
+            touched: vec![0; features],
             copy: None,
         }
     }
@@ -95,6 +98,17 @@ impl<W: Weight> DeferredRows<W> {
     pub(super) fn preserve(&mut self, f: usize) {
         if let Some(c) = self.copy.as_mut() {
             c.preserve(f, &self.w0);
+        }
+    }
+
+    /// Starts a new tick's marks ([`DeferredRows::marks`], [`DeferredRows::touched`]). The mark never
+    /// comes back to 0, the mark of no tick: when the counter wraps, the old marks are cleared.
+    pub fn next_mark(&mut self) {
+        self.mark = self.mark.wrapping_add(1);
+        if self.mark == 0 {
+            self.marks.fill(0);
+            self.touched.fill(0);
+            self.mark = 1;
         }
     }
 
@@ -159,7 +173,7 @@ impl<W: Weight> DeferredRows<W> {
     /// the next [`DeferredRows::touch`] can count how many of its rows are among them.
     pub fn gather(&mut self, active: &[usize], acc: &mut [W]) -> f64 {
         acc.fill(W::default());
-        self.mark = self.mark.wrapping_add(1);
+        self.next_mark();
         let mut coef_sum = 0.0;
         let cols = self.cols;
         for &f in active {

@@ -243,6 +243,7 @@ impl<W: Weight> TraceGroup<W> {
             coef_bound: 0.0,
             marks: vec![0; n],
             mark: 0,
+            touched: vec![0; n],
             copy: None,
         };
         self.rows.rescan_bounds();

@@ -1,5 +1,5 @@
 //! [`Weight`]: the element type of a [`super::TraceGroup`]'s weight rows (`f32` for a Horde of thousands
-//! of predictions, `f64` where a prediction must match the reference learner), and the three row kernels
+//! of predictions, `f64` where a prediction must match the reference learner), and the row kernels
 //! the group's tick is made of. Each kernel is a plain loop over two slices of equal length that the
 //! compiler vectorises; a row holds one weight per prediction of the group (feature-major layout), so a
 //! kernel streams one contiguous row per active feature.
@@ -106,6 +106,17 @@ pub(crate) fn accumulate<W: Weight>(acc: &mut [W], row: &[W]) {
     }
 }
 
+/// `acc[i] += row[i]`, then `row[i] += k · v[i]`, for every `i`: [`accumulate`] and [`add_scaled`] of
+/// the same row, reading it once.
+#[inline]
+pub(crate) fn accumulate_and_add_scaled<W: Weight>(acc: &mut [W], row: &mut [W], k: W, v: &[W]) {
+    for ((a, r), &x) in acc.iter_mut().zip(row.iter_mut()).zip(v) {
+        let w = *r;
+        *a = *a + w;
+        *r = w + k * x;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -119,6 +130,10 @@ mod tests {
         accumulate(&mut acc, &[1.0, 2.0, 3.0]);
         accumulate(&mut acc, &[0.5, 0.5, 0.5]);
         assert_eq!(acc, [1.5, 2.5, 3.5]);
+        let mut row = [1.0f32, 2.0, 3.0];
+        let mut acc = [0.5f32; 3];
+        accumulate_and_add_scaled(&mut acc, &mut row, -2.0, &[1.0, 0.5, 0.0]);
+        assert_eq!((acc, row), ([1.5, 2.5, 3.5], [-1.0, 1.0, 3.0]));
     }
 
     #[test]
