@@ -244,6 +244,7 @@ impl<W: Weight> TraceGroup<W> {
             marks: vec![0; n],
             mark: 0,
             touched: vec![0; n],
+            forward: vec![None; n],
             copy: None,
         };
         self.rows.rescan_bounds();
