@@ -7,6 +7,8 @@
 //! always lower a thread to `SCHED_IDLE`. The cost is that the Horde gets almost no CPU while the
 //! machine is busy with other work: it then skips ticks, counted and shown, and control is untouched.
 
+use std::sync::atomic::{AtomicI32, Ordering};
+
 /// Lowers the calling thread to `SCHED_IDLE` (`[horde] scheduling = "idle"`); a failure is logged and
 /// the thread runs on under the normal policy.
 pub(crate) fn give_way_to_the_tick() {
@@ -28,6 +30,61 @@ pub(crate) fn back_to_normal_policy() {
     }
 }
 
+/// The Horde's threads that may be under `SCHED_IDLE` (Linux thread ids, 0 for none), so that another
+/// thread can put them back under the normal policy when the Horde finishes: a thread under
+/// `SCHED_IDLE` on a machine busy with other work may wait minutes for a core, and the last checkpoint
+/// waits for both the learner's thread (which must first see the command to finish) and a writer
+/// already under way.
+#[derive(Debug, Default)]
+pub(crate) struct IdleThreads {
+    learner: AtomicI32,
+    writer: AtomicI32,
+}
+
+impl IdleThreads {
+    /// The calling thread, the learner's, gives way to the tick and is registered.
+    pub(crate) fn learner_gives_way(&self) {
+        give_way_to_the_tick();
+        self.learner.store(thread_id(), Ordering::Release);
+    }
+
+    /// The calling thread, a checkpoint writer, gives way to the tick and is registered until
+    /// [`IdleThreads::writer_done`].
+    pub(crate) fn writer_gives_way(&self) {
+        give_way_to_the_tick();
+        self.writer.store(thread_id(), Ordering::Release);
+    }
+
+    /// The calling writer is about to end: forgotten (its id may be reused).
+    pub(crate) fn writer_done(&self) {
+        let me = thread_id();
+        let _ = self
+            .writer
+            .compare_exchange(me, 0, Ordering::AcqRel, Ordering::Acquire);
+    }
+
+    /// Every registered thread back under the normal policy (refusals are logged, see
+    /// [`back_to_normal_policy`]).
+    pub(crate) fn all_back_to_normal(&self) {
+        for tid in [&self.learner, &self.writer].map(|t| t.load(Ordering::Acquire)) {
+            if tid != 0
+                && let Err(e) = set_policy_of(tid, POLICY_NORMAL)
+            {
+                tracing::debug!("a Horde thread stays under SCHED_IDLE to finish ({e})");
+            }
+        }
+    }
+}
+
+/// The calling thread's id (Linux's `gettid`; 0 elsewhere, which names no other thread).
+fn thread_id() -> i32 {
+    #[cfg(target_os = "linux")]
+    // SAFETY: `gettid` takes no arguments and cannot fail.
+    return unsafe { libc::gettid() };
+    #[cfg(not(target_os = "linux"))]
+    0
+}
+
 #[cfg(target_os = "linux")]
 const POLICY_NORMAL: i32 = libc::SCHED_OTHER;
 #[cfg(not(target_os = "linux"))]
@@ -40,12 +97,17 @@ fn set_idle_policy() -> std::io::Result<()> {
     Err(std::io::Error::other("SCHED_IDLE is Linux's"))
 }
 
-#[cfg(target_os = "linux")]
 fn set_policy(policy: i32) -> std::io::Result<()> {
+    set_policy_of(0, policy)
+}
+
+/// Sets the policy of thread `tid` (0: the calling thread).
+#[cfg(target_os = "linux")]
+fn set_policy_of(tid: i32, policy: i32) -> std::io::Result<()> {
     let param = libc::sched_param { sched_priority: 0 };
     // SAFETY: `sched_setscheduler` reads `param` (a valid, initialised struct that outlives the call);
-    // pid 0 names the calling thread.
-    let rc = unsafe { libc::sched_setscheduler(0, policy, &param) };
+    // `tid` names a thread (0: the calling one); a thread that no longer exists is an error code.
+    let rc = unsafe { libc::sched_setscheduler(tid, policy, &param) };
     if rc == 0 {
         Ok(())
     } else {
@@ -54,7 +116,7 @@ fn set_policy(policy: i32) -> std::io::Result<()> {
 }
 
 #[cfg(not(target_os = "linux"))]
-fn set_policy(_policy: i32) -> std::io::Result<()> {
+fn set_policy_of(_tid: i32, _policy: i32) -> std::io::Result<()> {
     Err(std::io::Error::other("scheduling policies are Linux's"))
 }
 
@@ -97,5 +159,42 @@ mod tests {
             libc::SCHED_OTHER,
             "only the thread itself"
         );
+    }
+
+    #[test]
+    fn registered_threads_are_put_back_by_another_thread() {
+        let threads = std::sync::Arc::new(IdleThreads::default());
+        let (asked_tx, asked_rx) = std::sync::mpsc::channel::<()>();
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel::<()>();
+        let t = threads.clone();
+        let learner = std::thread::spawn(move || {
+            t.learner_gives_way();
+            let idle = current_policy();
+            ready_tx.send(()).expect("the test waits");
+            asked_rx.recv().expect("the test asks");
+            (idle, current_policy())
+        });
+        ready_rx.recv().expect("the thread registers");
+        threads.all_back_to_normal();
+        asked_tx.send(()).expect("the thread waits");
+        let (idle, after) = learner.join().expect("the thread runs");
+        assert_eq!(idle, libc::SCHED_IDLE);
+        // Root (or a raised RLIMIT_NICE) may put it back; anyone else leaves it idle (and logs why).
+        assert!(
+            after == libc::SCHED_OTHER || after == libc::SCHED_IDLE,
+            "{after}"
+        );
+        // No writer registered, and a writer that is done is forgotten.
+        assert_eq!(threads.writer.load(Ordering::Acquire), 0);
+        let t = threads.clone();
+        std::thread::spawn(move || {
+            t.writer_gives_way();
+            assert_ne!(t.writer.load(Ordering::Acquire), 0);
+            t.writer_done();
+        })
+        .join()
+        .expect("the thread runs");
+        assert_eq!(threads.writer.load(Ordering::Acquire), 0);
+        assert_eq!(current_policy(), libc::SCHED_OTHER, "only those threads");
     }
 }

@@ -114,6 +114,8 @@ pub(crate) struct HordeHandle {
     values: watch::Receiver<Arc<HordeValues>>,
     names: Arc<Vec<String>>,
     thread: Option<JoinHandle<()>>,
+    /// The Horde's threads under `SCHED_IDLE`, put back under the normal policy to finish.
+    idle_threads: Arc<background::IdleThreads>,
 }
 
 impl HordeHandle {
@@ -181,8 +183,10 @@ impl HordeHandle {
         let (values_tx, values_rx) = watch::channel(Arc::new(HordeValues::default()));
         let offers = Arc::new(OfferCounters::default());
         let idle = config.horde.scheduling == Scheduling::Idle;
+        let idle_threads = Arc::new(background::IdleThreads::default());
         let worker = Worker {
             idle,
+            idle_threads: idle_threads.clone(),
             horde,
             ticks: tick_rx,
             returns: return_tx,
@@ -199,7 +203,7 @@ impl HordeHandle {
             .name("pavlov-horde".into())
             .spawn(move || {
                 if idle {
-                    background::give_way_to_the_tick();
+                    worker.idle_threads.learner_gives_way();
                 }
                 worker.run()
             })
@@ -215,6 +219,7 @@ impl HordeHandle {
             values: values_rx,
             names,
             thread: Some(thread),
+            idle_threads,
         })
     }
 
@@ -315,6 +320,9 @@ impl HordeHandle {
             dir: dir.to_path_buf(),
             keep,
         });
+        // Control has stopped: the Horde's threads need not give way any more, and under `SCHED_IDLE`
+        // on a busy machine the thread would not even see the command for minutes.
+        self.idle_threads.all_back_to_normal();
         // The command queue is small and nearly always empty; a blocking send waits for one command.
         let _ = self.commands.send(HordeCommand::Finish {
             checkpoint: target,

@@ -35,6 +35,8 @@ pub(crate) struct Worker<W> {
     pub(crate) horde: Horde<W>,
     /// Whether the checkpoint writer runs under `SCHED_IDLE` (`[horde] scheduling = "idle"`).
     pub(crate) idle: bool,
+    /// The threads under `SCHED_IDLE`, registered there (see [`super::background::IdleThreads`]).
+    pub(crate) idle_threads: Arc<super::background::IdleThreads>,
     pub(crate) ticks: Receiver<HordeTick>,
     /// Where a tick's buffer goes back once learned.
     pub(crate) returns: std::sync::mpsc::SyncSender<HordeTick>,
@@ -133,6 +135,8 @@ impl<W: Weight> Worker<W> {
         // write of hundreds of megabytes would wait minutes for a core.
         if self.idle {
             super::background::back_to_normal_policy();
+            // A writer under way is waited for below.
+            self.idle_threads.all_back_to_normal();
             self.idle = false;
         }
         let (target, done) = finish.unzip();
@@ -231,7 +235,8 @@ impl<W: Weight> Worker<W> {
             // One write at a time: the previous one has had the whole copy's time to finish.
             self.collect(p, previous);
         }
-        match spawn_write(target, tick, snapshot, self.idle) {
+        let idle = self.idle.then(|| self.idle_threads.clone());
+        match spawn_write(target, tick, snapshot, idle) {
             Ok(writer) => p.writer = Some(writer),
             Err(e) => {
                 p.errors += 1;
@@ -307,13 +312,13 @@ fn spawn_write<W: Weight>(
     target: Target,
     tick: u64,
     snapshot: HordeSnapshot<W>,
-    idle: bool,
+    idle: Option<Arc<super::background::IdleThreads>>,
 ) -> std::io::Result<Writer<W>> {
     std::thread::Builder::new()
         .name("pavlov-horde-write".into())
         .spawn(move || {
-            if idle {
-                super::background::give_way_to_the_tick();
+            if let Some(threads) = &idle {
+                threads.writer_gives_way();
             }
             let written = horde_file::write_atomic(&target.dir, tick, &snapshot).map_err(|e| {
                 (
@@ -329,6 +334,9 @@ fn spawn_write<W: Weight>(
                 && let Err(e) = horde_file::prune(&target.dir, target.keep)
             {
                 tracing::warn!("could not prune old Horde checkpoints: {e}");
+            }
+            if let Some(threads) = &idle {
+                threads.writer_done();
             }
             (written, snapshot)
         })
@@ -367,6 +375,7 @@ mod tests {
         let worker = Worker {
             horde,
             idle: false,
+            idle_threads: Arc::default(),
             ticks: tick_rx,
             // The tests hand ticks in themselves: the buffers need not come back.
             returns: sync_channel(super::super::BUFFERS).0,

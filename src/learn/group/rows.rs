@@ -4,7 +4,7 @@
 
 use super::copy::RowCopy;
 use super::epochs::{ClosedEpoch, Epochs};
-use super::weight::{Weight, accumulate, add_scaled};
+use super::weight::{Weight, accumulate_wide as accumulate, add_scaled_wide as add_scaled};
 
 /// The weights and the shared trace of a group of predictions over `features` binary features.
 #[derive(Debug, Clone, PartialEq)]
@@ -26,6 +26,11 @@ pub(crate) struct DeferredRows<W> {
     /// The rows the last `gather` read carry its mark.
     pub marks: Vec<u32>,
     pub mark: u32,
+    /// The rows a one-pass tick touches (`super::fused`) carry that tick's `mark` here.
+    pub touched: Vec<u32>,
+    /// The write that brings a row forward, left by [`DeferredRows::bring_forward_later`] for a
+    /// one-pass tick to make after it has read the row (empty between ticks).
+    pub forward: Vec<Option<W>>,
     /// A copy of `W0` in progress: every write preserves the row first.
     pub copy: Option<RowCopy<W>>,
 }
@@ -49,6 +54,8 @@ impl<W: Weight> DeferredRows<W> {
             coef_bound: 0.0,
             marks: vec![0; features],
             mark: 0,
+            touched: vec![0; features],
+            forward: vec![None; features],
             copy: None,
         }
     }
@@ -95,6 +102,17 @@ impl<W: Weight> DeferredRows<W> {
     pub(super) fn preserve(&mut self, f: usize) {
         if let Some(c) = self.copy.as_mut() {
             c.preserve(f, &self.w0);
+        }
+    }
+
+    /// Starts a new tick's marks ([`DeferredRows::marks`], [`DeferredRows::touched`]). The mark never
+    /// comes back to 0, the mark of no tick: when the counter wraps, the old marks are cleared.
+    pub fn next_mark(&mut self) {
+        self.mark = self.mark.wrapping_add(1);
+        if self.mark == 0 {
+            self.marks.fill(0);
+            self.touched.fill(0);
+            self.mark = 1;
         }
     }
 
@@ -154,12 +172,40 @@ impl<W: Weight> DeferredRows<W> {
         }
     }
 
+    /// [`DeferredRows::bring_forward`] of row `f`, one epoch behind, but for its write: returns the
+    /// factor `k` of the write `W0(f) += k · A_end` of the newest closed epoch for the caller to make
+    /// (`None` when there is none to make), so that the row can still be read as it was before.
+    /// A row further behind is brought forward at once (and `None` returned).
+    pub fn bring_forward_later(&mut self, f: usize) -> Option<W> {
+        let from = self.row_epoch[f];
+        if from == self.epochs.id {
+            return None;
+        }
+        let Some(newest) = self.epochs.ring.back().filter(|c| c.id == from) else {
+            self.bring_forward_from_old_epoch(f);
+            return None;
+        };
+        self.row_epoch[f] = self.epochs.id;
+        let c = self.coef[f];
+        if c == 0.0 {
+            return None;
+        }
+        let (k, raise, carry) = (W::from_f64(c), c.abs() * newest.a_end_max, newest.carry);
+        self.preserve(f);
+        self.w0_bound += raise;
+        self.coef[f] = c * carry;
+        if self.coef[f] != 0.0 {
+            self.epochs.members.push(f);
+        }
+        Some(k)
+    }
+
     /// Adds rows `active` into `acc` (one sum per prediction) and returns the sum of their
     /// coefficients, after bringing them forward: `wᵀx = acc + Σcoef · A`. Marks the rows, so that
     /// the next [`DeferredRows::touch`] can count how many of its rows are among them.
     pub fn gather(&mut self, active: &[usize], acc: &mut [W]) -> f64 {
         acc.fill(W::default());
-        self.mark = self.mark.wrapping_add(1);
+        self.next_mark();
         let mut coef_sum = 0.0;
         let cols = self.cols;
         for &f in active {

@@ -272,6 +272,8 @@ impl<W: Weight> TraceGroup<W> {
             coef_bound: 0.0,
             marks: vec![0; n],
             mark: 0,
+            touched: vec![0; n],
+            forward: vec![None; n],
             copy: None,
         };
         self.rows.rescan_bounds();

@@ -1,5 +1,5 @@
 //! [`Weight`]: the element type of a [`super::TraceGroup`]'s weight rows (`f32` for a Horde of thousands
-//! of predictions, `f64` where a prediction must match the reference learner), and the three row kernels
+//! of predictions, `f64` where a prediction must match the reference learner), and the row kernels
 //! the group's tick is made of. Each kernel is a plain loop over two slices of equal length that the
 //! compiler vectorises; a row holds one weight per prediction of the group (feature-major layout), so a
 //! kernel streams one contiguous row per active feature.
@@ -106,6 +106,76 @@ pub(crate) fn accumulate<W: Weight>(acc: &mut [W], row: &[W]) {
     }
 }
 
+/// Rows at least this long are worth the check for wider vectors ([`add_scaled_wide`]).
+const WIDE: usize = 64;
+
+/// [`add_scaled`] with AVX2 instructions where the CPU has them and the row is long: the same
+/// operations element by element (Rust never fuses a multiply and an add on its own), so the same bits.
+pub(crate) fn add_scaled_wide<W: Weight>(row: &mut [W], k: W, v: &[W]) {
+    #[cfg(target_arch = "x86_64")]
+    if row.len() >= WIDE && std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (just checked), the only requirement of a `target_feature`
+        // function.
+        unsafe { add_scaled_avx2(row, k, v) };
+        return;
+    }
+    add_scaled(row, k, v);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn add_scaled_avx2<W: Weight>(row: &mut [W], k: W, v: &[W]) {
+    add_scaled(row, k, v);
+}
+
+/// [`accumulate`] with AVX2 instructions where the CPU has them and the row is long (as
+/// [`add_scaled_wide`]).
+pub(crate) fn accumulate_wide<W: Weight>(acc: &mut [W], row: &[W]) {
+    #[cfg(target_arch = "x86_64")]
+    if row.len() >= WIDE && std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: as in `add_scaled_wide`.
+        unsafe { accumulate_avx2(acc, row) };
+        return;
+    }
+    accumulate(acc, row);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn accumulate_avx2<W: Weight>(acc: &mut [W], row: &[W]) {
+    accumulate(acc, row);
+}
+
+/// `acc[i] += row[i]`, then `row[i] += k · v[i]`, for every `i`: [`accumulate`] and [`add_scaled`] of
+/// the same row, reading it once.
+#[inline]
+pub(crate) fn accumulate_and_add_scaled<W: Weight>(acc: &mut [W], row: &mut [W], k: W, v: &[W]) {
+    for ((a, r), &x) in acc.iter_mut().zip(row.iter_mut()).zip(v) {
+        let w = *r;
+        *a = *a + w;
+        *r = w + k * x;
+    }
+}
+
+/// `acc[i] += row[i]`, then `row[i] += k · e[i]`, then `row[i] += m · v[i]`, for every `i`: a row read,
+/// brought forward into a new epoch and touched, in one loop.
+#[inline]
+pub(crate) fn accumulate_forward_and_add_scaled<W: Weight>(
+    acc: &mut [W],
+    row: &mut [W],
+    k: W,
+    e: &[W],
+    m: W,
+    v: &[W],
+) {
+    for (((a, r), &x), &y) in acc.iter_mut().zip(row.iter_mut()).zip(e).zip(v) {
+        let w = *r;
+        *a = *a + w;
+        let w = w + k * x;
+        *r = w + m * y;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -119,6 +189,28 @@ mod tests {
         accumulate(&mut acc, &[1.0, 2.0, 3.0]);
         accumulate(&mut acc, &[0.5, 0.5, 0.5]);
         assert_eq!(acc, [1.5, 2.5, 3.5]);
+        let long: Vec<f32> = (0..100).map(|i| i as f32 * 0.37).collect();
+        let (mut narrow, mut wide) = (long.clone(), long.clone());
+        add_scaled(&mut narrow, -0.3, &long);
+        add_scaled_wide(&mut wide, -0.3, &long);
+        assert_eq!(narrow, wide);
+        accumulate(&mut narrow, &long);
+        accumulate_wide(&mut wide, &long);
+        assert_eq!(narrow, wide);
+        let mut row = [1.0f32, 2.0, 3.0];
+        let mut acc = [0.5f32; 3];
+        accumulate_and_add_scaled(&mut acc, &mut row, -2.0, &[1.0, 0.5, 0.0]);
+        assert_eq!((acc, row), ([1.5, 2.5, 3.5], [-1.0, 1.0, 3.0]));
+        let mut acc = [0.0f32; 3];
+        accumulate_forward_and_add_scaled(
+            &mut acc,
+            &mut row,
+            2.0,
+            &[1.0, 1.0, 1.0],
+            1.0,
+            &[0.0, 1.0, 2.0],
+        );
+        assert_eq!((acc, row), ([-1.0, 1.0, 3.0], [1.0, 4.0, 7.0]));
     }
 
     #[test]
