@@ -18,6 +18,8 @@
 //! - `admission`: operator and watcher seats, counted apart (and watchers per address);
 //! - [`guard`]: the pool of connections that are not yet websockets (`pending`, bounded in total and per
 //!   `source` address, evicting the oldest of the busiest address) and their deadline to become one;
+//!   `linger`: a closed websocket's socket shut down for writing and read dry before it is closed, so
+//!   that its close frame is not lost to a reset;
 //! - `strict_json`: client messages parsed with duplicate keys refused;
 //! - `hello_config`: what of the configuration operators and watchers see;
 //! - [`assets`]: the page's files, built into the binary (or read from `--web-dir`);
@@ -44,6 +46,7 @@ pub(crate) mod horde_feed;
 pub(crate) mod http;
 pub(crate) mod hub;
 pub(crate) mod learning;
+pub(crate) mod linger;
 pub(crate) mod messages;
 pub(crate) mod out_queue;
 pub(crate) mod pending;
