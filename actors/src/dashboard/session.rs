@@ -161,8 +161,6 @@ pub(crate) struct Session {
     pub(crate) estop: EstopLatch,
     /// What this client may do.
     pub(crate) access: Access,
-    /// The `hello`, but for what is in force (taken with the history when the session starts).
-    pub(crate) hello: Hello,
     /// The largest `history` message, bytes.
     pub(crate) history_message_bytes: usize,
     /// The tick period, ms.
@@ -213,8 +211,10 @@ enum Out {
 }
 
 impl Session {
-    /// Serves one connection until either side ends it.
-    pub(crate) async fn run(self, socket: WebSocket) {
+    /// Serves one connection until either side ends it; `hello` is its first message, but for what is in
+    /// force (taken with the history when the session starts). It is made into text and let go at once:
+    /// a connection keeps no copy of the configuration it was shown.
+    pub(crate) async fn run(self, socket: WebSocket, hello: Hello) {
         tracing::debug!(access = ?self.access, "websocket client connected");
         let (sink, stream) = socket.split();
         let queue = Arc::new(OutQueue::new(self.queue));
@@ -226,7 +226,7 @@ impl Session {
         if watcher && in_force.recording.is_some() {
             in_force.recording = Some(REDACTED.into());
         }
-        let hello = self.hello.clone().with_in_force(in_force).to_json();
+        let hello = hello.with_in_force(in_force).to_json();
         let _ = queue.push_control(Out::Text(hello.into()));
         // The recent `learning` messages go out after the history, before the live telemetry.
         let recent_learning = self.hub.recent_learning();
@@ -301,7 +301,7 @@ impl Session {
     async fn receive(
         &self,
         mut stream: futures_util::stream::SplitStream<WebSocket>,
-        waiting: mpsc::Sender<Turn>,
+        waiting: mpsc::Sender<Box<Turn>>,
         queue: &Arc<OutQueue<Out>>,
         estops: &AtomicU64,
     ) -> Ended {
@@ -357,11 +357,11 @@ impl Session {
                     return Ended::Broken;
                 }
             };
-            match waiting.try_send(turn) {
+            match waiting.try_send(Box::new(turn)) {
                 Ok(()) => {}
                 Err(mpsc::error::TrySendError::Full(turn)) => {
                     // Every reply carries the id of the message it answers, a refusal too.
-                    let id = match turn {
+                    let id = match *turn {
                         Turn::Request { request: Ok(r), .. } => r.id,
                         Turn::Request {
                             request: Err(r), ..
@@ -401,14 +401,14 @@ impl Session {
     /// and the queue is empty, or when the client does not read its replies.
     async fn work(
         &self,
-        mut turns: mpsc::Receiver<Turn>,
+        mut turns: mpsc::Receiver<Box<Turn>>,
         stride: &AtomicU64,
         queue: &Arc<OutQueue<Out>>,
         estops: &AtomicU64,
     ) {
         let mut horde = HordeSubscription::default();
         while let Some(turn) = turns.recv().await {
-            let reply = match turn {
+            let reply = match *turn {
                 Turn::Reply(reply) => reply,
                 Turn::Request {
                     request,
@@ -644,7 +644,9 @@ impl Session {
 }
 
 /// A message waiting for its turn: a request (and how many e-stops had been applied ahead of the queue
-/// when it was read), or a reply already made (a refusal), kept in order with the others.
+/// when it was read), or a reply already made (a refusal), kept in order with the others. It waits boxed:
+/// the waiting queue's first block of slots is allocated with the connection and held for as long as it
+/// lasts, so its slots are a pointer each (8 bytes, not 136).
 enum Turn {
     Request {
         request: Result<ClientRequest, Rejection>,
