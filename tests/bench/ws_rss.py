@@ -154,7 +154,7 @@ def main():
                 alive = len(sel.get_map())
                 print(
                     f"{n:4} clients ({alive} reading, {read / args.settle / 1024:8.1f} KiB/s read): "
-                    f"VmRSS {st['VmRSS'] / 1024:6.1f} MB, VmHWM {st['VmHWM'] / 1024:6.1f} MB; "
+                    f"VmRSS {st['VmRSS'] / 1024:6.1f} MiB, VmHWM {st['VmHWM'] / 1024:6.1f} MiB; "
                     f"server CPU {cpu:5.2f} s in {wall:5.2f} s wall ({100 * cpu / wall:4.1f} %)"
                 )
             low, high = min(counts), max(counts)
