@@ -8,7 +8,8 @@
 //!   `history` (sent to a new client as `history_messages`) and the `learning` figures;
 //! - `horde_feed`: the Horde's names and values for the clients that ask (`horde_watch`);
 //! - `out_queue`: each client's bounded, drop-oldest queue and its tick-rate decimation;
-//! - [`session`]: one connection's reader, writer and forwarder; `socket_buffers`: the websocket
+//! - [`session`]: one connection's reader, writer and forwarder; `waiting`: the line of its messages
+//!   waiting for its worker, in the order they were read, refusals included; `socket_buffers`: the websocket
 //!   library's read and write buffers, sized for this protocol;
 //! - [`rate`]: the per-connection message rate limit;
 //! - `/metrics` is served here; its text is written in `crate::telemetry::prometheus` (with
@@ -57,6 +58,7 @@ pub(crate) mod socket_buffers;
 pub(crate) mod source;
 pub(crate) mod strict_json;
 pub mod token_throttle;
+pub(crate) mod waiting;
 
 pub use assets::WebAssets;
 pub use auth::generate_token;
