@@ -388,6 +388,11 @@ impl Session {
             };
             match placed {
                 Ok(()) => {}
+                // The worker is held by the client's own unread replies: that is why its refusals piled up.
+                Err(NoRoom::Full) if queue.replies_full() => {
+                    self.count_unread();
+                    return Ended::Unread;
+                }
                 Err(NoRoom::Full) => {
                     self.close_flooding(queue);
                     return Ended::Broken;
@@ -439,6 +444,12 @@ impl Session {
         {
             return true;
         }
+        self.count_unread();
+        false
+    }
+
+    /// Counts (and logs) a client disconnected because it does not read its replies.
+    fn count_unread(&self) {
         let n = self.counters.closed_unread.fetch_add(1, Ordering::Relaxed) + 1;
         if worth_logging(n) {
             tracing::warn!(
@@ -446,7 +457,6 @@ impl Session {
                 "websocket client does not read its replies; disconnecting it"
             );
         }
-        false
     }
 
     /// An operator's `estop`, applied the moment it is read.

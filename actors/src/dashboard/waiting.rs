@@ -8,7 +8,8 @@
 //! refusal joins the line), and at most [`MAX_REFUSALS`] refusals of at most [`MAX_REFUSAL_BYTES`] together
 //! (a refusal costs the worker no work, only the memory of its text). A connection that finds no room for
 //! a refusal has sent that many messages it may not send while its own commands are still waiting: the
-//! session closes it.
+//! session closes it (1008), or drops it as a client that does not read its replies when those are what
+//! holds the worker up.
 
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
