@@ -114,6 +114,7 @@ impl AppState {
             records_missed: load(&self.hub_counters.records_missed),
             closed_protocol: load(&c.closed_protocol),
             closed_invalid_utf8: load(&c.closed_invalid_utf8),
+            closed_refusals_piled: load(&c.closed_refusals_piled),
             tcp_refused: load(&self.guard_counters.refused),
             closed_evicted: load(&self.guard_counters.evicted),
             closed_no_upgrade: load(&self.guard_counters.timed_out),

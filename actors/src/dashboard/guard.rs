@@ -35,6 +35,7 @@ use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::time::Sleep;
 use tokio_util::sync::WaitForCancellationFutureOwned;
 
+use super::linger::{LINGERING_AT_ONCE, LingerSlots, Lingering};
 use super::pending::{Activity, Admission, Admitted, PendingPool};
 use super::session::worth_logging;
 use super::source::Source;
@@ -103,6 +104,8 @@ pub(crate) struct GuardedListener<L> {
     pool: SharedPool,
     counters: Arc<GuardCounters>,
     pre_upgrade_limit: Duration,
+    /// Places for the connections that linger once closed (`super::linger`).
+    lingering: LingerSlots,
 }
 
 impl<L> GuardedListener<L> {
@@ -118,6 +121,7 @@ impl<L> GuardedListener<L> {
             pool,
             counters,
             pre_upgrade_limit,
+            lingering: LingerSlots::new(LINGERING_AT_ONCE),
         }
     }
 }
@@ -201,7 +205,7 @@ impl<L: Listener<Addr = SocketAddr>> GuardedListener<L> {
             activity: admitted.activity,
         };
         let io = GuardedIo {
-            inner: io,
+            inner: Lingering::new(io, self.lingering.clone()),
             pending: Some(seat),
             ended: false,
             counters: self.counters.clone(),
@@ -229,9 +233,10 @@ impl Drop for PendingSeat {
     }
 }
 
-/// A connection: pending (bounded in time, evictable) until it becomes a websocket.
+/// A connection: pending (bounded in time, evictable) until it becomes a websocket; a websocket lingers
+/// when closed (`super::linger`).
 pub(crate) struct GuardedIo<T> {
-    inner: T,
+    inner: Lingering<T>,
     /// `None` once the connection is a websocket, or once it ended.
     pending: Option<PendingSeat>,
     /// Evicted or out of time: every read and write fails from then on.
@@ -291,6 +296,7 @@ impl<T> GuardedIo<T> {
     fn saw_write(&mut self, first: &[u8]) {
         if self.pending.is_some() && is_switch(first) {
             self.pending = None;
+            self.inner.arm();
         }
     }
 

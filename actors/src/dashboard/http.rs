@@ -183,7 +183,6 @@ async fn ws_handler(
         commands: state.commands.clone(),
         estop: state.estop.clone(),
         access,
-        hello,
         history_message_bytes: state
             .max_message_bytes
             .min(super::history_messages::HISTORY_MESSAGE_BYTES),
@@ -202,6 +201,6 @@ async fn ws_handler(
         .write_buffer_size(super::socket_buffers::WRITE_BUFFER_BYTES)
         .on_upgrade(move |socket| async move {
             let _seat = seat;
-            session.run(socket).await;
+            session.run(socket, hello).await;
         })
 }

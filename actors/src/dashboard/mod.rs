@@ -8,7 +8,8 @@
 //!   `history` (sent to a new client as `history_messages`) and the `learning` figures;
 //! - `horde_feed`: the Horde's names and values for the clients that ask (`horde_watch`);
 //! - `out_queue`: each client's bounded, drop-oldest queue and its tick-rate decimation;
-//! - [`session`]: one connection's reader, writer and forwarder; `socket_buffers`: the websocket
+//! - [`session`]: one connection's reader, writer and forwarder; `waiting`: the line of its messages
+//!   waiting for its worker, in the order they were read, refusals included; `socket_buffers`: the websocket
 //!   library's read and write buffers, sized for this protocol;
 //! - [`rate`]: the per-connection message rate limit;
 //! - `/metrics` is served here; its text is written in `crate::telemetry::prometheus` (with
@@ -18,6 +19,8 @@
 //! - `admission`: operator and watcher seats, counted apart (and watchers per address);
 //! - [`guard`]: the pool of connections that are not yet websockets (`pending`, bounded in total and per
 //!   `source` address, evicting the oldest of the busiest address) and their deadline to become one;
+//!   `linger`: a closed websocket's socket shut down for writing and read dry before it is closed, so
+//!   that its close frame is not lost to a reset;
 //! - `strict_json`: client messages parsed with duplicate keys refused;
 //! - `hello_config`: what of the configuration operators and watchers see;
 //! - [`assets`]: the page's files, built into the binary (or read from `--web-dir`);
@@ -44,6 +47,7 @@ pub(crate) mod horde_feed;
 pub(crate) mod http;
 pub(crate) mod hub;
 pub(crate) mod learning;
+pub(crate) mod linger;
 pub(crate) mod messages;
 pub(crate) mod out_queue;
 pub(crate) mod pending;
@@ -54,6 +58,7 @@ pub(crate) mod socket_buffers;
 pub(crate) mod source;
 pub(crate) mod strict_json;
 pub mod token_throttle;
+pub(crate) mod waiting;
 
 pub use assets::WebAssets;
 pub use auth::generate_token;

@@ -257,6 +257,11 @@ impl<T> OutQueue<T> {
     }
 
     /// Telemetry dropped so far.
+    /// Whether [`CONTROL_CAPACITY`] replies are waiting: the client is not taking its replies.
+    pub(crate) fn replies_full(&self) -> bool {
+        self.with_state(|s| s.control.len() >= CONTROL_CAPACITY)
+    }
+
     pub(crate) fn dropped(&self) -> u64 {
         self.dropped.load(Ordering::Relaxed)
     }

@@ -6,8 +6,12 @@
 //! ([`crate::pipeline::latch`]), the moment it reads it, however many slow commands (a run of
 //! `save_weights`) the same connection sent before and the worker still has to do; it is not refused for
 //! the rate limit either. A `release` read before such an `estop` and still waiting is answered
-//! `superseded` instead of undoing it. Other messages wait for the worker, at most [`WAITING_MESSAGES`]
-//! (beyond that, `busy` at once); what a client sent before it closed is still done.
+//! `superseded` instead of undoing it. Every other message takes its place in one line
+//! ([`super::waiting`]) in the order it was read, a refusal the reader makes (`rate_limited`, `busy`)
+//! included, and the worker answers the line in order, so replies leave in the order of the messages (but
+//! for the `estop`'s). The reader never waits on the worker: a request finding [`MAX_REQUESTS`] waiting is
+//! refused `busy` in its turn, and a connection whose refusals fill their room while its commands wait is
+//! closed with 1008; what a client sent before it closed is still done.
 //!
 //! On connect the client gets `hello`, then the history (the hub's snapshot, made into messages by the
 //! writer one at a time, replies going first), then live telemetry from where the history ends: the
@@ -47,6 +51,8 @@ use super::protocol::{
     peek_id,
 };
 use super::rate::{RateLimit, TokenBucket};
+use super::waiting::{LineIn, LineOut, NoRoom, Turn};
+pub use super::waiting::{MAX_REFUSAL_BYTES, MAX_REFUSALS, MAX_REQUESTS};
 use crate::command::{ControlCommand, ControlRequest, LatchCommand};
 use crate::pipeline::latch::EstopLatch;
 
@@ -59,10 +65,6 @@ pub const UNREAD_PATIENCE: Duration = Duration::from_secs(5);
 pub(crate) const OVER_LIMIT_READS_PER_SECOND: u32 = 1000;
 /// Messages over the limit between two pauses of the reader.
 const PACE_BATCH: u32 = 10;
-/// Messages read from one connection and waiting for their turn (behind a command being applied) before
-/// the next one is answered `busy` at once; above the rate limit's burst, so a client within its limit
-/// never sees it.
-pub const WAITING_MESSAGES: usize = 64;
 /// How long a command may wait for room in the router's inbox.
 const ROUTER_SEND_TIMEOUT: Duration = Duration::from_secs(1);
 /// How long a command may take to be applied before the client is told it timed out.
@@ -97,6 +99,9 @@ pub(crate) struct SessionCounters {
     pub(crate) closed_protocol: AtomicU64,
     /// Connections closed with 1007 for a text message that is not UTF-8.
     pub(crate) closed_invalid_utf8: AtomicU64,
+    /// Connections closed with 1008 because their refused messages filled the room refusals have while
+    /// their commands wait.
+    pub(crate) closed_refusals_piled: AtomicU64,
     /// Each connected client's queue, by the client's address: what it dropped, for the tests that check
     /// that a slow client's losses are its own ([`SessionCounters::telemetry_dropped_for`]).
     queues: Mutex<HashMap<SocketAddr, Weak<OutQueue<Out>>>>,
@@ -161,8 +166,6 @@ pub(crate) struct Session {
     pub(crate) estop: EstopLatch,
     /// What this client may do.
     pub(crate) access: Access,
-    /// The `hello`, but for what is in force (taken with the history when the session starts).
-    pub(crate) hello: Hello,
     /// The largest `history` message, bytes.
     pub(crate) history_message_bytes: usize,
     /// The tick period, ms.
@@ -213,8 +216,10 @@ enum Out {
 }
 
 impl Session {
-    /// Serves one connection until either side ends it.
-    pub(crate) async fn run(self, socket: WebSocket) {
+    /// Serves one connection until either side ends it; `hello` is its first message, but for what is in
+    /// force (taken with the history when the session starts). It is made into text and let go at once:
+    /// a connection keeps no copy of the configuration it was shown.
+    pub(crate) async fn run(self, socket: WebSocket, hello: Hello) {
         tracing::debug!(access = ?self.access, "websocket client connected");
         let (sink, stream) = socket.split();
         let queue = Arc::new(OutQueue::new(self.queue));
@@ -226,7 +231,7 @@ impl Session {
         if watcher && in_force.recording.is_some() {
             in_force.recording = Some(REDACTED.into());
         }
-        let hello = self.hello.clone().with_in_force(in_force).to_json();
+        let hello = hello.with_in_force(in_force).to_json();
         let _ = queue.push_control(Out::Text(hello.into()));
         // The recent `learning` messages go out after the history, before the live telemetry.
         let recent_learning = self.hub.recent_learning();
@@ -274,14 +279,15 @@ impl Session {
 
     /// Reads the connection and answers it: a reader takes every message off the socket as it comes, and
     /// answers an operator's `estop` at once (the latch is set before the next tick); every other message
-    /// waits in a queue of [`WAITING_MESSAGES`] for a worker that handles them one at a time, in order.
+    /// waits in one line (at most [`MAX_REQUESTS`] requests) for a worker that handles them one at a time,
+    /// in order.
     async fn read(
         &self,
         stream: futures_util::stream::SplitStream<WebSocket>,
         queue: &Arc<OutQueue<Out>>,
         stride: &AtomicU64,
     ) {
-        let (waiting, turns) = mpsc::channel(WAITING_MESSAGES);
+        let (waiting, turns) = super::waiting::line();
         let estops = AtomicU64::new(0);
         let worker = self.work(turns, stride, queue, &estops);
         tokio::pin!(worker);
@@ -296,12 +302,13 @@ impl Session {
         }
     }
 
-    /// Takes messages off the socket: an operator's `estop` is applied here, ahead of the queue; the rest
-    /// are queued for [`Session::work`] (or answered `busy` when [`WAITING_MESSAGES`] are waiting).
+    /// Takes messages off the socket: an operator's `estop` is applied here, ahead of the line; the rest
+    /// take their place in the line for [`Session::work`], refusals too (a request is answered `busy` when
+    /// [`MAX_REQUESTS`] are waiting).
     async fn receive(
         &self,
         mut stream: futures_util::stream::SplitStream<WebSocket>,
-        waiting: mpsc::Sender<Turn>,
+        waiting: LineIn<Waiting>,
         queue: &Arc<OutQueue<Out>>,
         estops: &AtomicU64,
     ) -> Ended {
@@ -332,18 +339,18 @@ impl Session {
                         continue;
                     }
                     if over_limit {
-                        Turn::Reply(self.rate_limited(peek_id(&text)))
+                        Turn::Refusal(self.rate_limited(peek_id(&text)))
                     } else {
-                        Turn::Request {
+                        Turn::Request(Waiting {
                             request,
                             estops_before: estops.load(Ordering::SeqCst),
-                        }
+                        })
                     }
                 }
-                Ok(Message::Binary(_)) if over_limit => Turn::Reply(self.rate_limited(None)),
+                Ok(Message::Binary(_)) if over_limit => Turn::Refusal(self.rate_limited(None)),
                 Ok(Message::Binary(_)) => {
                     let e = super::protocol::ProtocolError::Binary;
-                    Turn::Reply(self.error(&None, e.code(), &e.to_string()))
+                    Turn::Refusal(self.error(&None, e.code(), &e.to_string()))
                 }
                 Ok(Message::Ping(_) | Message::Pong(_)) => {
                     if over_limit {
@@ -357,38 +364,40 @@ impl Session {
                     return Ended::Broken;
                 }
             };
-            match waiting.try_send(turn) {
-                Ok(()) => {}
-                Err(mpsc::error::TrySendError::Full(turn)) => {
-                    // Every reply carries the id of the message it answers, a refusal too.
-                    let id = match turn {
-                        Turn::Request { request: Ok(r), .. } => r.id,
-                        Turn::Request {
-                            request: Err(r), ..
-                        } => r.id,
-                        Turn::Reply(ready) => {
-                            // Already an answer (a refusal with its id): it goes out as it is.
-                            if !self.reply(queue, ready).await {
-                                return Ended::Unread;
-                            }
-                            if over_limit {
-                                pace.over_limit().await;
-                            }
-                            continue;
-                        }
-                    };
-                    let busy = self.error(
-                        &id,
-                        "busy",
-                        &format!(
-                            "{WAITING_MESSAGES} messages of this connection are waiting for their turn; this one was not processed"
-                        ),
-                    );
-                    if !self.reply(queue, busy).await {
-                        return Ended::Unread;
+            let placed = match turn {
+                Turn::Request(w) => match waiting.push_request(w) {
+                    Ok(()) => Ok(()),
+                    Err((w, NoRoom::Full)) => {
+                        // Refused in its turn, with the id of the message it answers.
+                        let id = match w.request {
+                            Ok(r) => r.id,
+                            Err(r) => r.id,
+                        };
+                        let busy = self.error(
+                            &id,
+                            "busy",
+                            &format!(
+                                "{MAX_REQUESTS} messages of this connection are waiting for their turn; this one was not processed"
+                            ),
+                        );
+                        waiting.push_refusal(busy)
                     }
+                    Err((_, NoRoom::Gone)) => Err(NoRoom::Gone),
+                },
+                Turn::Refusal(reply) => waiting.push_refusal(reply),
+            };
+            match placed {
+                Ok(()) => {}
+                // The worker is held by the client's own unread replies: that is why its refusals piled up.
+                Err(NoRoom::Full) if queue.replies_full() => {
+                    self.count_unread();
+                    return Ended::Unread;
                 }
-                Err(mpsc::error::TrySendError::Closed(_)) => return Ended::Unread,
+                Err(NoRoom::Full) => {
+                    self.close_flooding(queue);
+                    return Ended::Broken;
+                }
+                Err(NoRoom::Gone) => return Ended::Unread,
             }
             if over_limit {
                 pace.over_limit().await;
@@ -401,19 +410,19 @@ impl Session {
     /// and the queue is empty, or when the client does not read its replies.
     async fn work(
         &self,
-        mut turns: mpsc::Receiver<Turn>,
+        mut turns: LineOut<Waiting>,
         stride: &AtomicU64,
         queue: &Arc<OutQueue<Out>>,
         estops: &AtomicU64,
     ) {
         let mut horde = HordeSubscription::default();
-        while let Some(turn) = turns.recv().await {
+        while let Some(turn) = turns.next().await {
             let reply = match turn {
-                Turn::Reply(reply) => reply,
-                Turn::Request {
+                Turn::Refusal(reply) => reply,
+                Turn::Request(Waiting {
                     request,
                     estops_before,
-                } => {
+                }) => {
                     let overtaken = estops.load(Ordering::SeqCst) > estops_before;
                     self.handle(request, overtaken, stride, queue, &mut horde)
                         .await
@@ -435,6 +444,12 @@ impl Session {
         {
             return true;
         }
+        self.count_unread();
+        false
+    }
+
+    /// Counts (and logs) a client disconnected because it does not read its replies.
+    fn count_unread(&self) {
         let n = self.counters.closed_unread.fetch_add(1, Ordering::Relaxed) + 1;
         if worth_logging(n) {
             tracing::warn!(
@@ -442,7 +457,6 @@ impl Session {
                 "websocket client does not read its replies; disconnecting it"
             );
         }
-        false
     }
 
     /// An operator's `estop`, applied the moment it is read.
@@ -452,6 +466,26 @@ impl Session {
         let applied = self.estop.set(true);
         let result = serde_json::to_value(&applied).unwrap_or_default();
         ack_json(&request.id, &request.cmd, &result)
+    }
+
+    /// Ends a connection that sent [`MAX_REFUSALS`] (or [`MAX_REFUSAL_BYTES`]) of refused messages while its
+    /// commands were still waiting: closed with 1008 (policy violation), counted.
+    fn close_flooding(&self, queue: &OutQueue<Out>) {
+        let n = self
+            .counters
+            .closed_refusals_piled
+            .fetch_add(1, Ordering::Relaxed)
+            + 1;
+        if worth_logging(n) {
+            tracing::warn!(
+                total = n,
+                "a websocket client's refused messages piled up behind its waiting commands; closing it"
+            );
+        }
+        let _ = queue.push_control(Out::Close(
+            close_code::POLICY,
+            "too many refused messages waiting",
+        ));
     }
 
     /// Ends the connection after the websocket layer refused what the client sent: an over-size message
@@ -643,14 +677,11 @@ impl Session {
     }
 }
 
-/// A message waiting for its turn: a request (and how many e-stops had been applied ahead of the queue
-/// when it was read), or a reply already made (a refusal), kept in order with the others.
-enum Turn {
-    Request {
-        request: Result<ClientRequest, Rejection>,
-        estops_before: u64,
-    },
-    Reply(String),
+/// A request waiting for its turn, and how many e-stops had been applied ahead of the line when it was
+/// read.
+struct Waiting {
+    request: Result<ClientRequest, Rejection>,
+    estops_before: u64,
 }
 
 /// Why the reader stopped.
@@ -852,32 +883,4 @@ async fn write(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_clients_drops_are_read_by_its_address_while_it_is_connected() {
-        let counters = Arc::new(SessionCounters::default());
-        let (a, b): (SocketAddr, SocketAddr) = (
-            "127.0.0.1:4000".parse().unwrap(),
-            "127.0.0.1:4001".parse().unwrap(),
-        );
-        let slow = Arc::new(OutQueue::new(1));
-        let fast = Arc::new(OutQueue::new(1));
-        let slow_seat = counters.register(a, &slow);
-        let fast_seat = counters.register(b, &fast);
-        for _ in 0..3 {
-            slow.push_telemetry(Out::Text(Utf8Bytes::from_static("tick")));
-        }
-        assert_eq!(counters.telemetry_dropped_for(a), Some(2));
-        assert_eq!(counters.telemetry_dropped_for(b), Some(0));
-        // A later connection from the same address replaces the entry; the earlier one's end leaves it.
-        let again = Arc::new(OutQueue::new(1));
-        let again_seat = counters.register(a, &again);
-        drop(slow_seat);
-        assert_eq!(counters.telemetry_dropped_for(a), Some(0));
-        drop((again_seat, fast_seat));
-        assert_eq!(counters.telemetry_dropped_for(a), None);
-        assert_eq!(counters.telemetry_dropped_for(b), None);
-    }
-}
+mod tests;

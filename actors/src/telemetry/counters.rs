@@ -144,13 +144,16 @@ counter_set! {
         /// the previous message (a slow client gets the newest, never a backlog).
         pub horde_values_skipped: u64,
     }
-    "pavlov_ws_closed_total" counter "Connections the server closed: oversize (1009), protocol (1002), invalid_utf8 (1007), unread_replies, write_stall, no_upgrade (plain HTTP too long), evicted (a pending connection closed to make room)." by "reason" {
+    "pavlov_ws_closed_total" counter "Connections the server closed: oversize (1009), protocol (1002), invalid_utf8 (1007), refusals_piled (1008: refused messages piled up behind the connection's waiting commands), unread_replies, write_stall, no_upgrade (plain HTTP too long), evicted (a pending connection closed to make room)." by "reason" {
         /// Connections closed with 1009 for an over-size message.
         pub closed_oversize: u64 = "oversize",
         /// Connections closed with 1002 for a websocket protocol violation.
         pub closed_protocol: u64 = "protocol",
         /// Connections closed with 1007 for a text message that is not UTF-8.
         pub closed_invalid_utf8: u64 = "invalid_utf8",
+        /// Connections closed with 1008 because their refused messages piled up behind their waiting
+        /// commands (`dashboard::waiting`).
+        pub closed_refusals_piled: u64 = "refusals_piled",
         /// Connections dropped because their replies piled up unread.
         pub closed_unread: u64 = "unread_replies",
         /// Connections dropped because their socket accepted nothing for `dashboard::session::WRITE_STALL`.

@@ -1,6 +1,7 @@
 //! The dashboard endpoint: the websocket protocol, the browser page, abuse, who gets in when it is abused
 //! (`operator`), what it refuses to guess and keeps to itself (`strictness`), `/metrics`, the recording's
-//! download (`download`), a full disk as the page shows it (`browser_storage`), the page without traps
+//! download (`download`), a refused message's close frame delivered while its rest still arrives
+//! (`lingering_close`), a full disk as the page shows it (`browser_storage`), the page without traps
 //! (`browser_traps`: one time axis, marker labels, a watcher's buttons), and the page of a copied binary
 //! run from an empty folder (`installed`).
 
@@ -17,6 +18,7 @@ mod download;
 mod installed;
 mod learning_bounds;
 mod learning_view;
+mod lingering_close;
 mod metrics;
 mod operator;
 mod operator_first;
