@@ -14,7 +14,7 @@ use crate::storage::recording::bench_support::TickEncoder;
 
 /// Hashes every record as a recording writes it (its `pavlov.Tick` protobuf message).
 #[derive(Default)]
-struct Hash(Sha256, u64, TickEncoder);
+pub(super) struct Hash(Sha256, u64, TickEncoder);
 
 impl Collect for Hash {
     type Output = (String, u64);

@@ -275,30 +275,8 @@ pub(crate) fn run_all<S: Sync, R: Send>(
 
 #[cfg(test)]
 mod tests {
-    use sha2::{Digest, Sha256};
-
+    use super::super::drivers_agree::Hash;
     use super::*;
-
-    /// Hashes every record as a recording writes it (its `pavlov.Tick` protobuf message).
-    struct Hash(
-        Sha256,
-        u64,
-        crate::storage::recording::bench_support::TickEncoder,
-    );
-
-    impl Collect for Hash {
-        type Output = (String, u64);
-
-        fn record(&mut self, record: Arc<TickRecord>) {
-            self.0.update(self.2.encode(&record));
-            self.1 += 1;
-        }
-
-        async fn finish(self) -> Result<Self::Output, RunError> {
-            let digest = self.0.finalize();
-            Ok((digest.iter().map(|b| format!("{b:02x}")).collect(), self.1))
-        }
-    }
 
     /// The ticks of a short Pavlovian stall run, pinned: a change to how the actors are driven under the
     /// paused clock (batching, stepping, buffers) must not change one bit of what a run records. The hash
@@ -316,7 +294,7 @@ mod tests {
             ticks: 1500,
             record: None,
         };
-        let done = run_paused(request, Hash(Sha256::new(), 0, Default::default())).expect("run");
+        let done = run_paused(request, Hash::default()).expect("run");
         let (hash, n) = done.output;
         assert_eq!(n, 1500);
         assert_eq!(done.lagged, 0);
