@@ -7,7 +7,7 @@
 //! `save_weights`) the same connection sent before and the worker still has to do; it is not refused for
 //! the rate limit either. A `release` read before such an `estop` and still waiting is answered
 //! `superseded` instead of undoing it. Every other message takes its place in one line
-//! ([`super::waiting`]) in the order it was read, a refusal the reader makes (`rate_limited`, `busy`)
+//! (`super::waiting`) in the order it was read, a refusal the reader makes (`rate_limited`, `busy`)
 //! included, and the worker answers the line in order, so replies leave in the order of the messages (but
 //! for the `estop`'s). The reader never waits on the worker: a request finding [`MAX_REQUESTS`] waiting is
 //! refused `busy` in its turn, and a connection whose refusals fill their room while its commands wait is
