@@ -110,6 +110,51 @@ pub struct Contact {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Enclosure {
     walls: Vec<Segment>,
+    /// One per wall: what [`Enclosure::contacts`] needs to skip a wall that is certainly out of reach.
+    reach_filters: Vec<ReachFilter>,
+}
+
+/// Relative margin of [`ReachFilter`]: far above the few ulps by which the computed distances can differ
+/// from the true ones (rounding of metre-scale coordinates is ~1e-16 of their magnitude).
+const REACH_MARGIN: f64 = 1e-9;
+
+/// A lower bound on a point's distance to one wall: its distance to the wall's supporting line. A wall
+/// whose line is farther than the reach plus a margin cannot be within reach, so the exact (and
+/// dearer) closest-point computation can be skipped for it without changing any result.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ReachFilter {
+    a: Vec2,
+    /// Unit normal of the wall's line; `None` for a zero-length wall (never skipped).
+    normal: Option<Vec2>,
+    /// `1 + |a.x| + |a.y| + |b.x| + |b.y|`: the scale of the coordinates the rounding errors are relative to.
+    scale: f64,
+}
+
+impl ReachFilter {
+    fn new(wall: &Segment) -> Self {
+        let ab = wall.b - wall.a;
+        let len = ab.length();
+        let normal = (len > 0.0 && len.is_finite()).then(|| Vec2::new(-ab.y, ab.x) * (1.0 / len));
+        ReachFilter {
+            a: wall.a,
+            normal,
+            scale: 1.0 + wall.a.x.abs() + wall.a.y.abs() + wall.b.x.abs() + wall.b.y.abs(),
+        }
+    }
+
+    /// True only when `p` is certainly farther than `reach` from the wall: its distance to the wall's
+    /// line exceeds `reach` by more than [`REACH_MARGIN`] times the coordinates' scale. `p_scale` is
+    /// `|p.x| + |p.y|`. NaN anywhere gives false (the exact computation decides).
+    #[inline]
+    fn certainly_beyond(&self, p: Vec2, p_scale: f64, reach: f64) -> bool {
+        match self.normal {
+            Some(n) => {
+                let line_distance = (p - self.a).dot(n).abs();
+                line_distance > reach + REACH_MARGIN * (self.scale + p_scale)
+            }
+            None => false,
+        }
+    }
 }
 
 impl Enclosure {
@@ -119,12 +164,19 @@ impl Enclosure {
         let o = Vec2::new(0.0, 0.0);
         let a = Vec2::new(leg, 0.0);
         let b = Vec2::new(0.0, leg);
+        Enclosure::new(vec![
+            Segment { a: o, b: a },
+            Segment { a, b },
+            Segment { a: b, b: o },
+        ])
+    }
+
+    /// An arena bounded by `walls`.
+    pub fn new(walls: Vec<Segment>) -> Self {
+        let reach_filters = walls.iter().map(ReachFilter::new).collect();
         Enclosure {
-            walls: vec![
-                Segment { a: o, b: a },
-                Segment { a, b },
-                Segment { a: b, b: o },
-            ],
+            walls,
+            reach_filters,
         }
     }
 
@@ -134,12 +186,20 @@ impl Enclosure {
 
     /// Replaces `out` with the contacts of a disc of `radius` at `centre` with every wall closer than
     /// `radius + tolerance`.
+    ///
+    /// Walls whose line is certainly beyond reach (see `ReachFilter`) are skipped; for the others the
+    /// exact test decides, so the contacts are those of testing every wall.
     pub fn contacts(&self, centre: Vec2, radius: f64, tolerance: f64, out: &mut Vec<Contact>) {
         out.clear();
-        for wall in &self.walls {
+        let reach = radius + tolerance;
+        let p_scale = centre.x.abs() + centre.y.abs();
+        for (wall, filter) in self.walls.iter().zip(&self.reach_filters) {
+            if filter.certainly_beyond(centre, p_scale, reach) {
+                continue;
+            }
             let away = centre - wall.closest_point(centre);
             let dist = away.length();
-            if dist < radius + tolerance && dist > 1e-12 {
+            if dist < reach && dist > 1e-12 {
                 out.push(Contact {
                     normal: away * (1.0 / dist),
                     depth: radius - dist,
@@ -185,6 +245,149 @@ mod tests {
         // In the right-angle corner both legs touch.
         e.contacts(Vec2::new(0.16, 0.16), 0.165, 0.001, &mut c);
         assert_eq!(c.len(), 2);
+    }
+
+    /// The contacts of testing every wall exactly: [`Enclosure::contacts`] without its prefilter.
+    fn contacts_unfiltered(
+        e: &Enclosure,
+        centre: Vec2,
+        radius: f64,
+        tolerance: f64,
+    ) -> Vec<Contact> {
+        let mut out = Vec::new();
+        for wall in e.walls() {
+            let away = centre - wall.closest_point(centre);
+            let dist = away.length();
+            if dist < radius + tolerance && dist > 1e-12 {
+                out.push(Contact {
+                    normal: away * (1.0 / dist),
+                    depth: radius - dist,
+                });
+            }
+        }
+        out
+    }
+
+    fn bits(contacts: &[Contact]) -> Vec<[u64; 3]> {
+        contacts
+            .iter()
+            .map(|c| {
+                [
+                    c.normal.x.to_bits(),
+                    c.normal.y.to_bits(),
+                    c.depth.to_bits(),
+                ]
+            })
+            .collect()
+    }
+
+    /// Checks the filtered contacts at `p` against the unfiltered ones, bit for bit; returns how many
+    /// walls the filter skipped.
+    fn agree_at(
+        e: &Enclosure,
+        p: Vec2,
+        radius: f64,
+        tolerance: f64,
+        out: &mut Vec<Contact>,
+    ) -> usize {
+        e.contacts(p, radius, tolerance, out);
+        let exact = contacts_unfiltered(e, p, radius, tolerance);
+        assert_eq!(
+            bits(out),
+            bits(&exact),
+            "at {p:?}, radius {radius}, tolerance {tolerance}"
+        );
+        let reach = radius + tolerance;
+        let p_scale = p.x.abs() + p.y.abs();
+        e.reach_filters
+            .iter()
+            .filter(|f| f.certainly_beyond(p, p_scale, reach))
+            .count()
+    }
+
+    #[test]
+    fn the_reach_prefilter_never_changes_the_contacts() {
+        let mut rng = crate::rng::Rng::new(42);
+        let mut out = Vec::new();
+        let mut skipped = 0;
+        let mut near_boundary = 0;
+        let arenas = [
+            Enclosure::right_triangle(1.0),
+            Enclosure::right_triangle(2.5),
+            // A slanted quadrilateral with a zero-length wall, and walls not on the axes.
+            Enclosure::new(vec![
+                Segment {
+                    a: Vec2::new(-0.3, 0.1),
+                    b: Vec2::new(1.7, -0.4),
+                },
+                Segment {
+                    a: Vec2::new(1.7, -0.4),
+                    b: Vec2::new(1.7, -0.4),
+                },
+                Segment {
+                    a: Vec2::new(1.7, -0.4),
+                    b: Vec2::new(0.9, 1.3),
+                },
+                Segment {
+                    a: Vec2::new(0.9, 1.3),
+                    b: Vec2::new(-0.3, 0.1),
+                },
+            ]),
+        ];
+        for e in &arenas {
+            for _ in 0..20_000 {
+                let radius = rng.uniform(0.0, 0.4);
+                let tolerance = [0.0, 0.001, rng.uniform(0.0, 0.01)][rng.below(3) as usize];
+                let reach = radius + tolerance;
+                // Anywhere around the arena.
+                let p = Vec2::new(rng.uniform(-1.0, 3.5), rng.uniform(-1.0, 3.5));
+                skipped += agree_at(e, p, radius, tolerance, &mut out);
+                // Exactly at the reach from a wall's line, at the filter's threshold, and a few ulps
+                // either side of both.
+                let wall = e.walls()[rng.below(e.walls().len() as u64) as usize];
+                let f = ReachFilter::new(&wall);
+                let Some(n) = f.normal else { continue };
+                let along = wall.a + (wall.b - wall.a) * rng.uniform(-0.2, 1.2);
+                let side = if rng.chance(0.5) { 1.0 } else { -1.0 };
+                let threshold = reach + REACH_MARGIN * (f.scale + along.x.abs() + along.y.abs());
+                for d in [reach, threshold] {
+                    let mut d = d;
+                    for _ in 0..4 {
+                        d = d.next_down();
+                    }
+                    for _ in 0..9 {
+                        let p = along + n * (side * d);
+                        agree_at(e, p, radius, tolerance, &mut out);
+                        near_boundary += 1;
+                        d = d.next_up();
+                    }
+                }
+            }
+        }
+        // The filter did skip walls (it is not vacuous) and the boundary points were tried.
+        assert!(skipped > 10_000, "skipped {skipped}");
+        assert!(near_boundary > 100_000, "{near_boundary}");
+    }
+
+    #[test]
+    fn the_reach_prefilter_leaves_odd_inputs_to_the_exact_test() {
+        let e = Enclosure::right_triangle(1.0);
+        let mut out = Vec::new();
+        for p in [
+            Vec2::new(f64::NAN, 0.5),
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1e12, -3e11),
+            Vec2::new(f64::INFINITY, 0.2),
+        ] {
+            for (radius, tolerance) in [
+                (0.165, 0.001),
+                (0.0, 0.0),
+                (f64::INFINITY, 0.0),
+                (-1.0, 0.0),
+            ] {
+                agree_at(&e, p, radius, tolerance, &mut out);
+            }
+        }
     }
 
     #[test]

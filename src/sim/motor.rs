@@ -47,6 +47,10 @@ pub struct MotorConstants {
     breakaway_n: f64,
     viscous_n_per_m_s: f64,
     accel_m_s2: f64,
+    /// `accel_m_s2 · dt_s`: the most the set-point moves in one sub-step, m/s.
+    accel_step_m_s: f64,
+    /// `resistance · kinetic / back-EMF`: the voltage that overcomes kinetic friction, V.
+    friction_v: f64,
     kp: f64,
     ki: f64,
     integral_limit: f64,
@@ -71,14 +75,19 @@ impl MotorConstants {
         } else {
             1.0
         };
+        let resistance_ohm = p.motor_resistance_ohm();
+        let kinetic_n = back_emf * p.friction_current_a;
+        let accel_m_s2 = p.accel_limit_mm_s2 / 1000.0;
         MotorConstants {
-            resistance_ohm: p.motor_resistance_ohm(),
+            resistance_ohm,
             back_emf,
             mass_kg: p.wheel_effective_mass_kg(),
-            kinetic_n: back_emf * p.friction_current_a,
+            kinetic_n,
             breakaway_n: back_emf * p.breakaway_current_a,
             viscous_n_per_m_s: back_emf * p.viscous_current_a_per_m_s,
-            accel_m_s2: p.accel_limit_mm_s2 / 1000.0,
+            accel_m_s2,
+            accel_step_m_s: accel_m_s2 * dt_s,
+            friction_v: resistance_ohm * kinetic_n / back_emf,
             kp: p.speed_kp,
             ki: p.speed_ki,
             integral_limit: p.integral_limit,
@@ -103,8 +112,7 @@ impl MotorConstants {
         if v == 0.0 {
             return 0.0;
         }
-        let friction_v = self.resistance_ohm * self.kinetic_n / self.back_emf;
-        (self.back_emf * v + friction_v * v.signum()) / self.nominal_v
+        (self.back_emf * v + self.friction_v * v.signum()) / self.nominal_v
     }
 }
 
@@ -112,6 +120,8 @@ impl MotorConstants {
 #[derive(Debug, Clone, PartialEq)]
 pub struct WheelMotor {
     command: WheelCommand,
+    /// The speed command in m/s (`mm/s / 1000`; 0 unless the command is a speed).
+    target_m_s: f64,
     setpoint_m_s: f64,
     integral: f64,
     speed_m_s: f64,
@@ -128,6 +138,7 @@ impl Default for WheelMotor {
     fn default() -> Self {
         WheelMotor {
             command: WheelCommand::Brake,
+            target_m_s: 0.0,
             setpoint_m_s: 0.0,
             integral: 0.0,
             speed_m_s: 0.0,
@@ -164,6 +175,10 @@ impl WheelMotor {
             }
         }
         self.command = cmd;
+        self.target_m_s = match cmd {
+            WheelCommand::Speed(mm_s) => mm_s / 1000.0,
+            WheelCommand::Brake | WheelCommand::Duty(_) => 0.0,
+        };
     }
 
     /// Advances the floor-irregularity factor by `dt` (once per 15 ms step; it varies slowly).
@@ -185,9 +200,9 @@ impl WheelMotor {
         self.duty = match self.command {
             WheelCommand::Brake => 0.0,
             WheelCommand::Duty(d) => d.clamp(-1.0, 1.0),
-            WheelCommand::Speed(mm_s) => {
-                let target = mm_s / 1000.0;
-                let step = c.accel_m_s2 * dt;
+            WheelCommand::Speed(_) => {
+                let target = self.target_m_s;
+                let step = c.accel_step_m_s;
                 self.setpoint_m_s += (target - self.setpoint_m_s).clamp(-step, step);
                 let e = self.setpoint_m_s - v;
                 self.integral =

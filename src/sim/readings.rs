@@ -174,9 +174,26 @@ fn flag(on: bool, bit: i32) -> i32 {
     if on { bit } else { 0 }
 }
 
-/// `v` rounded and limited to `lo..=hi`.
+/// `v` rounded (half away from zero) and limited to `lo..=hi`: `v.round().clamp(lo, hi) as i32`, without
+/// the call to `round` for `|v| < 2⁵²`. There the truncation `v as i64` is exact and so is the fraction
+/// `v − trunc(v)`; a fraction of a half or more steps one away from zero. (A −0 from `round` becomes +0
+/// here, which the conversion to `i32` does not tell apart.)
 fn round_in(v: f64, lo: f64, hi: f64) -> i32 {
-    v.round().clamp(lo, hi) as i32
+    const EXACT_BELOW: f64 = 4_503_599_627_370_496.0; // 2⁵²: every f64 at or above it is an integer
+    let rounded = if v.abs() < EXACT_BELOW {
+        let truncated = v as i64 as f64;
+        let fraction = v - truncated;
+        if fraction >= 0.5 {
+            truncated + 1.0
+        } else if fraction <= -0.5 {
+            truncated - 1.0
+        } else {
+            truncated
+        }
+    } else {
+        v.round()
+    };
+    rounded.clamp(lo, hi) as i32
 }
 
 #[cfg(test)]
@@ -190,6 +207,73 @@ mod tests {
         let rng = Rng::new(9);
         let s = Sensing::new(&p, model == Model::Create1, &rng);
         (World::new(p, rng.fork(10)), s)
+    }
+
+    /// `round_in` without `round` gives the integers `v.round().clamp(lo, hi) as i32` gives.
+    #[test]
+    fn rounding_matches_f64_round() {
+        fn by_round(v: f64, lo: f64, hi: f64) -> i32 {
+            v.round().clamp(lo, hi) as i32
+        }
+        let mut rng = Rng::new(11);
+        let mut values: Vec<f64> = (0..200_000)
+            .map(|i| match i % 4 {
+                0 => rng.uniform(-40_000.0, 70_000.0),
+                1 => rng.uniform(-3.0, 3.0),
+                2 => rng.below(140_000) as f64 / 2.0 - 35_000.0,
+                _ => rng.normal(0.0, 1e17),
+            })
+            .collect();
+        // Halves, integers and their neighbours, the ends of the exact range, and the odd values.
+        for base in [
+            0.5,
+            1.0,
+            1.5,
+            2.5,
+            4095.5,
+            32_767.5,
+            65_535.5,
+            4_503_599_627_370_495.5,
+            4_503_599_627_370_496.0,
+        ] {
+            for sign in [1.0, -1.0] {
+                let mut v: f64 = sign * base;
+                for _ in 0..4 {
+                    v = v.next_down();
+                }
+                for _ in 0..9 {
+                    values.push(v);
+                    v = v.next_up();
+                }
+            }
+        }
+        values.extend([
+            0.0,
+            -0.0,
+            0.49999999999999994,
+            -0.49999999999999994,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            1e300,
+            -1e300,
+            f64::MIN_POSITIVE,
+            -5e-324,
+        ]);
+        for (lo, hi) in [
+            (f64::from(i16::MIN), f64::from(i16::MAX)),
+            (0.0, 65_535.0),
+            (-128.0, 127.0),
+            (0.0, 4095.0),
+        ] {
+            for &v in &values {
+                assert_eq!(
+                    round_in(v, lo, hi),
+                    by_round(v, lo, hi),
+                    "{v:e} in {lo}..={hi}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -87,6 +87,8 @@ pub struct World {
     total_travel_mm: [f64; 2],
     odometer_m: f64,
     rng: Rng,
+    /// The last angle (its bits) given to [`World::direction`] and its unit vector.
+    direction_memo: (u64, Vec2),
 }
 
 impl World {
@@ -123,6 +125,7 @@ impl World {
             total_travel_mm: [0.0; 2],
             odometer_m: 0.0,
             rng,
+            direction_memo: (0f64.to_bits(), Vec2::from_angle(0.0)),
             constants,
             params,
         }
@@ -174,7 +177,6 @@ impl World {
         for w in &mut self.wheels {
             w.substep(&self.constants, v_batt);
         }
-        let heading = Vec2::from_angle(self.pose.heading_rad);
         let (vl, vr) = (
             self.wheels[LEFT].speed_m_s(),
             self.wheels[RIGHT].speed_m_s(),
@@ -189,10 +191,13 @@ impl World {
                 self.params.contact_tolerance_m,
                 &mut self.contacts,
             );
-            self.blocked = self
-                .contacts
-                .iter()
-                .any(|c| common * heading.dot(c.normal) < 0.0);
+            if !self.contacts.is_empty() {
+                let heading = self.direction(self.pose.heading_rad);
+                self.blocked = self
+                    .contacts
+                    .iter()
+                    .any(|c| common * heading.dot(c.normal) < 0.0);
+            }
         }
         if self.blocked {
             if vl * vr > 0.0 {
@@ -217,7 +222,7 @@ impl World {
         if !self.lifted {
             let common = (vl + vr) / 2.0;
             let turn = (vr - vl) / self.params.wheel_base_m * dt;
-            let mid = Vec2::from_angle(self.pose.heading_rad + turn / 2.0);
+            let mid = self.direction(self.pose.heading_rad + turn / 2.0);
             let moved = self.centre() + mid * (common * dt);
             self.pose.x_m = moved.x;
             self.pose.y_m = moved.y;
@@ -250,14 +255,17 @@ impl World {
         if self.lifted {
             return;
         }
-        let p = &self.params;
         self.enclosure.contacts(
             self.centre(),
-            p.body_radius_m,
-            p.contact_tolerance_m,
+            self.params.body_radius_m,
+            self.params.contact_tolerance_m,
             &mut self.contacts,
         );
-        let heading = Vec2::from_angle(self.pose.heading_rad);
+        if self.contacts.is_empty() {
+            return;
+        }
+        let heading = self.direction(self.pose.heading_rad);
+        let p = &self.params;
         for c in &self.contacts {
             let toward = -c.normal;
             let bearing = heading.cross(toward).atan2(heading.dot(toward));
@@ -273,6 +281,16 @@ impl World {
         }
     }
 
+    /// `Vec2::from_angle(angle)`, reusing the last result when `angle` is bit for bit the last one (a
+    /// robot at rest or driving straight keeps its heading for many sub-steps).
+    fn direction(&mut self, angle: f64) -> Vec2 {
+        let bits = angle.to_bits();
+        if bits != self.direction_memo.0 {
+            self.direction_memo = (bits, Vec2::from_angle(angle));
+        }
+        self.direction_memo.1
+    }
+
     fn centre(&self) -> Vec2 {
         Vec2::new(self.pose.x_m, self.pose.y_m)
     }
@@ -284,10 +302,16 @@ impl World {
             return None;
         }
         let h = self.pose.heading_rad;
-        let origin =
-            self.centre() + Vec2::from_angle(h + mount_bearing) * self.params.body_radius_m;
-        self.enclosure
-            .ray_distance(origin, Vec2::from_angle(h + look_bearing))
+        let (mount, look) = (h + mount_bearing, h + look_bearing);
+        let mount_dir = Vec2::from_angle(mount);
+        // A sensor looking out along its mount bearing (the light bumpers): one sine and cosine.
+        let look_dir = if look.to_bits() == mount.to_bits() {
+            mount_dir
+        } else {
+            Vec2::from_angle(look)
+        };
+        let origin = self.centre() + mount_dir * self.params.body_radius_m;
+        self.enclosure.ray_distance(origin, look_dir)
     }
 
     /// Lifts the robot off the floor (both wheel drops set, wheels turn freely, no motion) or puts it
@@ -420,7 +444,9 @@ impl World {
 /// `a` wrapped into (−π, π].
 pub fn wrap_angle(a: f64) -> f64 {
     let tau = std::f64::consts::TAU;
-    let w = a.rem_euclid(tau);
+    // `a.rem_euclid(tau)`, without its `fmod` when `|a| < τ`: `fmod` returns such an `a` unchanged.
+    let r = if a.abs() < tau { a } else { a % tau };
+    let w = if r < 0.0 { r + tau } else { r };
     if w > std::f64::consts::PI { w - tau } else { w }
 }
 

@@ -196,3 +196,40 @@ fn angles_wrap_into_one_turn() {
     assert!((wrap_angle(-0.5) + 0.5).abs() < 1e-12);
     assert!((wrap_angle(7.0) - (7.0 - std::f64::consts::TAU)).abs() < 1e-12);
 }
+
+/// `wrap_angle` skips `fmod` for angles within a turn: its results are those of `rem_euclid`, bit for bit.
+#[test]
+fn angle_wrapping_matches_rem_euclid_bit_for_bit() {
+    fn by_rem_euclid(a: f64) -> f64 {
+        let tau = std::f64::consts::TAU;
+        let w = a.rem_euclid(tau);
+        if w > std::f64::consts::PI { w - tau } else { w }
+    }
+    let tau = std::f64::consts::TAU;
+    let pi = std::f64::consts::PI;
+    let mut rng = crate::rng::Rng::new(5);
+    let mut angles: Vec<f64> = (0..100_000).map(|_| rng.uniform(-20.0, 20.0)).collect();
+    for edge in [0.0, pi, tau, 2.0 * tau, 1e-300] {
+        for sign in [1.0, -1.0] {
+            let mut a = sign * edge;
+            for _ in 0..4 {
+                a = a.next_down();
+            }
+            for _ in 0..9 {
+                angles.push(a);
+                a = a.next_up();
+            }
+        }
+    }
+    angles.extend([
+        -0.0,
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        1e300,
+        -1e300,
+    ]);
+    for a in angles {
+        assert_eq!(wrap_angle(a).to_bits(), by_rem_euclid(a).to_bits(), "{a:e}");
+    }
+}
