@@ -193,32 +193,17 @@ impl<W: Weight> TraceGroup<W> {
             self.rows.decay(decay);
             let read_again = self.rows.touch(&self.chain.x_prev, g);
             subtract_on_rows(&mut self.rows, &self.chain.x_prev, &back);
-            for (i, delta) in deltas.iter_mut().enumerate() {
-                let step = self.chain.step_prev[i];
-                if step != 0.0 && !self.rows.step(i, step) {
-                    self.chain.step_prev[i] = 0.0;
-                    *delta = f64::NAN;
-                    self.diverged[i] = true;
-                    stopped += 1;
-                }
-            }
-            let carry = self.rows.carry_since(self.chain.epoch_now);
-            self.chain.z = self.chain.coef_sum_now * carry * self.rows.p() + g * read_again as f64;
             dutch.back_prev = back;
             dutch.overlap = read_again;
-        } else {
-            self.chain.step_prev.fill(0.0);
-            self.chain.z = 0.0;
-            dutch.clear();
+            self.dutch = Some(dutch);
+            // The steps into `A`, `eᵀx_t` and the chain moved on, as for every group.
+            return self.finish_step(gamma_t, deltas, stopped, g, read_again);
         }
+        self.chain.step_prev.fill(0.0);
+        self.chain.z = 0.0;
+        dutch.clear();
         self.dutch = Some(dutch);
-        let chain = &mut self.chain;
-        std::mem::swap(&mut chain.x_prev, &mut chain.x_now);
-        std::mem::swap(&mut chain.y_prev, &mut chain.y_now);
-        chain.gamma_prev = gamma_t;
-        chain.has_prev = true;
-        chain.fresh = false;
-        stopped
+        self.finish_step(gamma_t, deltas, stopped, 0.0, 0)
     }
 }
 
