@@ -12,6 +12,7 @@
 
 use super::params::SimParams;
 use super::world::{LEFT, RIGHT, World};
+use crate::oi::ModelSpec;
 use crate::oi::packets::bits;
 use crate::rng::Rng;
 
@@ -55,21 +56,32 @@ pub struct Readings {
 pub struct Sensing {
     params: SimParams,
     caster_bit: bool,
+    /// The light bumpers are read: the model reports them, or its packet 8 mirrors one.
+    light_bumpers: bool,
+    /// The model reports the wheel motor currents (packets 54, 55).
+    motor_currents: bool,
     cliff_offsets: [f64; 4],
     noise: Rng,
     overcurrent: Rng,
 }
 
 impl Sensing {
-    /// Sensing for a robot described by `params`; `caster_bit` says whether packet 7 has the caster
-    /// drop bit (bit 4: [`crate::oi::ModelSpec::has_caster_drop`], the Create 1).
-    pub fn new(params: &SimParams, caster_bit: bool, rng: &Rng) -> Self {
+    /// Sensing for a robot described by `params` of the model `spec` describes. Packet 7 has the caster
+    /// drop bit when [`ModelSpec::has_caster_drop`] (bit 4, the Create 1). Readings of packets the model
+    /// lacks (the light bumpers and motor currents of a Create 1) are not computed and stay 0 — nothing
+    /// reports them — but their noise is still drawn, so every other reading is what computing them
+    /// would have given.
+    pub fn new(params: &SimParams, spec: &ModelSpec, rng: &Rng) -> Self {
         let mut calibration = rng.fork(1);
         let spread = params.cliff_signal_spread;
         let cliff_offsets = [(); 4].map(|_| calibration.normal(0.0, spread));
+        let caster_bit = spec.has_caster_drop;
         Sensing {
             params: params.clone(),
             caster_bit,
+            // Without the caster bit packet 8 mirrors the right light bumper (see `read`).
+            light_bumpers: spec.has_light_bumpers || !caster_bit,
+            motor_currents: spec.has_motor_currents,
             cliff_offsets,
             noise: rng.fork(2),
             overcurrent: rng.fork(3),
@@ -101,12 +113,16 @@ impl Sensing {
                     bits::OC_RIGHT_WHEEL
                 };
             }
-            let ma = world.wheel_current_a(side) * 1000.0;
-            r.wheel_current_ma[side] = round_in(
-                ma + self.noise.normal(0.0, p.wheel_current_noise_ma),
-                f64::from(i16::MIN),
-                f64::from(i16::MAX),
-            );
+            if self.motor_currents {
+                let ma = world.wheel_current_a(side) * 1000.0;
+                r.wheel_current_ma[side] = round_in(
+                    ma + self.noise.normal(0.0, p.wheel_current_noise_ma),
+                    f64::from(i16::MIN),
+                    f64::from(i16::MAX),
+                );
+            } else {
+                self.noise.skip_normal();
+            }
         }
 
         let b = world.battery();
@@ -140,6 +156,10 @@ impl Sensing {
         let wall = wall_clean + noise.normal(0.0, sd);
         r.wall_signal = round_in(wall, 0.0, 4095.0);
         for (i, &bearing) in p.light_bump_bearings_rad.iter().enumerate() {
+            if !self.light_bumpers {
+                noise.skip_normal();
+                continue;
+            }
             let (peak, scale) = (p.light_bump_peak, p.light_bump_scale_m);
             let s = ir_signal(world, bearing, bearing, peak, scale) + noise.normal(0.0, sd);
             r.light_bump_signals[i] = round_in(s, 0.0, 4095.0);
@@ -205,7 +225,7 @@ mod tests {
     fn setup(model: Model) -> (World, Sensing) {
         let p = SimParams::for_model(model);
         let rng = Rng::new(9);
-        let s = Sensing::new(&p, model == Model::Create1, &rng);
+        let s = Sensing::new(&p, model.spec(), &rng);
         (World::new(p, rng.fork(10)), s)
     }
 

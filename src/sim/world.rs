@@ -81,6 +81,9 @@ pub struct World {
     lifted: bool,
     cliffs: [bool; 4],
     contacts: Vec<Contact>,
+    /// The centre (its coordinates' bits) whose contacts within the contact tolerance `contacts` holds,
+    /// if it holds such contacts: the same centre gives the same contacts, so they are reused.
+    contacts_at: Option<(u64, u64)>,
     bumps: [bool; 2],
     blocked: bool,
     step_travel_mm: [f64; 2],
@@ -119,6 +122,7 @@ impl World {
             lifted: false,
             cliffs: [false; 4],
             contacts: Vec::with_capacity(4),
+            contacts_at: None,
             bumps: [false; 2],
             blocked: false,
             step_travel_mm: [0.0; 2],
@@ -184,13 +188,7 @@ impl World {
         let common = (vl + vr) / 2.0;
         self.blocked = false;
         if !self.lifted {
-            let centre = self.centre();
-            self.enclosure.contacts(
-                centre,
-                self.params.body_radius_m,
-                self.params.contact_tolerance_m,
-                &mut self.contacts,
-            );
+            self.find_contacts();
             if !self.contacts.is_empty() {
                 let heading = self.direction(self.pose.heading_rad);
                 self.blocked = self
@@ -228,14 +226,56 @@ impl World {
             self.pose.y_m = moved.y;
             self.pose.heading_rad = wrap_angle(self.pose.heading_rad + turn);
             self.odometer_m += common.abs() * dt;
-            self.push_out_of_walls();
+            self.push_out_of_walls_in_substep();
         }
         let motors: f64 = self.wheels.iter().map(WheelMotor::battery_current_a).sum();
         self.battery.update(dt, motors);
     }
 
+    /// Makes `contacts` the contacts within the contact tolerance at the present centre: found anew
+    /// unless they were found for this very centre (bit for bit; the walls, the radius and the tolerance
+    /// never change), when finding them again would give the same list.
+    fn find_contacts(&mut self) {
+        let centre = self.centre();
+        let at = (centre.x.to_bits(), centre.y.to_bits());
+        if self.contacts_at != Some(at) {
+            self.enclosure.contacts(
+                centre,
+                self.params.body_radius_m,
+                self.params.contact_tolerance_m,
+                &mut self.contacts,
+            );
+            self.contacts_at = Some(at);
+        }
+    }
+
+    /// [`World::push_out_of_walls`] in a sub-step, with the contacts the next sub-step (or the step's
+    /// end) will test found at the same time.
+    ///
+    /// Exact: with a tolerance `tol ≥ 0` the contacts within `radius + tol` include every contact
+    /// within `radius` with the same normal and depth (both depend only on the centre and the wall),
+    /// in the same wall order, and a contact is pushed out only when its depth `radius − dist` is
+    /// positive, that is when `dist < radius`: exactly the tolerance-0 contacts that push. So the
+    /// pushes are those of `push_out_of_walls`, and when they leave the centre's bits unchanged the
+    /// contacts found here are the ones the next test needs.
+    fn push_out_of_walls_in_substep(&mut self) {
+        let tolerance = self.params.contact_tolerance_m;
+        if tolerance.is_nan() || tolerance < 0.0 {
+            self.push_out_of_walls();
+            return;
+        }
+        self.find_contacts();
+        for c in &self.contacts {
+            if c.depth > 0.0 {
+                self.pose.x_m += c.normal.x * c.depth;
+                self.pose.y_m += c.normal.y * c.depth;
+            }
+        }
+    }
+
     /// Moves the body out of any wall it overlaps (numerical drift while sliding into a corner).
     fn push_out_of_walls(&mut self) {
+        self.contacts_at = None;
         self.enclosure.contacts(
             self.centre(),
             self.params.body_radius_m,
@@ -255,12 +295,7 @@ impl World {
         if self.lifted {
             return;
         }
-        self.enclosure.contacts(
-            self.centre(),
-            self.params.body_radius_m,
-            self.params.contact_tolerance_m,
-            &mut self.contacts,
-        );
+        self.find_contacts();
         if self.contacts.is_empty() {
             return;
         }
