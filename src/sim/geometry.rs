@@ -436,6 +436,73 @@ mod tests {
         }
     }
 
+    /// [`Enclosure::ray_distance`] is `filter_map(ray_hit).min_by(total_cmp)` over the walls, bit for bit.
+    #[test]
+    fn ray_distance_is_the_least_hit_of_every_wall() {
+        let mut rng = crate::rng::Rng::new(7);
+        let quad = Enclosure::new(vec![
+            Segment {
+                a: Vec2::new(-0.3, 0.1),
+                b: Vec2::new(1.7, -0.4),
+            },
+            Segment {
+                a: Vec2::new(1.7, -0.4),
+                b: Vec2::new(1.7, -0.4),
+            },
+            Segment {
+                a: Vec2::new(1.7, -0.4),
+                b: Vec2::new(0.9, 1.3),
+            },
+            Segment {
+                a: Vec2::new(0.9, 1.3),
+                b: Vec2::new(-0.3, 0.1),
+            },
+        ]);
+        let mut hits = 0;
+        for e in [Enclosure::right_triangle(1.0), quad] {
+            for i in 0..50_000 {
+                // Inside and outside, and from a corner (two walls hit at the same distance).
+                let origin = if i % 10 == 0 {
+                    e.walls()[rng.below(e.walls().len() as u64) as usize].a
+                } else {
+                    Vec2::new(rng.uniform(-0.5, 2.0), rng.uniform(-0.5, 2.0))
+                };
+                let dir = Vec2::from_angle(rng.uniform(-4.0, 4.0));
+                let expected = e
+                    .walls()
+                    .iter()
+                    .filter_map(|w| w.ray_hit(origin, dir))
+                    .min_by(f64::total_cmp);
+                let got = e.ray_distance(origin, dir);
+                assert_eq!(got.map(f64::to_bits), expected.map(f64::to_bits));
+                hits += usize::from(got.is_some());
+            }
+        }
+        assert!(hits > 30_000, "{hits}");
+    }
+
+    /// What the world's fused push-out relies on: the contacts within a tolerance ≥ 0 that overlap
+    /// (depth > 0) are the overlapping contacts within tolerance 0, bit for bit and in order.
+    #[test]
+    fn overlapping_contacts_do_not_depend_on_the_tolerance() {
+        let mut rng = crate::rng::Rng::new(8);
+        let e = Enclosure::right_triangle(1.0);
+        let (mut with, mut without) = (Vec::new(), Vec::new());
+        let mut overlapping = 0;
+        for _ in 0..100_000 {
+            let p = Vec2::new(rng.uniform(0.0, 1.0), rng.uniform(0.0, 1.0));
+            let radius = [0.165, rng.uniform(0.0, 0.4)][rng.below(2) as usize];
+            let tolerance = [0.0, 0.001, rng.uniform(0.0, 0.01)][rng.below(3) as usize];
+            e.contacts(p, radius, tolerance, &mut with);
+            e.contacts(p, radius, 0.0, &mut without);
+            with.retain(|c| c.depth > 0.0);
+            without.retain(|c| c.depth > 0.0);
+            assert_eq!(bits(&with), bits(&without), "at {p:?}");
+            overlapping += with.len();
+        }
+        assert!(overlapping > 10_000, "{overlapping}");
+    }
+
     #[test]
     fn rays_hit_the_nearest_wall() {
         let e = Enclosure::right_triangle(1.0);

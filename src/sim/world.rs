@@ -220,10 +220,16 @@ impl World {
         if !self.lifted {
             let common = (vl + vr) / 2.0;
             let turn = (vr - vl) / self.params.wheel_base_m * dt;
-            let mid = self.direction(self.pose.heading_rad + turn / 2.0);
-            let moved = self.centre() + mid * (common * dt);
-            self.pose.x_m = moved.x;
-            self.pose.y_m = moved.y;
+            let mid_angle = self.pose.heading_rad + turn / 2.0;
+            let advance_m = common * dt;
+            // A robot turning on the spot against a wall moves its centre by less than the
+            // coordinates resolve: the sine and cosine of the mid-step heading would change nothing.
+            if !moves_below_resolution(self.centre(), mid_angle, advance_m) {
+                let mid = self.direction(mid_angle);
+                let moved = self.centre() + mid * advance_m;
+                self.pose.x_m = moved.x;
+                self.pose.y_m = moved.y;
+            }
             self.pose.heading_rad = wrap_angle(self.pose.heading_rad + turn);
             self.odometer_m += common.abs() * dt;
             self.push_out_of_walls_in_substep();
@@ -345,6 +351,15 @@ impl World {
         } else {
             Vec2::from_angle(look)
         };
+        self.ir_range_along(mount_dir, look_dir)
+    }
+
+    /// [`World::ir_range_m`] given the unit vectors of the sensor's mount and look directions
+    /// (`Vec2::from_angle` of the heading plus each bearing).
+    pub fn ir_range_along(&self, mount_dir: Vec2, look_dir: Vec2) -> Option<f64> {
+        if self.lifted {
+            return None;
+        }
         let origin = self.centre() + mount_dir * self.params.body_radius_m;
         self.enclosure.ray_distance(origin, look_dir)
     }
@@ -474,6 +489,27 @@ impl World {
     pub fn time_s(&self) -> f64 {
         self.steps as f64 * STEP_SECONDS
     }
+}
+
+/// True when `centre + Vec2::from_angle(angle) * advance` is certainly `centre`, bit for bit, whatever the
+/// sine and cosine: then they need not be computed.
+///
+/// Exact: for a finite `angle` both components of the direction are at most 1 in magnitude (2 is
+/// allowed here, so nothing is assumed of libm's last bit), so each rounded product is at most
+/// `2·|advance|`. A finite coordinate `c` with `|c| ≥ 1e-290` is a normal double whose neighbours lie at
+/// least `|c|·2⁻⁵³` away (the gap just below a power of two is the narrowest), so adding anything smaller
+/// than half of that, `|c|·2⁻⁵⁴` (computed exactly: a power-of-two scaling that stays normal), rounds
+/// back to `c`. A NaN anywhere makes the test false.
+fn moves_below_resolution(centre: Vec2, angle: f64, advance: f64) -> bool {
+    const HALF_GAP: f64 = 1.0 / (1u64 << 54) as f64;
+    const SMALLEST: f64 = 1e-290;
+    let (x, y) = (centre.x.abs(), centre.y.abs());
+    angle.is_finite()
+        && x.is_finite()
+        && y.is_finite()
+        && x >= SMALLEST
+        && y >= SMALLEST
+        && 2.0 * advance.abs() < x.min(y) * HALF_GAP
 }
 
 /// `a` wrapped into (−π, π].
