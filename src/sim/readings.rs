@@ -42,11 +42,11 @@ pub struct Readings {
     pub wall_signal: i32,
     /// Packets 28–31.
     pub cliff_signals: [i32; 4],
-    /// Packet 45 (Create 2).
+    /// Packet 45 (Create 2; 0 on a model without light bumpers).
     pub light_bumper: i32,
-    /// Packets 46–51 (Create 2).
+    /// Packets 46–51 (Create 2; 0 on a model without light bumpers).
     pub light_bump_signals: [i32; 6],
-    /// Packets 54, 55 (Create 2): left and right wheel motor current, mA.
+    /// Packets 54, 55 (Create 2; 0 on a model without them): left and right wheel motor current, mA.
     pub wheel_current_ma: [i32; 2],
     /// Packet 58 (Create 2).
     pub stasis: i32,
