@@ -91,6 +91,15 @@ impl Rng {
         let r = (-2.0 * u1.ln()).sqrt();
         mean + sd * r * (std::f64::consts::TAU * u2).cos()
     }
+
+    /// Advances the generator exactly as [`Rng::normal`] does (its two draws) without computing the
+    /// deviate: for a reading nobody will see, so that every number drawn after it is the one drawing
+    /// the deviate would have left.
+    #[inline]
+    pub fn skip_normal(&mut self) {
+        self.next_u64();
+        self.next_u64();
+    }
 }
 
 #[cfg(test)]
@@ -125,6 +134,19 @@ mod tests {
         assert!((su / n - 0.5).abs() < 0.01);
         assert!((sn / n).abs() < 0.01);
         assert!((sn2 / n - 1.0).abs() < 0.02);
+    }
+
+    #[test]
+    fn skipping_a_normal_leaves_the_sequence_of_drawing_it() {
+        let mut drawn = Rng::new(5);
+        let mut skipped = Rng::new(5);
+        for i in 0..100 {
+            if i % 3 == 0 {
+                drawn.normal(0.0, 1.0);
+                skipped.skip_normal();
+            }
+            assert_eq!(drawn.next_u64(), skipped.next_u64());
+        }
     }
 
     #[test]

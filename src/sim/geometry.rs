@@ -110,7 +110,9 @@ pub struct Contact {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Enclosure {
     walls: Vec<Segment>,
-    /// One per wall: what [`Enclosure::contacts`] needs to skip a wall that is certainly out of reach.
+    /// One per wall, in the walls' order: the wall as [`Enclosure::contacts`] and
+    /// [`Enclosure::ray_distance`] use it, with what they need to skip a wall that is certainly out of
+    /// reach.
     reach_filters: Vec<ReachFilter>,
 }
 
@@ -121,11 +123,20 @@ const REACH_MARGIN: f64 = 1e-9;
 /// A lower bound on a point's distance to one wall: its distance to the wall's supporting line. A wall
 /// whose line is farther than the reach plus a margin cannot be within reach, so the exact (and
 /// dearer) closest-point computation can be skipped for it without changing any result.
+///
+/// It also keeps the wall's `b − a` and its squared length, computed once as [`Segment::closest_point`]
+/// and [`Segment::ray_hit`] compute them on every call (the same operations on the same values, so the
+/// same bits).
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct ReachFilter {
     a: Vec2,
-    /// Unit normal of the wall's line; `None` for a zero-length wall (never skipped).
-    normal: Option<Vec2>,
+    /// `b − a`.
+    ab: Vec2,
+    /// `ab · ab`.
+    len2: f64,
+    /// Unit normal of the wall's line; NaN for a zero-length (or infinite) wall, which makes
+    /// `certainly_beyond` false: such a wall is never skipped.
+    normal: Vec2,
     /// `1 + |a.x| + |a.y| + |b.x| + |b.y|`: the scale of the coordinates the rounding errors are relative to.
     scale: f64,
 }
@@ -134,9 +145,15 @@ impl ReachFilter {
     fn new(wall: &Segment) -> Self {
         let ab = wall.b - wall.a;
         let len = ab.length();
-        let normal = (len > 0.0 && len.is_finite()).then(|| Vec2::new(-ab.y, ab.x) * (1.0 / len));
+        let normal = if len > 0.0 && len.is_finite() {
+            Vec2::new(-ab.y, ab.x) * (1.0 / len)
+        } else {
+            Vec2::new(f64::NAN, f64::NAN)
+        };
         ReachFilter {
             a: wall.a,
+            ab,
+            len2: ab.dot(ab),
             normal,
             scale: 1.0 + wall.a.x.abs() + wall.a.y.abs() + wall.b.x.abs() + wall.b.y.abs(),
         }
@@ -144,16 +161,35 @@ impl ReachFilter {
 
     /// True only when `p` is certainly farther than `reach` from the wall: its distance to the wall's
     /// line exceeds `reach` by more than [`REACH_MARGIN`] times the coordinates' scale. `p_scale` is
-    /// `|p.x| + |p.y|`. NaN anywhere gives false (the exact computation decides).
+    /// `|p.x| + |p.y|`. NaN anywhere (a NaN normal included) gives false: the exact computation decides.
     #[inline]
     fn certainly_beyond(&self, p: Vec2, p_scale: f64, reach: f64) -> bool {
-        match self.normal {
-            Some(n) => {
-                let line_distance = (p - self.a).dot(n).abs();
-                line_distance > reach + REACH_MARGIN * (self.scale + p_scale)
-            }
-            None => false,
+        let line_distance = (p - self.a).dot(self.normal).abs();
+        line_distance > reach + REACH_MARGIN * (self.scale + p_scale)
+    }
+
+    /// [`Segment::closest_point`] of the wall, with its `ab` and `len2` computed once.
+    #[inline]
+    fn closest_point(&self, p: Vec2) -> Vec2 {
+        if self.len2 == 0.0 {
+            return self.a;
         }
+        let t = ((p - self.a).dot(self.ab) / self.len2).clamp(0.0, 1.0);
+        self.a + self.ab * t
+    }
+
+    /// [`Segment::ray_hit`] of the wall, with its `ab` computed once.
+    #[inline]
+    fn ray_hit(&self, origin: Vec2, dir: Vec2) -> Option<f64> {
+        let ab = self.ab;
+        let denom = dir.cross(ab);
+        if denom.abs() < 1e-12 {
+            return None; // parallel
+        }
+        let ao = self.a - origin;
+        let t = ao.cross(ab) / denom;
+        let u = ao.cross(dir) / denom;
+        (t >= 0.0 && (0.0..=1.0).contains(&u)).then_some(t)
     }
 }
 
@@ -193,8 +229,8 @@ impl Enclosure {
         out.clear();
         let reach = radius + tolerance;
         let p_scale = centre.x.abs() + centre.y.abs();
-        for (wall, filter) in self.walls.iter().zip(&self.reach_filters) {
-            if filter.certainly_beyond(centre, p_scale, reach) {
+        for wall in &self.reach_filters {
+            if wall.certainly_beyond(centre, p_scale, reach) {
                 continue;
             }
             let away = centre - wall.closest_point(centre);
@@ -210,10 +246,17 @@ impl Enclosure {
 
     /// Distance from `origin` along unit `dir` to the nearest wall, if any wall is hit.
     pub fn ray_distance(&self, origin: Vec2, dir: Vec2) -> Option<f64> {
-        self.walls
-            .iter()
-            .filter_map(|w| w.ray_hit(origin, dir))
-            .min_by(f64::total_cmp)
+        // `filter_map(ray_hit).min_by(f64::total_cmp)` written out: the first of the least hits.
+        let mut nearest: Option<f64> = None;
+        for wall in &self.reach_filters {
+            if let Some(t) = wall.ray_hit(origin, dir) {
+                nearest = match nearest {
+                    Some(n) if t.total_cmp(&n).is_ge() => Some(n),
+                    _ => Some(t),
+                };
+            }
+        }
+        nearest
     }
 }
 
@@ -346,7 +389,10 @@ mod tests {
                 // either side of both.
                 let wall = e.walls()[rng.below(e.walls().len() as u64) as usize];
                 let f = ReachFilter::new(&wall);
-                let Some(n) = f.normal else { continue };
+                let n = f.normal;
+                if n.x.is_nan() {
+                    continue;
+                }
                 let along = wall.a + (wall.b - wall.a) * rng.uniform(-0.2, 1.2);
                 let side = if rng.chance(0.5) { 1.0 } else { -1.0 };
                 let threshold = reach + REACH_MARGIN * (f.scale + along.x.abs() + along.y.abs());
@@ -388,6 +434,73 @@ mod tests {
                 agree_at(&e, p, radius, tolerance, &mut out);
             }
         }
+    }
+
+    /// [`Enclosure::ray_distance`] is `filter_map(ray_hit).min_by(total_cmp)` over the walls, bit for bit.
+    #[test]
+    fn ray_distance_is_the_least_hit_of_every_wall() {
+        let mut rng = crate::rng::Rng::new(7);
+        let quad = Enclosure::new(vec![
+            Segment {
+                a: Vec2::new(-0.3, 0.1),
+                b: Vec2::new(1.7, -0.4),
+            },
+            Segment {
+                a: Vec2::new(1.7, -0.4),
+                b: Vec2::new(1.7, -0.4),
+            },
+            Segment {
+                a: Vec2::new(1.7, -0.4),
+                b: Vec2::new(0.9, 1.3),
+            },
+            Segment {
+                a: Vec2::new(0.9, 1.3),
+                b: Vec2::new(-0.3, 0.1),
+            },
+        ]);
+        let mut hits = 0;
+        for e in [Enclosure::right_triangle(1.0), quad] {
+            for i in 0..50_000 {
+                // Inside and outside, and from a corner (two walls hit at the same distance).
+                let origin = if i % 10 == 0 {
+                    e.walls()[rng.below(e.walls().len() as u64) as usize].a
+                } else {
+                    Vec2::new(rng.uniform(-0.5, 2.0), rng.uniform(-0.5, 2.0))
+                };
+                let dir = Vec2::from_angle(rng.uniform(-4.0, 4.0));
+                let expected = e
+                    .walls()
+                    .iter()
+                    .filter_map(|w| w.ray_hit(origin, dir))
+                    .min_by(f64::total_cmp);
+                let got = e.ray_distance(origin, dir);
+                assert_eq!(got.map(f64::to_bits), expected.map(f64::to_bits));
+                hits += usize::from(got.is_some());
+            }
+        }
+        assert!(hits > 30_000, "{hits}");
+    }
+
+    /// What the world's fused push-out relies on: the contacts within a tolerance ≥ 0 that overlap
+    /// (depth > 0) are the overlapping contacts within tolerance 0, bit for bit and in order.
+    #[test]
+    fn overlapping_contacts_do_not_depend_on_the_tolerance() {
+        let mut rng = crate::rng::Rng::new(8);
+        let e = Enclosure::right_triangle(1.0);
+        let (mut with, mut without) = (Vec::new(), Vec::new());
+        let mut overlapping = 0;
+        for _ in 0..100_000 {
+            let p = Vec2::new(rng.uniform(0.0, 1.0), rng.uniform(0.0, 1.0));
+            let radius = [0.165, rng.uniform(0.0, 0.4)][rng.below(2) as usize];
+            let tolerance = [0.0, 0.001, rng.uniform(0.0, 0.01)][rng.below(3) as usize];
+            e.contacts(p, radius, tolerance, &mut with);
+            e.contacts(p, radius, 0.0, &mut without);
+            with.retain(|c| c.depth > 0.0);
+            without.retain(|c| c.depth > 0.0);
+            assert_eq!(bits(&with), bits(&without), "at {p:?}");
+            overlapping += with.len();
+        }
+        assert!(overlapping > 10_000, "{overlapping}");
     }
 
     #[test]

@@ -64,6 +64,16 @@ pub struct MotorConstants {
     dt_s: f64,
     /// Low-pass factor of the current measurement per sub-step.
     sense_alpha: f64,
+    /// [`floor_factors`] of a 15 ms step (the `dt` the world varies the floor by), computed once.
+    step_floor_factors: (f64, f64),
+}
+
+/// The floor irregularity's decay over `dt` and the spread of its innovation: `(a, sd)` of
+/// `floor ← a·floor + N(0, sd)`.
+fn floor_factors(floor_sd: f64, floor_tau_s: f64, dt: f64) -> (f64, f64) {
+    let a = (-dt / floor_tau_s).exp();
+    let sd = floor_sd * (1.0 - a * a).sqrt();
+    (a, sd)
 }
 
 impl MotorConstants {
@@ -99,6 +109,11 @@ impl MotorConstants {
             limit_current: p.limit_wheel_current,
             dt_s,
             sense_alpha,
+            step_floor_factors: floor_factors(
+                p.floor_friction_sd,
+                p.floor_friction_tau_s,
+                super::STEP_SECONDS,
+            ),
         }
     }
 
@@ -187,8 +202,12 @@ impl WheelMotor {
             self.floor = 0.0;
             return;
         }
-        let a = (-dt / c.floor_tau_s).exp();
-        let sd = c.floor_sd * (1.0 - a * a).sqrt();
+        // The same function of the same values as computing them here: the same bits.
+        let (a, sd) = if dt.to_bits() == super::STEP_SECONDS.to_bits() {
+            c.step_floor_factors
+        } else {
+            floor_factors(c.floor_sd, c.floor_tau_s, dt)
+        };
         self.floor = (a * self.floor + rng.normal(0.0, sd)).clamp(-0.9, 3.0);
     }
 

@@ -10,8 +10,10 @@
 //! observations of an over-current condition occurred regularly in normal operation", a stall makes
 //! them persistent).
 
+use super::geometry::Vec2;
 use super::params::SimParams;
 use super::world::{LEFT, RIGHT, World};
+use crate::oi::ModelSpec;
 use crate::oi::packets::bits;
 use crate::rng::Rng;
 
@@ -40,11 +42,11 @@ pub struct Readings {
     pub wall_signal: i32,
     /// Packets 28–31.
     pub cliff_signals: [i32; 4],
-    /// Packet 45 (Create 2).
+    /// Packet 45 (Create 2; 0 on a model without light bumpers).
     pub light_bumper: i32,
-    /// Packets 46–51 (Create 2).
+    /// Packets 46–51 (Create 2; 0 on a model without light bumpers).
     pub light_bump_signals: [i32; 6],
-    /// Packets 54, 55 (Create 2): left and right wheel motor current, mA.
+    /// Packets 54, 55 (Create 2; 0 on a model without them): left and right wheel motor current, mA.
     pub wheel_current_ma: [i32; 2],
     /// Packet 58 (Create 2).
     pub stasis: i32,
@@ -55,24 +57,38 @@ pub struct Readings {
 pub struct Sensing {
     params: SimParams,
     caster_bit: bool,
+    /// The light bumpers are read: the model reports them, or its packet 8 mirrors one.
+    light_bumpers: bool,
+    /// The model reports the wheel motor currents (packets 54, 55).
+    motor_currents: bool,
     cliff_offsets: [f64; 4],
     noise: Rng,
     overcurrent: Rng,
+    /// The wall sensor's, then each light bumper's.
+    ir_memos: [IrMemo; 7],
 }
 
 impl Sensing {
-    /// Sensing for a robot described by `params`; `caster_bit` says whether packet 7 has the caster
-    /// drop bit (bit 4: [`crate::oi::ModelSpec::has_caster_drop`], the Create 1).
-    pub fn new(params: &SimParams, caster_bit: bool, rng: &Rng) -> Self {
+    /// Sensing for a robot described by `params` of the model `spec` describes. Packet 7 has the caster
+    /// drop bit when [`ModelSpec::has_caster_drop`] (bit 4, the Create 1). Readings of packets the model
+    /// lacks (the light bumpers and motor currents of a Create 1) are not computed and stay 0 — nothing
+    /// reports them — but their noise is still drawn, so every other reading is what computing them
+    /// would have given.
+    pub fn new(params: &SimParams, spec: &ModelSpec, rng: &Rng) -> Self {
         let mut calibration = rng.fork(1);
         let spread = params.cliff_signal_spread;
         let cliff_offsets = [(); 4].map(|_| calibration.normal(0.0, spread));
+        let caster_bit = spec.has_caster_drop;
         Sensing {
             params: params.clone(),
             caster_bit,
+            // Without the caster bit packet 8 mirrors the right light bumper (see `read`).
+            light_bumpers: spec.has_light_bumpers || !caster_bit,
+            motor_currents: spec.has_motor_currents,
             cliff_offsets,
             noise: rng.fork(2),
             overcurrent: rng.fork(3),
+            ir_memos: [IrMemo::default(); 7],
         }
     }
 
@@ -101,12 +117,16 @@ impl Sensing {
                     bits::OC_RIGHT_WHEEL
                 };
             }
-            let ma = world.wheel_current_a(side) * 1000.0;
-            r.wheel_current_ma[side] = round_in(
-                ma + self.noise.normal(0.0, p.wheel_current_noise_ma),
-                f64::from(i16::MIN),
-                f64::from(i16::MAX),
-            );
+            if self.motor_currents {
+                let ma = world.wheel_current_a(side) * 1000.0;
+                r.wheel_current_ma[side] = round_in(
+                    ma + self.noise.normal(0.0, p.wheel_current_noise_ma),
+                    f64::from(i16::MIN),
+                    f64::from(i16::MAX),
+                );
+            } else {
+                self.noise.skip_normal();
+            }
         }
 
         let b = world.battery();
@@ -130,7 +150,9 @@ impl Sensing {
         let (mount, look) = p.wall_sensor_bearings_rad;
         let noise = &mut self.noise;
         let sd = p.wall_signal_noise;
+        let [wall_memo, bump_memos @ ..] = &mut self.ir_memos;
         let wall_clean = ir_signal(
+            wall_memo,
             world,
             mount,
             look,
@@ -139,9 +161,13 @@ impl Sensing {
         );
         let wall = wall_clean + noise.normal(0.0, sd);
         r.wall_signal = round_in(wall, 0.0, 4095.0);
-        for (i, &bearing) in p.light_bump_bearings_rad.iter().enumerate() {
+        for (i, (&bearing, memo)) in p.light_bump_bearings_rad.iter().zip(bump_memos).enumerate() {
+            if !self.light_bumpers {
+                noise.skip_normal();
+                continue;
+            }
             let (peak, scale) = (p.light_bump_peak, p.light_bump_scale_m);
-            let s = ir_signal(world, bearing, bearing, peak, scale) + noise.normal(0.0, sd);
+            let s = ir_signal(memo, world, bearing, bearing, peak, scale) + noise.normal(0.0, sd);
             r.light_bump_signals[i] = round_in(s, 0.0, 4095.0);
             if s > p.light_bump_threshold {
                 r.light_bumper |= 1 << i;
@@ -162,11 +188,56 @@ impl Sensing {
     }
 }
 
-/// Reflected infrared from the nearest wall seen by a sensor (before noise).
-fn ir_signal(world: &World, mount: f64, look: f64, peak: f64, scale: f64) -> f64 {
-    match world.ir_range_m(mount, look) {
-        Some(d) if scale > 0.0 => peak * (-d.max(0.0) / scale).exp(),
+/// Reflected infrared from the nearest wall seen by a sensor (before noise): [`World::ir_range_m`]
+/// and the exponential fade, with the sines, cosines and exponential of the sensor's last reading
+/// reused for the same arguments.
+fn ir_signal(
+    memo: &mut IrMemo,
+    world: &World,
+    mount: f64,
+    look: f64,
+    peak: f64,
+    scale: f64,
+) -> f64 {
+    let h = world.pose().heading_rad;
+    let (mount, look) = (h + mount, h + look);
+    let mount_dir = memo.mount.get(mount, Vec2::from_angle);
+    // A sensor looking out along its mount bearing (the light bumpers): one sine and cosine.
+    let look_dir = if look.to_bits() == mount.to_bits() {
+        mount_dir
+    } else {
+        memo.look.get(look, Vec2::from_angle)
+    };
+    match world.ir_range_along(mount_dir, look_dir) {
+        Some(d) if scale > 0.0 => peak * memo.fade.get(-d.max(0.0) / scale, f64::exp),
         _ => 0.0,
+    }
+}
+
+/// One infrared sensor's last sines and cosines and fade (a robot at rest reads them again and again).
+#[derive(Debug, Clone, Copy, Default)]
+struct IrMemo {
+    mount: Memo<Vec2>,
+    look: Memo<Vec2>,
+    fade: Memo<f64>,
+}
+
+/// The last argument (its bits) of a pure function of one `f64` and the value it gave: the same bits
+/// in give the same value out, so it is reused rather than computed again.
+#[derive(Debug, Clone, Copy, Default)]
+struct Memo<T>(Option<(u64, T)>);
+
+impl<T: Copy> Memo<T> {
+    fn get(&mut self, arg: f64, f: impl FnOnce(f64) -> T) -> T {
+        let bits = arg.to_bits();
+        match self.0 {
+            Some((at, value)) if at == bits => value,
+            _ => {
+                let value = f(arg);
+                self.0 = Some((bits, value));
+                value
+            }
+        }
     }
 }
 
@@ -205,7 +276,7 @@ mod tests {
     fn setup(model: Model) -> (World, Sensing) {
         let p = SimParams::for_model(model);
         let rng = Rng::new(9);
-        let s = Sensing::new(&p, model == Model::Create1, &rng);
+        let s = Sensing::new(&p, model.spec(), &rng);
         (World::new(p, rng.fork(10)), s)
     }
 
@@ -329,5 +400,94 @@ mod tests {
         let r1 = s1.read(&w1);
         assert!(r1.wall && r1.wall_signal > 500, "{}", r1.wall_signal);
         w1.command(DriveTarget::STOP);
+    }
+
+    /// A Create 1 skips its light bumpers and motor currents; everything else it reads is what sensing
+    /// that computes them reads, step by step (their noise is still drawn).
+    #[test]
+    fn skipped_readings_leave_every_other_reading_unchanged() {
+        let p = SimParams::for_model(Model::Create1);
+        let spec = *Model::Create1.spec();
+        let full_spec = ModelSpec {
+            has_light_bumpers: true,
+            has_motor_currents: true,
+            ..spec
+        };
+        let rng = Rng::new(9);
+        let mut lean = Sensing::new(&p, &spec, &rng);
+        let mut full = Sensing::new(&p, &full_spec, &rng);
+        let mut w = World::new(p, rng.fork(10));
+        w.command(DriveTarget::Speed {
+            left_mm_s: 300.0,
+            right_mm_s: 250.0,
+        });
+        let (mut lit, mut currents) = (0, 0);
+        for i in 0..3000 {
+            if i == 1500 {
+                w.command(DriveTarget::Speed {
+                    left_mm_s: -150.0,
+                    right_mm_s: 150.0,
+                });
+            }
+            w.step();
+            let lean_r = lean.read(&w);
+            let mut full_r = full.read(&w);
+            lit += usize::from(full_r.light_bumper != 0);
+            currents += usize::from(full_r.wheel_current_ma != [0; 2]);
+            assert_eq!(lean_r.light_bump_signals, [0; 6]);
+            assert_eq!(lean_r.wheel_current_ma, [0; 2]);
+            full_r.light_bumper = 0;
+            full_r.light_bump_signals = [0; 6];
+            full_r.wheel_current_ma = [0; 2];
+            assert_eq!(lean_r, full_r, "step {i}");
+        }
+        // The skipped readings were there to skip: walls came near and currents flowed.
+        assert!(lit > 10 && currents > 1000, "{lit} {currents}");
+    }
+
+    /// The infrared signals with their sines, cosines and fades reused are those computed afresh from
+    /// [`World::ir_range_m`], bit for bit, driving, at rest (when the memo answers) and lifted.
+    #[test]
+    fn the_infrared_memo_reads_what_computing_afresh_reads() {
+        let (mut w, _) = setup(Model::Create2);
+        let p = w.params().clone();
+        let mut sensors = vec![(
+            p.wall_sensor_bearings_rad.0,
+            p.wall_sensor_bearings_rad.1,
+            p.wall_signal_peak,
+            p.wall_signal_scale_m,
+        )];
+        for &b in &p.light_bump_bearings_rad {
+            sensors.push((b, b, p.light_bump_peak, p.light_bump_scale_m));
+        }
+        let mut memos = vec![IrMemo::default(); sensors.len()];
+        let mut lit = 0;
+        for i in 0..3000 {
+            match i {
+                0 => w.command(DriveTarget::Speed {
+                    left_mm_s: 300.0,
+                    right_mm_s: 260.0,
+                }),
+                1000 => w.command(DriveTarget::STOP),
+                1500 => w.command(DriveTarget::Speed {
+                    left_mm_s: -100.0,
+                    right_mm_s: 100.0,
+                }),
+                2000 => w.set_lifted(true),
+                2500 => w.set_lifted(false),
+                _ => {}
+            }
+            w.step();
+            for (&(mount, look, peak, scale), memo) in sensors.iter().zip(&mut memos) {
+                let fresh = match w.ir_range_m(mount, look) {
+                    Some(d) if scale > 0.0 => peak * (-d.max(0.0) / scale).exp(),
+                    _ => 0.0,
+                };
+                let got = ir_signal(memo, &w, mount, look, peak, scale);
+                assert_eq!(got.to_bits(), fresh.to_bits(), "step {i}");
+                lit += usize::from(got > 100.0);
+            }
+        }
+        assert!(lit > 100, "{lit}");
     }
 }

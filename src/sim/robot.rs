@@ -107,6 +107,8 @@ pub struct SimRobot {
     /// Fault injection: report packet 35 as mode + 1 (the firmware quirk of create_robot issue 64).
     mode_quirk: bool,
     stream_ids: Vec<u8>,
+    /// Whether `stream_ids` take Distance and Angle (`report::takes_odometry`), found when they are set.
+    stream_takes_odometry: [bool; 2],
     /// Reused for every stream frame: a copy of the ids it reports, and the frame's bytes.
     frame_scratch: (Vec<u8>, Vec<u8>),
     stream_paused: bool,
@@ -123,7 +125,7 @@ impl SimRobot {
     /// A robot of `model` at rest in its start pose, OI in Off, all randomness from `seed`.
     pub fn new(model: Model, params: SimParams, seed: u64) -> Self {
         let root = Rng::new(seed);
-        let sensing = Sensing::new(&params, model.spec().has_caster_drop, &root.fork(1));
+        let sensing = Sensing::new(&params, model.spec(), &root.fork(1));
         let odometry = Odometry::new(&params);
         let world = World::new(params, root.fork(2));
         let mut robot = SimRobot {
@@ -139,6 +141,7 @@ impl SimRobot {
             line_baud: None,
             mode_quirk: false,
             stream_ids: Vec::new(),
+            stream_takes_odometry: [false; 2],
             frame_scratch: (Vec::new(), Vec::new()),
             stream_paused: false,
             drive: DriveTarget::STOP,

@@ -81,6 +81,9 @@ pub struct World {
     lifted: bool,
     cliffs: [bool; 4],
     contacts: Vec<Contact>,
+    /// The centre (its coordinates' bits) whose contacts within the contact tolerance `contacts` holds,
+    /// if it holds such contacts: the same centre gives the same contacts, so they are reused.
+    contacts_at: Option<(u64, u64)>,
     bumps: [bool; 2],
     blocked: bool,
     step_travel_mm: [f64; 2],
@@ -119,6 +122,7 @@ impl World {
             lifted: false,
             cliffs: [false; 4],
             contacts: Vec::with_capacity(4),
+            contacts_at: None,
             bumps: [false; 2],
             blocked: false,
             step_travel_mm: [0.0; 2],
@@ -184,13 +188,7 @@ impl World {
         let common = (vl + vr) / 2.0;
         self.blocked = false;
         if !self.lifted {
-            let centre = self.centre();
-            self.enclosure.contacts(
-                centre,
-                self.params.body_radius_m,
-                self.params.contact_tolerance_m,
-                &mut self.contacts,
-            );
+            self.find_contacts();
             if !self.contacts.is_empty() {
                 let heading = self.direction(self.pose.heading_rad);
                 self.blocked = self
@@ -222,20 +220,68 @@ impl World {
         if !self.lifted {
             let common = (vl + vr) / 2.0;
             let turn = (vr - vl) / self.params.wheel_base_m * dt;
-            let mid = self.direction(self.pose.heading_rad + turn / 2.0);
-            let moved = self.centre() + mid * (common * dt);
-            self.pose.x_m = moved.x;
-            self.pose.y_m = moved.y;
+            let mid_angle = self.pose.heading_rad + turn / 2.0;
+            let advance_m = common * dt;
+            // A robot turning on the spot against a wall moves its centre by less than the
+            // coordinates resolve: the sine and cosine of the mid-step heading would change nothing.
+            if !moves_below_resolution(self.centre(), mid_angle, advance_m) {
+                let mid = self.direction(mid_angle);
+                let moved = self.centre() + mid * advance_m;
+                self.pose.x_m = moved.x;
+                self.pose.y_m = moved.y;
+            }
             self.pose.heading_rad = wrap_angle(self.pose.heading_rad + turn);
             self.odometer_m += common.abs() * dt;
-            self.push_out_of_walls();
+            self.push_out_of_walls_in_substep();
         }
         let motors: f64 = self.wheels.iter().map(WheelMotor::battery_current_a).sum();
         self.battery.update(dt, motors);
     }
 
+    /// Makes `contacts` the contacts within the contact tolerance at the present centre: found anew
+    /// unless they were found for this very centre (bit for bit; the walls, the radius and the tolerance
+    /// never change), when finding them again would give the same list.
+    fn find_contacts(&mut self) {
+        let centre = self.centre();
+        let at = (centre.x.to_bits(), centre.y.to_bits());
+        if self.contacts_at != Some(at) {
+            self.enclosure.contacts(
+                centre,
+                self.params.body_radius_m,
+                self.params.contact_tolerance_m,
+                &mut self.contacts,
+            );
+            self.contacts_at = Some(at);
+        }
+    }
+
+    /// [`World::push_out_of_walls`] in a sub-step, with the contacts the next sub-step (or the step's
+    /// end) will test found at the same time.
+    ///
+    /// Exact: with a tolerance `tol ≥ 0` the contacts within `radius + tol` include every contact
+    /// within `radius` with the same normal and depth (both depend only on the centre and the wall),
+    /// in the same wall order, and a contact is pushed out only when its depth `radius − dist` is
+    /// positive, that is when `dist < radius`: exactly the tolerance-0 contacts that push. So the
+    /// pushes are those of `push_out_of_walls`, and when they leave the centre's bits unchanged the
+    /// contacts found here are the ones the next test needs.
+    fn push_out_of_walls_in_substep(&mut self) {
+        let tolerance = self.params.contact_tolerance_m;
+        if tolerance.is_nan() || tolerance < 0.0 {
+            self.push_out_of_walls();
+            return;
+        }
+        self.find_contacts();
+        for c in &self.contacts {
+            if c.depth > 0.0 {
+                self.pose.x_m += c.normal.x * c.depth;
+                self.pose.y_m += c.normal.y * c.depth;
+            }
+        }
+    }
+
     /// Moves the body out of any wall it overlaps (numerical drift while sliding into a corner).
     fn push_out_of_walls(&mut self) {
+        self.contacts_at = None;
         self.enclosure.contacts(
             self.centre(),
             self.params.body_radius_m,
@@ -255,12 +301,7 @@ impl World {
         if self.lifted {
             return;
         }
-        self.enclosure.contacts(
-            self.centre(),
-            self.params.body_radius_m,
-            self.params.contact_tolerance_m,
-            &mut self.contacts,
-        );
+        self.find_contacts();
         if self.contacts.is_empty() {
             return;
         }
@@ -310,6 +351,15 @@ impl World {
         } else {
             Vec2::from_angle(look)
         };
+        self.ir_range_along(mount_dir, look_dir)
+    }
+
+    /// [`World::ir_range_m`] given the unit vectors of the sensor's mount and look directions
+    /// (`Vec2::from_angle` of the heading plus each bearing).
+    pub fn ir_range_along(&self, mount_dir: Vec2, look_dir: Vec2) -> Option<f64> {
+        if self.lifted {
+            return None;
+        }
         let origin = self.centre() + mount_dir * self.params.body_radius_m;
         self.enclosure.ray_distance(origin, look_dir)
     }
@@ -439,6 +489,27 @@ impl World {
     pub fn time_s(&self) -> f64 {
         self.steps as f64 * STEP_SECONDS
     }
+}
+
+/// True when `centre + Vec2::from_angle(angle) * advance` is certainly `centre`, bit for bit, whatever the
+/// sine and cosine: then they need not be computed.
+///
+/// Exact: for a finite `angle` both components of the direction are at most 1 in magnitude (2 is
+/// allowed here, so nothing is assumed of libm's last bit), so each rounded product is at most
+/// `2·|advance|`. A finite coordinate `c` with `|c| ≥ 1e-290` is a normal double whose neighbours lie at
+/// least `|c|·2⁻⁵³` away (the gap just below a power of two is the narrowest), so adding anything smaller
+/// than half of that, `|c|·2⁻⁵⁴` (computed exactly: a power-of-two scaling that stays normal), rounds
+/// back to `c`. A NaN anywhere makes the test false.
+fn moves_below_resolution(centre: Vec2, angle: f64, advance: f64) -> bool {
+    const HALF_GAP: f64 = 1.0 / (1u64 << 54) as f64;
+    const SMALLEST: f64 = 1e-290;
+    let (x, y) = (centre.x.abs(), centre.y.abs());
+    angle.is_finite()
+        && x.is_finite()
+        && y.is_finite()
+        && x >= SMALLEST
+        && y >= SMALLEST
+        && 2.0 * advance.abs() < x.min(y) * HALF_GAP
 }
 
 /// `a` wrapped into (−π, π].

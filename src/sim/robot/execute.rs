@@ -150,6 +150,7 @@ impl SimRobot {
             && ids.iter().all(|&id| available_on(id, self.model))
             && crate::oi::frame::stream_payload_len(&ids).is_ok();
         if valid {
+            self.stream_takes_odometry = super::report::takes_odometry(&ids);
             self.stream_ids = ids;
             self.stream_paused = false;
         } else {

@@ -100,19 +100,16 @@ impl SimRobot {
         }
     }
 
-    /// The values for a report of `ids`, taking (and so resetting) the odometry it contains.
-    fn report_values(&mut self, ids: &[u8]) -> SensorValues {
-        let contains = |packet: u8| {
-            ids.iter().any(|&i| {
-                i == packet || group_members(i).is_some_and(|members| members.contains(&packet))
-            })
-        };
-        let distance = if contains(id::DISTANCE) {
+    /// The values for a report whose packets take (and so reset) the odometry as `takes` says
+    /// (see [`takes_odometry`]).
+    fn report_values(&mut self, takes: [bool; 2]) -> SensorValues {
+        let [takes_distance, takes_angle] = takes;
+        let distance = if takes_distance {
             self.odometry.take_distance_mm()
         } else {
             self.odometry.peek_distance_mm()
         };
-        let angle = if contains(id::ANGLE) {
+        let angle = if takes_angle {
             self.odometry.take_angle_deg()
         } else {
             self.odometry.peek_angle_deg()
@@ -134,7 +131,7 @@ impl SimRobot {
         if known.is_empty() {
             return;
         }
-        let values = self.report_values(&known);
+        let values = self.report_values(takes_odometry(&known));
         let mut out = Vec::new();
         for &i in &known {
             if encode_data(i, &values, &mut out).is_err() {
@@ -152,7 +149,8 @@ impl SimRobot {
         let (mut ids, mut frame) = std::mem::take(&mut self.frame_scratch);
         ids.clear();
         ids.extend_from_slice(&self.stream_ids);
-        let values = self.report_values(&ids);
+        // The stream's ids have not changed since `start_stream` found what they take.
+        let values = self.report_values(self.stream_takes_odometry);
         match encode_stream_frame_into(&ids, &values, &mut frame) {
             Ok(()) => {
                 self.transmit(&frame);
@@ -162,4 +160,14 @@ impl SimRobot {
         }
         self.frame_scratch = (ids, frame);
     }
+}
+
+/// Whether a report of `ids` contains Distance and Angle (alone or in a group): `[distance, angle]`.
+pub(super) fn takes_odometry(ids: &[u8]) -> [bool; 2] {
+    let contains = |packet: u8| {
+        ids.iter().any(|&i| {
+            i == packet || group_members(i).is_some_and(|members| members.contains(&packet))
+        })
+    };
+    [contains(id::DISTANCE), contains(id::ANGLE)]
 }

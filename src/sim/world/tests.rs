@@ -233,3 +233,37 @@ fn angle_wrapping_matches_rem_euclid_bit_for_bit() {
         assert_eq!(wrap_angle(a).to_bits(), by_rem_euclid(a).to_bits(), "{a:e}");
     }
 }
+
+/// When `moves_below_resolution` says so, moving the centre leaves it bit for bit where it was, and it
+/// does say so for the tiny advances of turning on the spot at a wall.
+#[test]
+fn a_move_below_resolution_changes_no_bit() {
+    let mut rng = Rng::new(3);
+    let mut below = 0;
+    for i in 0..200_000 {
+        let centre = Vec2::new(rng.uniform(0.1, 1.0), rng.uniform(0.1, 1.0));
+        let angle = rng.uniform(-4.0, 4.0);
+        // Around the threshold, half a gap of the smaller coordinate, and far below it.
+        let gap = centre.x.abs().min(centre.y.abs()) / (1u64 << 54) as f64;
+        let advance = match i % 3 {
+            0 => gap * rng.uniform(0.0, 2.0),
+            1 => gap * rng.uniform(0.0, 1e-3),
+            _ => 0.0,
+        } * if rng.chance(0.5) { 1.0 } else { -1.0 };
+        if moves_below_resolution(centre, angle, advance) {
+            below += 1;
+            let moved = centre + Vec2::from_angle(angle) * advance;
+            assert_eq!(
+                (moved.x.to_bits(), moved.y.to_bits()),
+                (centre.x.to_bits(), centre.y.to_bits()),
+                "{centre:?} {angle} {advance:e}"
+            );
+        }
+    }
+    assert!(below > 100_000, "{below}");
+    let at = Vec2::new(0.5, 0.5);
+    assert!(!moves_below_resolution(at, f64::NAN, 0.0));
+    assert!(!moves_below_resolution(at, 0.3, f64::NAN));
+    assert!(!moves_below_resolution(Vec2::new(0.0, 0.5), 0.3, 0.0));
+    assert!(!moves_below_resolution(at, 0.3, 1e-9));
+}
