@@ -267,7 +267,7 @@ mod tests {
 
     /// What a recording is made of, in order.
     enum Step {
-        Tick(TickRecord),
+        Tick(Box<TickRecord>),
         Event(Event),
         Flush,
     }
@@ -399,7 +399,7 @@ mod tests {
             let mut r = records[(k % records.len() as u64) as usize].clone();
             r.seq = 100 + k;
             r.t_ms = r.seq as f64 * 20.0;
-            steps.push(Step::Tick(r));
+            steps.push(Step::Tick(Box::new(r)));
             if k % 97 == 5 {
                 steps.push(Step::Event(Event {
                     id: k,
