@@ -397,9 +397,14 @@ impl<W: Write> Container<W> {
         };
         let result = self.write_chunk(&chunk);
         self.spare = chunk.records;
+        // A chunk that could not be compressed or written is lost: nothing is written after it.
+        self.failed |= result.is_err();
         result
     }
 
+    /// Compresses `chunk` into its Chunk record (a zstd frame of its records, behind the header with
+    /// its time bounds, sizes and the CRC of the uncompressed records), writes the record whole and
+    /// indexes it for the summary.
     fn write_chunk(&mut self, chunk: &OpenChunk) -> io::Result<()> {
         let encoder = match &mut self.zstd {
             // Reset for a new frame, with the parameters kept.
