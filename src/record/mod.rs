@@ -12,6 +12,7 @@
 
 pub mod wire;
 mod wire_parts;
+mod wire_put;
 #[cfg(test)]
 mod wire_tests;
 

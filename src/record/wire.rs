@@ -16,8 +16,11 @@
 //! library writes for the same message. Unknown fields are skipped when read (forward compatibility).
 
 pub use prost::encoding::WireType;
-use prost::encoding::{
-    self, DecodeContext, decode_key, decode_varint, encode_key, encode_varint, skip_field,
+use prost::encoding::{self, DecodeContext, decode_key, decode_varint, skip_field};
+
+use super::wire_put::{
+    put_bool, put_double, put_int32, put_key, put_packed_float, put_sint32, put_string, put_uint32,
+    put_uint64,
 };
 
 /// Why bytes are not a record this version can read.
@@ -195,24 +198,26 @@ pub fn skip(wire: WireType, number: u32, buf: &mut &[u8]) -> Result<(), WireErro
 }
 
 /// Appends `m` as a length-delimited field: the body is written in place behind a one-byte length that
-/// is widened afterwards if the body is 128 bytes or more (no scratch buffer, no length pass).
+/// is widened afterwards if the body is 128 bytes or more (no scratch buffer, no length pass: the body is
+/// moved up by the extra length bytes, within the buffer's capacity once it is warm).
 pub fn encode_nested<M: Message>(m: &M, number: u32, buf: &mut Vec<u8>) {
-    encode_key(number, WireType::LengthDelimited, buf);
+    put_key(buf, number, WireType::LengthDelimited);
     let at = buf.len();
     buf.push(0);
     m.encode_fields(buf);
-    let len = buf.len() - at - 1;
+    let end = buf.len();
+    let len = end - at - 1;
     if len < 0x80 {
         // `len` < 128 fits the one byte.
         buf[at] = len as u8;
     } else {
-        // A varint is at most 10 bytes: widened in place, with no allocation (the recorder encodes every
-        // tick, and its raw-snapshot message is over 127 bytes).
+        // The varint of `len` (at most 10 bytes), as `put_varint` writes it.
         let mut prefix = [0u8; 10];
-        let mut free = &mut prefix[..];
-        encode_varint(len as u64, &mut free);
-        let used = 10 - free.len();
-        buf.splice(at..=at, prefix[..used].iter().copied());
+        let used = super::wire_put::varint_into(len as u64, &mut prefix);
+        // Make room for the `used − 1` extra bytes and move the body up behind them.
+        buf.resize(end + used - 1, 0);
+        buf.copy_within(at + 1..end, at + used);
+        buf[at..at + used].copy_from_slice(&prefix[..used]);
     }
 }
 
@@ -239,7 +244,7 @@ pub fn merge_nested<M: Message>(
 
 /// Implements [`Field`] for a scalar type with implicit presence (left out when equal to its zero).
 macro_rules! implicit_scalar {
-    ($t:ty, $scalar:ident, $codec:ident) => {
+    ($t:ty, $scalar:ident, $codec:ident, $put:ident) => {
         impl Field for $t {
             fn shape() -> Shape {
                 Shape {
@@ -249,7 +254,7 @@ macro_rules! implicit_scalar {
             }
             fn encode_field(&self, number: u32, buf: &mut Vec<u8>) {
                 if *self != <$t>::default() {
-                    encoding::$codec::encode(number, self, buf);
+                    $put(buf, number, self);
                 }
             }
             fn merge_field(&mut self, wire: WireType, buf: &mut &[u8]) -> Result<(), WireError> {
@@ -262,7 +267,7 @@ macro_rules! implicit_scalar {
 
 /// Implements [`Field`] for `Option` of a scalar type: explicit presence (`optional`).
 macro_rules! optional_scalar {
-    ($t:ty, $scalar:ident, $codec:ident) => {
+    ($t:ty, $scalar:ident, $codec:ident, $put:ident) => {
         impl Field for Option<$t> {
             fn shape() -> Shape {
                 Shape {
@@ -272,7 +277,7 @@ macro_rules! optional_scalar {
             }
             fn encode_field(&self, number: u32, buf: &mut Vec<u8>) {
                 if let Some(v) = self {
-                    encoding::$codec::encode(number, v, buf);
+                    $put(buf, number, v);
                 }
             }
             fn merge_field(&mut self, wire: WireType, buf: &mut &[u8]) -> Result<(), WireError> {
@@ -284,15 +289,15 @@ macro_rules! optional_scalar {
     };
 }
 
-implicit_scalar!(u64, Uint64, uint64);
-implicit_scalar!(u32, Uint32, uint32);
-implicit_scalar!(i32, Sint32, sint32);
-implicit_scalar!(bool, Bool, bool);
-implicit_scalar!(String, String, string);
-optional_scalar!(u32, Uint32, uint32);
-optional_scalar!(i32, Sint32, sint32);
-optional_scalar!(f64, Double, double);
-optional_scalar!(String, String, string);
+implicit_scalar!(u64, Uint64, uint64, put_uint64);
+implicit_scalar!(u32, Uint32, uint32, put_uint32);
+implicit_scalar!(i32, Sint32, sint32, put_sint32);
+implicit_scalar!(bool, Bool, bool, put_bool);
+implicit_scalar!(String, String, string, put_string);
+optional_scalar!(u32, Uint32, uint32, put_uint32);
+optional_scalar!(i32, Sint32, sint32, put_sint32);
+optional_scalar!(f64, Double, double, put_double);
+optional_scalar!(String, String, string, put_string);
 
 /// An `f64` is always written (explicit presence): proto3 would leave out a plain 0.0 and so turn −0.0
 /// into +0.0.
@@ -304,7 +309,7 @@ impl Field for f64 {
         }
     }
     fn encode_field(&self, number: u32, buf: &mut Vec<u8>) {
-        encoding::double::encode(number, self, buf);
+        put_double(buf, number, self);
     }
     fn merge_field(&mut self, wire: WireType, buf: &mut &[u8]) -> Result<(), WireError> {
         encoding::double::merge(wire, self, buf, DecodeContext::default())
@@ -353,9 +358,7 @@ impl Field for Vec<f32> {
         }
     }
     fn encode_field(&self, number: u32, buf: &mut Vec<u8>) {
-        if !self.is_empty() {
-            encoding::float::encode_packed(number, self, buf);
-        }
+        put_packed_float(buf, number, self);
     }
     fn merge_field(&mut self, wire: WireType, buf: &mut &[u8]) -> Result<(), WireError> {
         encoding::float::merge_repeated(wire, self, buf, DecodeContext::default())
@@ -552,7 +555,7 @@ pub(crate) use {message_fields, wire_enum, wire_message};
 /// Appends an enum field of number `n` unless `n` is zero (implicit presence).
 pub fn encode_enum(number: u32, n: i32, buf: &mut Vec<u8>) {
     if n != 0 {
-        encoding::int32::encode(number, &n, buf);
+        put_int32(buf, number, &n);
     }
 }
 

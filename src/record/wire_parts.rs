@@ -94,11 +94,10 @@ impl Message for SensorValues {
     fn encode_fields(&self, buf: &mut Vec<u8>) {
         let (slots, present) = self.slots();
         let used = (64 - present.leading_zeros() as usize).min(slots.len());
-        if used > 0 {
-            encoding::sint32::encode_packed(1, &slots[..used], buf);
-        }
+        // Nothing when no slot is used.
+        super::wire_put::put_packed_sint32(buf, 1, &slots[..used]);
         if present != 0 {
-            encoding::fixed64::encode(2, &present, buf);
+            super::wire_put::put_fixed64(buf, 2, present);
         }
     }
 

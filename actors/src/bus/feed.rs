@@ -4,6 +4,10 @@
 //! a subscriber that falls behind skips the oldest records and is told how many it missed. The recorder gets
 //! its own bounded queue; when it is full the record is dropped and counted, so a slow disk is visible rather
 //! than silently slowing control.
+//!
+//! The newest link summary is replaced on every record, but its watchers are woken only when the link's
+//! state changes: its counters move on every tick, and waking (eight `Notify`s in tokio's `watch`) on
+//! every tick cost the tick's thread more than the rest of publishing. Readers `borrow` the newest.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -15,6 +19,12 @@ use tokio::sync::{broadcast, mpsc, watch};
 
 /// Capacity of the live broadcast, in records (20 s at 50 Hz).
 pub(crate) const LIVE_CAPACITY: usize = 1024;
+
+/// Whether watchers of the link summary should wake for `new`: on the first record and whenever the
+/// link's state, up flag, OI mode or trip cause differ from `old` (not for its counters alone).
+fn link_changed(old: Option<&LinkStatus>, new: &LinkStatus) -> bool {
+    old.is_none_or(|o| (o.up, o.state, o.mode, o.trip) != (new.up, new.state, new.mode, new.trip))
+}
 
 /// The publishing side of the feed.
 #[derive(Clone)]
@@ -53,7 +63,13 @@ impl TickFeed {
         {
             self.recorder_dropped.fetch_add(1, Ordering::Relaxed);
         }
-        self.latest_link.send_replace(Some(record.link));
+        // The value is always replaced (readers `borrow` the newest); watchers wake on a change of state.
+        let link = record.link;
+        self.latest_link.send_if_modified(|latest| {
+            let changed = link_changed(latest.as_ref(), &link);
+            *latest = Some(link);
+            changed
+        });
         self.next_seq.store(record.seq + 1, Ordering::Relaxed);
         // An error only means nobody is subscribed right now.
         let _ = self.live.send(record);
@@ -69,7 +85,8 @@ impl TickFeed {
         self.next_seq.load(Ordering::Relaxed).checked_sub(1)
     }
 
-    /// The link summary of the newest record (`None` before the first).
+    /// The link summary of the newest record (`None` before the first). `changed` wakes when the
+    /// link's state, up flag, OI mode or trip cause change; `borrow` always gives the newest record's.
     pub(crate) fn latest_link(&self) -> watch::Receiver<Option<LinkStatus>> {
         self.latest_link.subscribe()
     }
@@ -127,6 +144,30 @@ mod tests {
         while rx.try_recv().is_ok() {}
         assert!(rx.is_closed());
         assert_eq!(gauge.backlog(), 0);
+    }
+
+    #[test]
+    fn the_link_summary_is_always_the_newest_and_wakes_watchers_on_a_change_of_state() {
+        use pavlov::supervision::LinkState;
+        let feed = TickFeed::new();
+        let mut link = feed.latest_link();
+        assert_eq!(*link.borrow(), None);
+        let with = |seq: u64, good: u64, state: LinkState| {
+            let mut r = TickRecord::at_rest(seq, seq as f64 * 20.0, Mode::Reactive);
+            r.link.good_frames = good;
+            r.link.state = state;
+            Arc::new(r)
+        };
+        feed.publish(with(0, 1, LinkState::Up));
+        assert!(link.has_changed().unwrap(), "the first record is a change");
+        assert_eq!(link.borrow_and_update().unwrap().good_frames, 1);
+        feed.publish(with(1, 2, LinkState::Up));
+        assert!(!link.has_changed().unwrap(), "counters alone wake nobody");
+        assert_eq!(link.borrow().unwrap().good_frames, 2, "but are the newest");
+        feed.publish(with(2, 3, LinkState::Stale));
+        assert!(link.has_changed().unwrap());
+        let now = link.borrow_and_update().unwrap();
+        assert_eq!((now.good_frames, now.state), (3, LinkState::Stale));
     }
 
     #[test]

@@ -652,9 +652,9 @@ mod tests {
 
     #[test]
     fn the_reason_of_a_write_error_carries_the_os_words() {
-        let e = crate::storage::recording::mcap_write::McapWriteError::Mcap(mcap::McapError::Io(
+        let e = crate::storage::recording::mcap_write::McapWriteError::Io(
             std::io::Error::from_raw_os_error(28),
-        ));
+        );
         let text = reason(&e);
         assert!(
             text.contains("No space left on device (os error 28)"),

@@ -28,6 +28,7 @@ use crate::provenance::Provenance;
 mod bounded_file;
 pub(crate) mod finish;
 pub mod jsonl;
+mod mcap_container;
 mod mcap_fields;
 mod mcap_read;
 mod mcap_scan;
