@@ -283,17 +283,23 @@ const CREATE2_DIMS: [ObsDim; 64] = [
 pub struct ObsLayout {
     model: Model,
     dims: &'static [ObsDim],
+    /// The presence bits of the packets the dimensions read.
+    packets: u64,
 }
 
 impl ObsLayout {
     /// The layout for `model`: 44 dimensions on a Create 1, 64 on a Create 2 (the table its spec files
     /// it under, [`crate::oi::ModelSpec::packet_facts`]).
     pub fn for_model(model: Model) -> Self {
-        let dims: &'static [ObsDim] = match model.spec().packet_facts {
-            PacketFacts::Create1 => &CREATE1_DIMS,
-            PacketFacts::Create2 => &CREATE2_DIMS,
+        let (dims, packets): (&'static [ObsDim], u64) = match model.spec().packet_facts {
+            PacketFacts::Create1 => (&CREATE1_DIMS, const { packet_mask(&CREATE1_DIMS) }),
+            PacketFacts::Create2 => (&CREATE2_DIMS, const { packet_mask(&CREATE2_DIMS) }),
         };
-        ObsLayout { model, dims }
+        ObsLayout {
+            model,
+            dims,
+            packets,
+        }
     }
 
     /// The robot model this layout describes.
@@ -342,12 +348,34 @@ impl ObsLayout {
     /// `[0, 1]`, or `NaN` for a packet absent from `raw`). Does not allocate once `out` has capacity.
     pub fn scale(&self, raw: &SensorValues, out: &mut Vec<f64>) {
         out.clear();
+        let (slots, present) = raw.slots();
+        if present & self.packets == self.packets {
+            // Every packet the layout reads is present (a whole frame's snapshot): read the slots
+            // without asking each dimension's packet whether it is there. The same values.
+            out.extend(
+                self.dims
+                    .iter()
+                    .map(|d| d.scale_raw(slots.get(usize::from(d.packet)).copied().unwrap_or(0))),
+            );
+            return;
+        }
         out.extend(
             self.dims
                 .iter()
                 .map(|d| raw.get(d.packet).map_or(f64::NAN, |v| d.scale_raw(v))),
         );
     }
+}
+
+/// The presence bits of every packet `dims` read (packets 7–58: all below 64).
+const fn packet_mask(dims: &[ObsDim]) -> u64 {
+    let mut mask = 0u64;
+    let mut i = 0;
+    while i < dims.len() {
+        mask |= 1u64 << dims[i].packet;
+        i += 1;
+    }
+    mask
 }
 
 #[cfg(test)]

@@ -152,14 +152,21 @@ impl TileCoder {
                 if *tiles == 0 {
                     return;
                 }
-                out.reserve(*dims);
+                let input = input.get(..*dims).unwrap_or(input);
+                // Every input's feature is written at the next free place and the place advances
+                // only for a finite input (a non-finite one computes a bin that is then overwritten
+                // or cut off): no branch and no capacity check per input, the same features.
+                out.resize(input.len(), 0);
                 let (n, last) = (*tiles as f64, *tiles - 1);
-                for (d, &x) in input.iter().take(*dims).enumerate() {
-                    if x.is_finite() {
-                        let b = ((x.clamp(0.0, 1.0) * n) as u32 as usize).min(last);
-                        out.push(d * tiles + b);
+                let mut count = 0;
+                for (d, &x) in input.iter().enumerate() {
+                    let b = ((x.clamp(0.0, 1.0) * n) as u32 as usize).min(last);
+                    if let Some(slot) = out.get_mut(count) {
+                        *slot = d * tiles + b;
                     }
+                    count += usize::from(x.is_finite());
                 }
+                out.truncate(count);
             }
             TileSpec::OneDimTilings {
                 dims,

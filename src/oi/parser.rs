@@ -23,6 +23,7 @@
 use super::frame::{STREAM_HEADER, byte_sum, stream_payload_len};
 use super::packets::{group_members, spec};
 use super::plausible::{FrameContext, Implausible, WAIVE_AFTER, Waived, implausible_except};
+use super::sensors::PACKET_SLOTS;
 use super::{Model, OiError, SensorValues};
 
 /// Counters of what the parser has seen since it was created.
@@ -96,13 +97,16 @@ impl ScanState {
     }
 }
 
-/// Where one single packet's value sits in a frame.
+/// Where one single packet's value sits in a frame, and how to read it.
 #[derive(Debug, Clone, Copy)]
 struct Field {
     offset: usize,
     id: u8,
-    size: u8,
-    signed: bool,
+    /// Two bytes (big-endian) rather than one.
+    two: bool,
+    /// Sign extension as a shift pair, `(raw << shift) >> shift` on an `i32`: 24 for a signed byte,
+    /// 16 for a signed 16-bit value, 0 for an unsigned one (exactly `as i8` / `as i16` / nothing).
+    shift: u32,
 }
 
 /// The fixed shape of a valid frame for the requested list.
@@ -113,6 +117,8 @@ struct Layout {
     /// `(offset in frame, expected id byte)` for each requested id.
     id_checks: Vec<(usize, u8)>,
     fields: Vec<Field>,
+    /// The presence bit of every field's packet: what decoding a frame marks present.
+    present: u64,
 }
 
 /// What a window starting at a header byte turned out to be.
@@ -144,17 +150,26 @@ impl Layout {
                 fields.push(Field {
                     offset,
                     id: s.id,
-                    size: s.size,
-                    signed: s.signed,
+                    two: s.size == 2,
+                    shift: match (s.size, s.signed) {
+                        (_, false) => 0,
+                        (1, true) => 24,
+                        (_, true) => 16,
+                    },
                 });
                 offset += usize::from(s.size);
             }
         }
+        let present = fields
+            .iter()
+            .filter(|f| usize::from(f.id) < PACKET_SLOTS)
+            .fold(0u64, |mask, f| mask | 1 << f.id);
         Ok(Layout {
             payload_len: payload_len as u8, // <= 255, checked by stream_payload_len
             frame_len: payload_len + 3,
             id_checks,
             fields,
+            present,
         })
     }
 
@@ -179,26 +194,20 @@ impl Layout {
         }
     }
 
-    /// The values of a frame already judged good.
+    /// The values of a frame already judged good: every field in order (a packet requested twice
+    /// keeps its last value), written straight into the snapshot's slots without a branch per field.
     fn decode(&self, frame: &[u8]) -> SensorValues {
         let mut values = SensorValues::new();
+        let (slots, present) = values.slots_mut();
         for f in &self.fields {
-            let hi = frame.get(f.offset).copied().unwrap_or(0);
-            let v = match (f.size, f.signed) {
-                (1, false) => i32::from(hi),
-                (1, true) => i32::from(hi as i8),
-                (_, signed) => {
-                    let lo = frame.get(f.offset + 1).copied().unwrap_or(0);
-                    let raw = u16::from_be_bytes([hi, lo]);
-                    if signed {
-                        i32::from(raw as i16)
-                    } else {
-                        i32::from(raw)
-                    }
-                }
-            };
-            values.set(f.id, v);
+            let hi = u32::from(frame.get(f.offset).copied().unwrap_or(0));
+            let lo = u32::from(frame.get(f.offset + 1).copied().unwrap_or(0));
+            let raw = if f.two { hi << 8 | lo } else { hi };
+            if let Some(slot) = slots.get_mut(usize::from(f.id)) {
+                *slot = (raw << f.shift) as i32 >> f.shift;
+            }
         }
+        *present = self.present;
         values
     }
 

@@ -273,11 +273,17 @@ pub fn implausible_except(
         FrameContext::FollowsFrame => ODOMETRY,
         FrameContext::First => &[],
     };
+    // The packets to check are those present and not waived: one mask for the whole frame instead of
+    // two tests per bound (`Waived::contains`, `SensorValues::get`). Bounds are tried in the same order,
+    // so the same first one is reported.
+    let (slots, present) = values.slots();
+    let checked = present & !waived.0;
     bounds(model).iter().chain(odometry).find_map(|bound| {
-        if waived.contains(bound.id) {
+        let i = usize::from(bound.id);
+        if i >= 64 || checked & (1 << i) == 0 {
             return None;
         }
-        let value = values.get(bound.id)?;
+        let value = *slots.get(i)?;
         (!(bound.min..=bound.max).contains(&value)).then_some(Implausible {
             id: bound.id,
             value,

@@ -101,6 +101,13 @@ impl SensorValues {
         (&self.values, self.present)
     }
 
+    /// The slots and the presence mask to write in place (the parser's decoding): a slot's value counts
+    /// only when its bit is set, and a slot whose bit is clear must hold 0, as [`SensorValues::slots`]
+    /// promises its readers.
+    pub(crate) fn slots_mut(&mut self) -> (&mut [i32; PACKET_SLOTS], &mut u64) {
+        (&mut self.values, &mut self.present)
+    }
+
     /// True when no packet is present.
     pub fn is_empty(&self) -> bool {
         self.present == 0
