@@ -367,6 +367,31 @@ impl ObsLayout {
     }
 }
 
+impl ObsLayout {
+    /// [`ObsLayout::scale`] of `raw`, given that `out` holds `scale` of `previous`: only the dimensions
+    /// whose packet's value changed are scaled again. A dimension is a function of its packet's value
+    /// alone, so every other one keeps the same bits. Falls back to `scale` unless both snapshots hold
+    /// every packet the layout reads and `out` has one value per dimension.
+    pub fn rescale(&self, raw: &SensorValues, previous: &SensorValues, out: &mut Vec<f64>) {
+        let (slots, present) = raw.slots();
+        let (before, present_before) = previous.slots();
+        let complete =
+            present & self.packets == self.packets && present_before & self.packets == self.packets;
+        if !complete || out.len() != self.dims.len() {
+            self.scale(raw, out);
+            return;
+        }
+        for (d, o) in self.dims.iter().zip(out.iter_mut()) {
+            let p = usize::from(d.packet);
+            // Present, so below the slots' end: `get` never misses here.
+            let now = slots.get(p).copied().unwrap_or(0);
+            if before.get(p) != Some(&now) {
+                *o = d.scale_raw(now);
+            }
+        }
+    }
+}
+
 /// The presence bits of every packet `dims` read (packets 7–58: all below 64).
 const fn packet_mask(dims: &[ObsDim]) -> u64 {
     let mut mask = 0u64;

@@ -172,7 +172,7 @@ pub struct LearningStage {
     /// The unscaled observation of the last `act`, filled from `values` only when
     /// [`LearningStage::signals`] asks for it (a Horde reads it; the predictions never do).
     raw: Vec<f64>,
-    /// The snapshot the last `act` saw, kept for `raw`.
+    /// The snapshot the last `act` saw, kept for `raw`; `obs` is its scaled form when it is `Some`.
     values: Option<SensorValues>,
     extra: [f64; 4],
     stimuli: [bool; 1],
@@ -266,10 +266,15 @@ impl LearningStage {
 
     /// Step 1 of a tick: stimulus and predictions with the current weights.
     pub fn act(&mut self, input: LearnInput) -> LearnOutput {
-        self.obs.clear();
-        match input.values {
-            Some(v) => self.layout.scale(v, &mut self.obs),
-            None => self.obs.resize(self.layout.len(), f64::NAN),
+        // `obs` holds the scaled `values` of the previous tick (when it had a snapshot): only what
+        // changed since is scaled again.
+        match (input.values, &self.values) {
+            (Some(v), Some(previous)) => self.layout.rescale(v, previous, &mut self.obs),
+            (Some(v), None) => self.layout.scale(v, &mut self.obs),
+            (None, _) => {
+                self.obs.clear();
+                self.obs.resize(self.layout.len(), f64::NAN);
+            }
         }
         self.values = input.values.cloned();
         let elbow = input.elbow.map(|e| {

@@ -209,10 +209,13 @@ impl DenseTd {
                 step,
                 self.skip_zero_blocks,
             );
+            // Both vectors cut to one length, so one test per feature covers both.
+            let n = self.traces.len().min(self.weights.len());
+            let (traces, weights) = (&mut self.traces[..n], &mut self.weights[..n]);
             for &f in &self.x_prev {
-                if let (Some(e), Some(w)) = (self.traces.get_mut(f), self.weights.get_mut(f)) {
-                    *e += grad;
-                    *w += step * grad;
+                if f < n {
+                    traces[f] += grad;
+                    weights[f] += step * grad;
                 }
             }
         } else {

@@ -138,6 +138,8 @@ pub(crate) struct Learner {
     /// `gather` is `0, 1, …, n − 1`: the coder reads the first n observation dimensions as they are
     /// (when the observation has n of them), with no copy into `scratch`.
     gather_is_prefix: bool,
+    /// The coder's input of the last `predict`: `x_now` holds its active features.
+    coded: Vec<f64>,
     x_now: Vec<usize>,
     fresh: bool,
 }
@@ -185,6 +187,7 @@ impl Learner {
             threshold: spec.threshold_value(),
             scratch: Vec::with_capacity(resolved.gather.len()),
             gather_is_prefix: resolved.gather.iter().enumerate().all(|(k, &i)| k == i),
+            coded: Vec::with_capacity(resolved.gather.len()),
             x_now: Vec::with_capacity(tilings),
             fresh: false,
             bounds,
@@ -211,15 +214,20 @@ impl Learner {
         }
         // With a prefix gather the coder's input is the observation's first `gather.len()` values,
         // exactly what the copy below would hold (`FeatureInputs::get` of an index inside `obs`).
-        match inputs.obs.get(..self.gather.len()) {
-            Some(prefix) if self.gather_is_prefix => self.coder.active(prefix, &mut self.x_now),
+        let input = match inputs.obs.get(..self.gather.len()) {
+            Some(prefix) if self.gather_is_prefix => prefix,
             _ => {
                 self.scratch.clear();
                 self.scratch
                     .extend(self.gather.iter().map(|&i| inputs.get(i)));
-                self.coder.active(&self.scratch, &mut self.x_now);
+                &self.scratch[..]
             }
-        }
+        };
+        // `x_now` still holds the features of `coded`, the last tick's input: only what changed is
+        // coded again.
+        self.coder.active_since(input, &self.coded, &mut self.x_now);
+        self.coded.clear();
+        self.coded.extend_from_slice(input);
         let value = match &mut self.engine {
             Engine::Td(g) => g.predict_value(&self.x_now),
             Engine::Gtd(c) => self.spec.sigma.value(c.predict(&self.x_now)),

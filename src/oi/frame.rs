@@ -8,7 +8,7 @@
 //! A frame must fit in one 15 ms slot at the link's baud rate or the stream corrupts [C1 p14; C2 p22].
 
 use super::model::stream_budget_bytes;
-use super::packets::{MAX_DATA_LEN, data_len, encode_data_into};
+use super::packets::{DataBuf, data_len, encode_data_into};
 use super::{OiError, SensorValues};
 
 /// The first byte of every stream frame.
@@ -82,7 +82,7 @@ pub fn encode_stream_frame_into(
     bytes[0] = STREAM_HEADER;
     bytes[1] = n as u8; // stream_payload_len guarantees n <= 255
     let mut at = 2;
-    let mut data = [0u8; MAX_DATA_LEN];
+    let mut data: DataBuf = [0; 256];
     for &id in ids {
         let len = encode_data_into(id, values, &mut data)?;
         // `n` counted every id and its data, so they fit before the checksum's byte.

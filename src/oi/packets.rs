@@ -485,56 +485,49 @@ fn members_of(id: u8) -> Result<&'static [u8], OiError> {
 /// absent values as 0. This is exactly what the robot sends after the id in a stream frame, and the
 /// whole reply to Sensors (142) [C1 p13; C2 p21].
 pub fn encode_data(id: u8, values: &SensorValues, out: &mut Vec<u8>) -> Result<(), OiError> {
-    let mut buf = [0u8; MAX_DATA_LEN];
+    let mut buf: DataBuf = [0; 256];
     let n = encode_data_into(id, values, &mut buf)?;
     out.extend_from_slice(buf.get(..n).unwrap_or_default());
     Ok(())
 }
 
-/// The most data bytes of any packet or group (group 100).
-pub(crate) const MAX_DATA_LEN: usize = 80;
+/// A buffer that one packet's or group's data always fits in (at most 80 bytes, group 100), indexed
+/// by a byte so that no write can fall outside it.
+pub(crate) type DataBuf = [u8; 256];
 
 /// Like [`encode_data`], into the front of `buf`; returns the bytes written. Each member is encoded
-/// as [`encode_value`] does (saturated to its wire range, the encoders wrapped, big-endian), from the
-/// compile-time [`WIRE`] table instead of a lookup and a match per member; `buf` must hold
-/// [`data_len`] bytes (a byte that does not fit is left out, which [`MAX_DATA_LEN`] rules out).
+/// as [`encode_value`] does (its value or 0 when absent, saturated to its wire range, the encoders
+/// wrapped, big-endian), from the compile-time [`WIRE`] table and without a branch per member.
 pub(crate) fn encode_data_into(
     id: u8,
     values: &SensorValues,
-    buf: &mut [u8; MAX_DATA_LEN],
+    buf: &mut DataBuf,
 ) -> Result<usize, OiError> {
     let (first, count) = member_run(id).ok_or(OiError::UnknownPacket(id))?;
+    let (first, count) = (usize::from(first), usize::from(count));
     let (slots, present) = values.slots();
-    let mut n = 0;
-    for m in first..first + count {
-        let i = usize::from(m);
-        // `get_or_zero(m)`: the slot when present, else 0.
-        let value = if present & (1 << i) != 0 {
-            slots.get(i).copied().unwrap_or(0)
-        } else {
-            0
-        };
-        let Some(w) = WIRE.get(usize::from(m - FIRST_PACKET)) else {
-            return Err(OiError::UnknownPacket(m));
-        };
-        let [h, l] = (value.clamp(w.lo, w.hi) as u16).to_be_bytes();
-        if w.size == 1 {
-            if let Some(b) = buf.get_mut(n) {
-                *b = l;
-            }
-            n += 1;
-        } else {
-            if let Some([bh, bl]) = buf
-                .get_mut(n..n + 2)
-                .and_then(|b| <&mut [u8; 2]>::try_from(b).ok())
-            {
-                *bh = h;
-                *bl = l;
-            }
-            n += 2;
-        }
+    // Every run lies within packets 7..=58, so within both tables.
+    let start = first - usize::from(FIRST_PACKET);
+    let (Some(wires), Some(slots)) = (
+        WIRE.get(start..start + count),
+        slots.get(first..first + count),
+    ) else {
+        return Err(OiError::UnknownPacket(id));
+    };
+    let mut n = 0u8;
+    for (k, (w, &slot)) in wires.iter().zip(slots).enumerate() {
+        // `get_or_zero`: the slot when its presence bit is set, else 0.
+        let bit = ((present >> (first + k)) & 1) as i32;
+        let value = slot & bit.wrapping_neg();
+        // `clamp(lo, hi)` as max then min: the same for lo <= hi (every entry), without its check.
+        let [h, l] = (value.max(w.lo).min(w.hi) as u16).to_be_bytes();
+        // Two bytes are `h l`, one byte is `l` (`v as u8`). The byte after the value is written
+        // either way; when it is not the value's, the next member overwrites it.
+        buf[usize::from(n)] = if w.size == 2 { h } else { l };
+        buf[usize::from(n.wrapping_add(1))] = l;
+        n = n.wrapping_add(w.size);
     }
-    Ok(n)
+    Ok(usize::from(n))
 }
 
 /// Decodes the data of a single packet or a whole group (`bytes` must be exactly [`data_len`] long)

@@ -100,14 +100,20 @@ impl ScanState {
 /// Where one single packet's value sits in a frame, and how to read it.
 #[derive(Debug, Clone, Copy)]
 struct Field {
-    offset: usize,
+    /// Below 258: a frame is at most 3 + 255 bytes.
+    offset: u16,
+    /// 7–58.
     id: u8,
     /// Two bytes (big-endian) rather than one.
     two: bool,
     /// Sign extension as a shift pair, `(raw << shift) >> shift` on an `i32`: 24 for a signed byte,
     /// 16 for a signed 16-bit value, 0 for an unsigned one (exactly `as i8` / `as i16` / nothing).
-    shift: u32,
+    shift: u8,
 }
+
+/// A frame copied for decoding: 512 bytes, so that an offset masked to 9 bits (all of them are
+/// below 258) is always inside it, and bytes beyond the frame read as 0.
+type FrameBuf = [u8; 512];
 
 /// The fixed shape of a valid frame for the requested list.
 #[derive(Debug, Clone)]
@@ -148,7 +154,7 @@ impl Layout {
                 .ok_or(OiError::UnknownPacket(id))?;
             for s in members.iter().filter_map(|&m| spec(m)) {
                 fields.push(Field {
-                    offset,
+                    offset: offset as u16, // < 258, checked by stream_payload_len
                     id: s.id,
                     two: s.size == 2,
                     shift: match (s.size, s.signed) {
@@ -197,18 +203,22 @@ impl Layout {
     /// The values of a frame already judged good: every field in order (a packet requested twice
     /// keeps its last value), written straight into the snapshot's slots without a branch per field.
     fn decode(&self, frame: &[u8]) -> SensorValues {
-        let mut values = SensorValues::new();
-        let (slots, present) = values.slots_mut();
-        for f in &self.fields {
-            let hi = u32::from(frame.get(f.offset).copied().unwrap_or(0));
-            let lo = u32::from(frame.get(f.offset + 1).copied().unwrap_or(0));
-            let raw = if f.two { hi << 8 | lo } else { hi };
-            if let Some(slot) = slots.get_mut(usize::from(f.id)) {
-                *slot = (raw << f.shift) as i32 >> f.shift;
-            }
+        let mut bytes: FrameBuf = [0; 512];
+        let len = frame.len().min(self.frame_len).min(bytes.len());
+        if let (Some(dst), Some(src)) = (bytes.get_mut(..len), frame.get(..len)) {
+            dst.copy_from_slice(src);
         }
-        *present = self.present;
-        values
+        // Indexed by id masked to 6 bits (ids are 7–58), then cut to the snapshot's 59 slots; a
+        // slot no field writes stays 0, as an absent packet's must.
+        let mut slots = [0i32; 64];
+        for f in &self.fields {
+            let at = usize::from(f.offset) & 511;
+            let hi = u32::from(bytes[at]);
+            let lo = u32::from(bytes[(at + 1) & 511]);
+            let raw = if f.two { hi << 8 | lo } else { hi };
+            slots[usize::from(f.id) & 63] = (raw << f.shift) as i32 >> f.shift;
+        }
+        SensorValues::from_slots(&slots, self.present)
     }
 
     /// Scans candidate frame starts `0..start_limit` of `data`, handing over good frames. Returns where

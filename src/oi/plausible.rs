@@ -278,7 +278,21 @@ pub fn implausible_except(
     // so the same first one is reported.
     let (slots, present) = values.slots();
     let checked = present & !waived.0;
-    bounds(model).iter().chain(odometry).find_map(|bound| {
+    let mut all = bounds(model).iter().chain(odometry);
+    // First, without a branch per bound, whether any checked value is out of its bound (`v − min` as
+    // unsigned exceeds `max − min` exactly when `v` is outside `min..=max`); almost every frame is
+    // plausible and stops here. Only then the bound to report is looked for, in order.
+    let any_out = all.clone().fold(false, |out, bound| {
+        let i = usize::from(bound.id);
+        let on = i < 64 && checked & (1u64 << (i & 63)) != 0;
+        let value = slots.get(i).copied().unwrap_or(0);
+        let span = bound.max.wrapping_sub(bound.min) as u32;
+        out | (on & (value.wrapping_sub(bound.min) as u32 > span))
+    });
+    if !any_out {
+        return None;
+    }
+    all.find_map(|bound| {
         let i = usize::from(bound.id);
         if i >= 64 || checked & (1 << i) == 0 {
             return None;

@@ -101,11 +101,18 @@ impl SensorValues {
         (&self.values, self.present)
     }
 
-    /// The slots and the presence mask to write in place (the parser's decoding): a slot's value counts
-    /// only when its bit is set, and a slot whose bit is clear must hold 0, as [`SensorValues::slots`]
-    /// promises its readers.
-    pub(crate) fn slots_mut(&mut self) -> (&mut [i32; PACKET_SLOTS], &mut u64) {
-        (&mut self.values, &mut self.present)
+    /// A snapshot of the first [`PACKET_SLOTS`] of `slots` with presence mask `present` (bits above
+    /// the slots are dropped), for the parser's decoding. A slot whose bit is clear must hold 0, as
+    /// [`SensorValues::slots`] promises its readers.
+    pub(crate) fn from_slots(slots: &[i32; 64], present: u64) -> Self {
+        let mut values = [0; PACKET_SLOTS];
+        if let Some(head) = slots.get(..PACKET_SLOTS) {
+            values.copy_from_slice(head);
+        }
+        SensorValues {
+            values,
+            present: present & ((1 << PACKET_SLOTS) - 1),
+        }
     }
 
     /// True when no packet is present.
