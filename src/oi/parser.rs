@@ -22,7 +22,7 @@
 
 use super::frame::{STREAM_HEADER, byte_sum, stream_payload_len};
 use super::packets::{group_members, spec};
-use super::plausible::{FrameContext, Implausible, WAIVE_AFTER, Waived, implausible_except};
+use super::plausible::{FrameCheck, FrameContext, Implausible, WAIVE_AFTER, Waived};
 use super::sensors::PACKET_SLOTS;
 use super::{Model, OiError, SensorValues};
 
@@ -55,6 +55,8 @@ struct ScanState {
     streak: Option<(u8, u32)>,
     /// Packets whose bound a run of [`WAIVE_AFTER`] frames proved wrong for this robot.
     waived: Waived,
+    /// The plausibility bounds laid out for the frames' model and packets.
+    check: Option<FrameCheck>,
 }
 
 impl ScanState {
@@ -63,14 +65,14 @@ impl ScanState {
     }
 
     /// Why `values` cannot be a frame from the robot, if plausibility is checked.
-    fn reject(&self, values: &SensorValues) -> Option<Implausible> {
+    fn reject(&mut self, values: &SensorValues) -> Option<Implausible> {
         let model = self.model?;
         let context = if self.skipped_at_accept == Some(self.stats.skipped_bytes) {
             FrameContext::FollowsFrame
         } else {
             FrameContext::First
         };
-        implausible_except(values, model, context, self.waived)
+        FrameCheck::implausible(&mut self.check, values, model, context, self.waived)
     }
 
     /// Counts a frame rejected for `why`; a long enough run for one packet waives its bound.
