@@ -515,6 +515,37 @@ mod tests {
         }
     }
 
+    proptest::proptest! {
+        /// Scaling only what changed since a previous snapshot gives the bits a full `scale` gives, for
+        /// any two snapshots (complete or not, equal in some packets, different in others).
+        #[test]
+        fn rescaling_the_changed_dimensions_matches_a_full_scale(
+            before in proptest::collection::vec(-3..3i32, 59),
+            after in proptest::collection::vec(proptest::prop_oneof![-3..3i32, proptest::num::i32::ANY], 59),
+            missing in proptest::option::of(7u8..=58),
+            create2 in proptest::bool::ANY,
+        ) {
+            let layout = ObsLayout::for_model(if create2 { Model::Create2 } else { Model::Create1 });
+            let snapshot = |raw: &[i32], skip: Option<u8>| {
+                let mut v = SensorValues::new();
+                for id in 7..=58u8 {
+                    if Some(id) != skip {
+                        v.set(id, raw[usize::from(id)]);
+                    }
+                }
+                v
+            };
+            let (previous, now) = (snapshot(&before, None), snapshot(&after, missing));
+            let mut out = Vec::new();
+            layout.scale(&previous, &mut out);
+            layout.rescale(&now, &previous, &mut out);
+            let mut full = Vec::new();
+            layout.scale(&now, &mut full);
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            proptest::prop_assert_eq!(bits(&out), bits(&full));
+        }
+    }
+
     #[test]
     fn extreme_raw_values_stay_in_range() {
         for model in [Model::Create1, Model::Create2] {

@@ -359,6 +359,36 @@ mod tests {
     }
 
     proptest! {
+        /// Re-binning only the inputs that changed gives the features `active` gives, for the paper's coder
+        /// and a multi-tiling one, with inputs that repeat, change, leave `[0, 1]` or are not finite.
+        #[test]
+        fn coding_only_what_changed_matches_coding_everything(
+            ticks in proptest::collection::vec(
+                proptest::collection::vec(
+                    prop_oneof![
+                        4 => prop::sample::select(vec![0.0, 0.25, 0.5, 0.999, 1.0]),
+                        2 => -0.5..1.5f64,
+                        1 => prop::sample::select(vec![f64::NAN, f64::INFINITY, -0.0]),
+                    ],
+                    6,
+                ),
+                1..12,
+            ),
+            tilings in 1usize..3,
+        ) {
+            let coder = TileCoder::one_dim_offset(6, 10, tilings).unwrap();
+            let (mut previous, mut out): (Vec<f64>, Vec<usize>) = (Vec::new(), Vec::new());
+            for input in ticks {
+                coder.active_since(&input, &previous, &mut out);
+                let mut full = Vec::new();
+                coder.active(&input, &mut full);
+                prop_assert_eq!(&out, &full);
+                previous = input;
+            }
+        }
+    }
+
+    proptest! {
         #[test]
         fn one_dim_activates_one_feature_per_dimension(input in prop::collection::vec(unit(), 44)) {
             let coder = TileCoder::one_dim(44, 10).unwrap();
