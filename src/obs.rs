@@ -283,17 +283,23 @@ const CREATE2_DIMS: [ObsDim; 64] = [
 pub struct ObsLayout {
     model: Model,
     dims: &'static [ObsDim],
+    /// The presence bits of the packets the dimensions read.
+    packets: u64,
 }
 
 impl ObsLayout {
     /// The layout for `model`: 44 dimensions on a Create 1, 64 on a Create 2 (the table its spec files
     /// it under, [`crate::oi::ModelSpec::packet_facts`]).
     pub fn for_model(model: Model) -> Self {
-        let dims: &'static [ObsDim] = match model.spec().packet_facts {
-            PacketFacts::Create1 => &CREATE1_DIMS,
-            PacketFacts::Create2 => &CREATE2_DIMS,
+        let (dims, packets): (&'static [ObsDim], u64) = match model.spec().packet_facts {
+            PacketFacts::Create1 => (&CREATE1_DIMS, const { packet_mask(&CREATE1_DIMS) }),
+            PacketFacts::Create2 => (&CREATE2_DIMS, const { packet_mask(&CREATE2_DIMS) }),
         };
-        ObsLayout { model, dims }
+        ObsLayout {
+            model,
+            dims,
+            packets,
+        }
     }
 
     /// The robot model this layout describes.
@@ -342,12 +348,59 @@ impl ObsLayout {
     /// `[0, 1]`, or `NaN` for a packet absent from `raw`). Does not allocate once `out` has capacity.
     pub fn scale(&self, raw: &SensorValues, out: &mut Vec<f64>) {
         out.clear();
+        let (slots, present) = raw.slots();
+        if present & self.packets == self.packets {
+            // Every packet the layout reads is present (a whole frame's snapshot): read the slots
+            // without asking each dimension's packet whether it is there. The same values.
+            out.extend(
+                self.dims
+                    .iter()
+                    .map(|d| d.scale_raw(slots.get(usize::from(d.packet)).copied().unwrap_or(0))),
+            );
+            return;
+        }
         out.extend(
             self.dims
                 .iter()
                 .map(|d| raw.get(d.packet).map_or(f64::NAN, |v| d.scale_raw(v))),
         );
     }
+}
+
+impl ObsLayout {
+    /// [`ObsLayout::scale`] of `raw`, given that `out` holds `scale` of `previous`: only the dimensions
+    /// whose packet's value changed are scaled again. A dimension is a function of its packet's value
+    /// alone, so every other one keeps the same bits. Falls back to `scale` unless both snapshots hold
+    /// every packet the layout reads and `out` has one value per dimension.
+    pub fn rescale(&self, raw: &SensorValues, previous: &SensorValues, out: &mut Vec<f64>) {
+        let (slots, present) = raw.slots();
+        let (before, present_before) = previous.slots();
+        let complete =
+            present & self.packets == self.packets && present_before & self.packets == self.packets;
+        if !complete || out.len() != self.dims.len() {
+            self.scale(raw, out);
+            return;
+        }
+        for (d, o) in self.dims.iter().zip(out.iter_mut()) {
+            let p = usize::from(d.packet);
+            // Present, so below the slots' end: `get` never misses here.
+            let now = slots.get(p).copied().unwrap_or(0);
+            if before.get(p) != Some(&now) {
+                *o = d.scale_raw(now);
+            }
+        }
+    }
+}
+
+/// The presence bits of every packet `dims` read (packets 7–58: all below 64).
+const fn packet_mask(dims: &[ObsDim]) -> u64 {
+    let mut mask = 0u64;
+    let mut i = 0;
+    while i < dims.len() {
+        mask |= 1u64 << dims[i].packet;
+        i += 1;
+    }
+    mask
 }
 
 #[cfg(test)]
@@ -459,6 +512,37 @@ mod tests {
             for (d, &i) in active.iter().enumerate() {
                 proptest::prop_assert!(i / 10 == d, "feature {} outside tiling {}", i, d);
             }
+        }
+    }
+
+    proptest::proptest! {
+        /// Scaling only what changed since a previous snapshot gives the bits a full `scale` gives, for
+        /// any two snapshots (complete or not, equal in some packets, different in others).
+        #[test]
+        fn rescaling_the_changed_dimensions_matches_a_full_scale(
+            before in proptest::collection::vec(-3..3i32, 59),
+            after in proptest::collection::vec(proptest::prop_oneof![-3..3i32, proptest::num::i32::ANY], 59),
+            missing in proptest::option::of(7u8..=58),
+            create2 in proptest::bool::ANY,
+        ) {
+            let layout = ObsLayout::for_model(if create2 { Model::Create2 } else { Model::Create1 });
+            let snapshot = |raw: &[i32], skip: Option<u8>| {
+                let mut v = SensorValues::new();
+                for id in 7..=58u8 {
+                    if Some(id) != skip {
+                        v.set(id, raw[usize::from(id)]);
+                    }
+                }
+                v
+            };
+            let (previous, now) = (snapshot(&before, None), snapshot(&after, missing));
+            let mut out = Vec::new();
+            layout.scale(&previous, &mut out);
+            layout.rescale(&now, &previous, &mut out);
+            let mut full = Vec::new();
+            layout.scale(&now, &mut full);
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            proptest::prop_assert_eq!(bits(&out), bits(&full));
         }
     }
 

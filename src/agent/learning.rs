@@ -169,7 +169,11 @@ pub struct LearningStage {
     stall: StallDetector,
     gate_index: usize,
     obs: Vec<f64>,
+    /// The unscaled observation of the last `act`, filled from `values` only when
+    /// [`LearningStage::signals`] asks for it (a Horde reads it; the predictions never do).
     raw: Vec<f64>,
+    /// The snapshot the last `act` saw, kept for `raw`; `obs` is its scaled form when it is `Some`.
+    values: Option<SensorValues>,
     extra: [f64; 4],
     stimuli: [bool; 1],
     pending_stimulus: Option<bool>,
@@ -208,6 +212,7 @@ impl LearningStage {
         Ok(LearningStage {
             obs: Vec::with_capacity(layout.len()),
             raw: Vec::with_capacity(layout.len()),
+            values: None,
             stimuli: [false],
             layout,
             set,
@@ -261,18 +266,17 @@ impl LearningStage {
 
     /// Step 1 of a tick: stimulus and predictions with the current weights.
     pub fn act(&mut self, input: LearnInput) -> LearnOutput {
-        self.obs.clear();
-        self.raw.clear();
-        match input.values {
-            Some(v) => {
-                self.layout.scale(v, &mut self.obs);
-                self.layout.raw(v, &mut self.raw);
-            }
-            None => {
+        // `obs` holds the scaled `values` of the previous tick (when it had a snapshot): only what
+        // changed since is scaled again.
+        match (input.values, &self.values) {
+            (Some(v), Some(previous)) => self.layout.rescale(v, previous, &mut self.obs),
+            (Some(v), None) => self.layout.scale(v, &mut self.obs),
+            (None, _) => {
+                self.obs.clear();
                 self.obs.resize(self.layout.len(), f64::NAN);
-                self.raw.resize(self.layout.len(), f64::NAN);
             }
         }
+        self.values = input.values.cloned();
         let elbow = input.elbow.map(|e| {
             self.extra = [
                 scaled_angle(e.left),
@@ -304,31 +308,37 @@ impl LearningStage {
                 .elbow
                 .is_some_and(|e| e.left.is_some() && e.right.is_some()),
         };
-        let outs = self.set.predict(&FeatureInputs {
-            obs: &self.obs,
-            extra: &self.extra,
-        });
-        let (gate_value, gate_threshold) = outs
-            .get(self.gate_index)
-            .map_or((None, f64::INFINITY), |o| (o.valid_value(), o.threshold));
-        let gate_inputs = outs
-            .iter()
-            .map(|o| crate::control::GateInput {
-                value: o.valid_value(),
-                threshold: o.threshold,
-            })
-            .collect();
+        // The predictions straight into the output's vectors (no vector of outputs between, each name
+        // copied once, into the record).
+        let n = self.set.len();
+        let mut predictions = Vec::with_capacity(n);
+        let mut gate_inputs = Vec::with_capacity(n);
+        let (mut gate_value, mut gate_threshold) = (None, f64::INFINITY);
+        let gate_index = self.gate_index;
+        self.set.predict_each(
+            &FeatureInputs {
+                obs: &self.obs,
+                extra: &self.extra,
+            },
+            |name, o| {
+                if predictions.len() == gate_index {
+                    (gate_value, gate_threshold) = (o.valid_value(), o.threshold);
+                }
+                gate_inputs.push(crate::control::GateInput {
+                    value: o.valid_value(),
+                    threshold: o.threshold,
+                });
+                predictions.push(PredictionValue {
+                    name: name.to_string(),
+                    value: o.value,
+                    threshold: o.threshold,
+                });
+            },
+        );
         LearnOutput {
             obs_vector: self.obs.iter().map(|&x| x as f32).collect(),
             stimulus,
-            predictions: outs
-                .into_iter()
-                .map(|o| PredictionValue {
-                    name: o.name,
-                    value: o.value,
-                    threshold: o.threshold,
-                })
-                .collect(),
+            predictions,
             gate_value,
             gate_threshold,
             gate_inputs,
@@ -354,7 +364,8 @@ impl LearningStage {
             });
         }
         let before = self.set.divergences();
-        self.set.learn_with_ratio(&[stimulus], self.pending_rho)?;
+        self.set
+            .learn_each(&[stimulus], self.pending_rho, |_delta| {})?;
         let divergences = self.set.divergences();
         let newly_diverged = if divergences > before {
             // Rare (never with the bounds in force); the names are only gathered then.
@@ -372,8 +383,16 @@ impl LearningStage {
     }
 
     /// The signals of the last [`LearningStage::act`], as a Horde reads them: the observation scaled and
-    /// unscaled, the extra inputs and the stimulus.
-    pub fn signals(&self) -> TickSignals<'_> {
+    /// unscaled, the extra inputs and the stimulus. The unscaled observation is filled here, from the
+    /// snapshot `act` kept (a tick without a Horde never needs it).
+    pub fn signals(&mut self) -> TickSignals<'_> {
+        match &self.values {
+            Some(v) => self.layout.raw(v, &mut self.raw),
+            None => {
+                self.raw.clear();
+                self.raw.resize(self.layout.len(), f64::NAN);
+            }
+        }
         TickSignals {
             obs: &self.obs,
             raw: &self.raw,

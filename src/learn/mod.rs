@@ -48,7 +48,7 @@ pub use gtd::{Gtd, GtdParams};
 pub use horde::{FamilySpec, Horde, HordeSnapshot, HordeState, TickSignals};
 pub use inputs::{FeatureInputs, SignalNames};
 pub use named::{Named, NamedChain};
-pub use set::{PredictionOut, PredictionSet};
+pub use set::{Predicted, PredictionOut, PredictionSet};
 pub use sigma::Sigma;
 pub use snapshot::{PredictionSnapshot, PreviousStep, SetSnapshot};
 pub use spec::{Cumulant, FeatureSpec, LearnerKind, PairSpec, PredictionSpec, Threshold};

@@ -64,6 +64,42 @@ pub struct PredictionOut {
     pub diverged: bool,
 }
 
+/// One prediction's output on one tick without its name (which is its spec's, [`PredictionSet::specs`]):
+/// what [`PredictionSet::predict_each`] hands over, so that a tick need not copy every name.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Predicted {
+    /// v_t = σ(wᵀx_t).
+    pub value: f64,
+    /// The mixing-function threshold θ.
+    pub threshold: f64,
+    /// How many features were active (fewer than `tilings` when some inputs were missing or invalid).
+    pub active_features: usize,
+    /// How many tilings the coder has: the active count for a fully valid input.
+    pub tilings: usize,
+    /// The prediction stopped learning because its weights were about to become non-finite.
+    pub diverged: bool,
+}
+
+impl Predicted {
+    /// As [`PredictionOut::valid_value`].
+    pub fn valid_value(&self) -> Option<f64> {
+        (self.active_features == self.tilings && self.value.is_finite() && !self.diverged)
+            .then_some(self.value)
+    }
+
+    /// With the prediction's `name`.
+    pub fn named(self, name: &str) -> PredictionOut {
+        PredictionOut {
+            name: name.to_string(),
+            value: self.value,
+            threshold: self.threshold,
+            active_features: self.active_features,
+            tilings: self.tilings,
+            diverged: self.diverged,
+        }
+    }
+}
+
 impl PredictionOut {
     /// The value when it rests on a fully valid input (every tiling active), is finite and comes from a
     /// prediction that has not diverged, else `None`: the gate then falls back to the stimulus alone.
@@ -99,6 +135,11 @@ pub(crate) struct Learner {
     /// The limits of runtime changes (α·‖x‖² ≤ 1).
     pub bounds: ParamBounds,
     scratch: Vec<f64>,
+    /// `gather` is `0, 1, …, n − 1`: the coder reads the first n observation dimensions as they are
+    /// (when the observation has n of them), with no copy into `scratch`.
+    gather_is_prefix: bool,
+    /// The coder's input of the last `predict`: `x_now` holds its active features.
+    coded: Vec<f64>,
     x_now: Vec<usize>,
     fresh: bool,
 }
@@ -145,6 +186,8 @@ impl Learner {
         Ok(Learner {
             threshold: spec.threshold_value(),
             scratch: Vec::with_capacity(resolved.gather.len()),
+            gather_is_prefix: resolved.gather.iter().enumerate().all(|(k, &i)| k == i),
+            coded: Vec::with_capacity(resolved.gather.len()),
             x_now: Vec::with_capacity(tilings),
             fresh: false,
             bounds,
@@ -165,22 +208,33 @@ impl Learner {
         }
     }
 
-    fn predict(&mut self, inputs: &FeatureInputs) -> PredictionOut {
+    fn predict(&mut self, inputs: &FeatureInputs) -> Predicted {
         if self.fresh {
             self.break_chain();
         }
-        self.scratch.clear();
-        self.scratch
-            .extend(self.gather.iter().map(|&i| inputs.get(i)));
-        self.coder.active(&self.scratch, &mut self.x_now);
+        // With a prefix gather the coder's input is the observation's first `gather.len()` values,
+        // exactly what the copy below would hold (`FeatureInputs::get` of an index inside `obs`).
+        let input = match inputs.obs.get(..self.gather.len()) {
+            Some(prefix) if self.gather_is_prefix => prefix,
+            _ => {
+                self.scratch.clear();
+                self.scratch
+                    .extend(self.gather.iter().map(|&i| inputs.get(i)));
+                &self.scratch[..]
+            }
+        };
+        // `x_now` still holds the features of `coded`, the last tick's input: only what changed is
+        // coded again.
+        self.coder.active_since(input, &self.coded, &mut self.x_now);
+        self.coded.clear();
+        self.coded.extend_from_slice(input);
         let value = match &mut self.engine {
             Engine::Td(g) => g.predict_value(&self.x_now),
             Engine::Gtd(c) => self.spec.sigma.value(c.predict(&self.x_now)),
             Engine::Named(c) => c.predict(&self.x_now),
         };
         self.fresh = true;
-        PredictionOut {
-            name: self.spec.name.clone(),
+        Predicted {
             value,
             threshold: self.threshold,
             active_features: self.x_now.len(),
@@ -308,10 +362,18 @@ impl PredictionSet {
 
     /// Step 1 of a tick: features and predictions for this tick's inputs, in spec order.
     pub fn predict(&mut self, inputs: &FeatureInputs) -> Vec<PredictionOut> {
-        self.learners
-            .iter_mut()
-            .map(|l| l.predict(inputs))
-            .collect()
+        let mut outs = Vec::with_capacity(self.learners.len());
+        self.predict_each(inputs, |name, p| outs.push(p.named(name)));
+        outs
+    }
+
+    /// [`PredictionSet::predict`] without collecting: hands each prediction's name and output to
+    /// `each`, in spec order (a tick's caller builds what it needs from them without a vector between).
+    pub fn predict_each(&mut self, inputs: &FeatureInputs, mut each: impl FnMut(&str, Predicted)) {
+        for l in &mut self.learners {
+            let p = l.predict(inputs);
+            each(&l.spec.name, p);
+        }
     }
 
     /// Step 2 of a tick for on-policy data: [`PredictionSet::learn_with_ratio`] with ρ = 1 (the previous
@@ -331,6 +393,19 @@ impl PredictionSet {
         stimuli: &[bool],
         rho_prev: f64,
     ) -> Result<Vec<Option<f64>>, LearnError> {
+        let mut deltas = Vec::with_capacity(self.learners.len());
+        self.learn_each(stimuli, rho_prev, |delta| deltas.push(delta))?;
+        Ok(deltas)
+    }
+
+    /// [`PredictionSet::learn_with_ratio`] without collecting: hands each prediction's δ to `each`, in
+    /// spec order (nothing, on an error, which is found before any prediction learns).
+    pub fn learn_each(
+        &mut self,
+        stimuli: &[bool],
+        rho_prev: f64,
+        mut each: impl FnMut(Option<f64>),
+    ) -> Result<(), LearnError> {
         if stimuli.len() != self.names.stimuli.len() {
             return Err(LearnError::StimulusCountMismatch {
                 expected: self.names.stimuli.len(),
@@ -341,18 +416,14 @@ impl PredictionSet {
             return Err(LearnError::LearnWithoutPredict);
         }
         let mut stopped = 0;
-        let deltas = self
-            .learners
-            .iter_mut()
-            .map(|l| {
-                let was = l.diverged();
-                let delta = l.learn(stimuli.get(l.stimulus).copied().unwrap_or(false), rho_prev);
-                stopped += u64::from(l.diverged() && !was);
-                delta
-            })
-            .collect();
+        for l in &mut self.learners {
+            let was = l.diverged();
+            let delta = l.learn(stimuli.get(l.stimulus).copied().unwrap_or(false), rho_prev);
+            stopped += u64::from(l.diverged() && !was);
+            each(delta);
+        }
         self.divergences += stopped;
-        Ok(deltas)
+        Ok(())
     }
 
     /// How many times a prediction stopped learning because its weights were about to become

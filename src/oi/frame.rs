@@ -8,7 +8,7 @@
 //! A frame must fit in one 15 ms slot at the link's baud rate or the stream corrupts [C1 p14; C2 p22].
 
 use super::model::stream_budget_bytes;
-use super::packets::{data_len, encode_data};
+use super::packets::{DataBuf, data_len, encode_data_into};
 use super::{OiError, SensorValues};
 
 /// The first byte of every stream frame.
@@ -76,16 +76,28 @@ pub fn encode_stream_frame_into(
 ) -> Result<(), OiError> {
     frame.clear();
     let n = stream_payload_len(ids)?;
-    frame.push(STREAM_HEADER);
-    frame.push(n as u8); // stream_payload_len guarantees n <= 255
+    // The frame is assembled in a fixed array (header, N ≤ 255 bytes, checksum) and copied out once,
+    // instead of growing `frame` a byte at a time; the bytes are the same.
+    let mut bytes = [0u8; 3 + u8::MAX as usize];
+    bytes[0] = STREAM_HEADER;
+    bytes[1] = n as u8; // stream_payload_len guarantees n <= 255
+    let mut at = 2;
+    let mut data: DataBuf = [0; 256];
     for &id in ids {
-        frame.push(id);
-        if let Err(e) = encode_data(id, values, frame) {
-            frame.clear();
-            return Err(e);
+        let len = encode_data_into(id, values, &mut data)?;
+        // `n` counted every id and its data, so they fit before the checksum's byte.
+        if let Some(slot) = bytes.get_mut(at) {
+            *slot = id;
         }
+        if let (Some(dst), Some(src)) = (bytes.get_mut(at + 1..at + 1 + len), data.get(..len)) {
+            dst.copy_from_slice(src);
+        }
+        at += 1 + len;
     }
-    frame.push(checksum_for(frame));
+    let body = bytes.get(..at).unwrap_or_default();
+    let sum = checksum_for(body);
+    frame.extend_from_slice(body);
+    frame.push(sum);
     Ok(())
 }
 

@@ -204,8 +204,11 @@ const SIGNAL: (i32, i32) = (0, 4095);
 const WHEEL_MM_S: (i32, i32) = (-500, 500);
 
 /// Every single sensor packet, indexed by `id - 7` [C1 pp17–21, 24–25; C2 pp23–32, 37–39].
+pub static PACKETS: [PacketSpec; 52] = PACKET_TABLE;
+
+/// [`PACKETS`] as a constant, for the tables built from it at compile time.
 #[rustfmt::skip]
-pub static PACKETS: [PacketSpec; 52] = [
+const PACKET_TABLE: [PacketSpec; 52] = [
     p(7,  "bumps_wheel_drops",        1, U, "bits",   (0, 31),    BOTH), // C2 has no caster bit: 0–15
     p(8,  "wall",                     1, U, "bool",   BOOL,       BOTH), // C2: = light-bumper right
     p(9,  "cliff_left",               1, U, "bool",   BOOL,       BOTH),
@@ -317,18 +320,93 @@ pub fn group_members(id: u8) -> Option<&'static [u8]> {
 }
 
 /// Data bytes of a single packet or of a whole group (group 6: 52, group 100: 80); `None` if unknown.
+/// A table lookup: the sums over the members are computed once, at compile time ([`DATA_LEN`]).
 pub fn data_len(id: u8) -> Option<usize> {
-    if let Some(s) = spec(id) {
-        return Some(usize::from(s.size));
+    match DATA_LEN[usize::from(id)] {
+        0 => None,
+        n => Some(usize::from(n)),
     }
-    group_members(id).map(|members| {
-        members
-            .iter()
-            .filter_map(|&m| spec(m))
-            .map(|s| usize::from(s.size))
-            .sum()
-    })
 }
+
+/// The members of packet-or-group `id` as a run of consecutive ids `(first, count)` (every group is
+/// one: see the `GROUP_*` tables), for tables built at compile time; `None` if unknown.
+const fn member_run(id: u8) -> Option<(u8, u8)> {
+    match id {
+        FIRST_PACKET..=LAST_PACKET => Some((id, 1)),
+        0 => Some((7, 20)),
+        1 => Some((7, 10)),
+        2 => Some((17, 4)),
+        3 => Some((21, 6)),
+        4 => Some((27, 8)),
+        5 => Some((35, 8)),
+        6 => Some((7, 36)),
+        100 => Some((7, 52)),
+        101 => Some((43, 16)),
+        106 => Some((46, 6)),
+        107 => Some((54, 5)),
+        _ => None,
+    }
+}
+
+/// Data bytes of every packet-or-group id, 0 for an unknown id (no known id has 0 bytes; the largest,
+/// group 100, has 80). A test checks it against the member lists.
+static DATA_LEN: [u8; 256] = {
+    let mut table = [0u8; 256];
+    let mut id = 0;
+    while id < 256 {
+        if let Some((first, count)) = member_run(id as u8) {
+            let mut n = 0u8;
+            let mut k = 0;
+            while k < count {
+                n += PACKET_TABLE[(first + k - FIRST_PACKET) as usize].size;
+                k += 1;
+            }
+            table[id] = n;
+        }
+        id += 1;
+    }
+    table
+};
+
+/// How single packet `id` goes on the wire: its size and the range its value is saturated to.
+#[derive(Debug, Clone, Copy)]
+struct Wire {
+    size: u8,
+    lo: i32,
+    hi: i32,
+}
+
+/// [`Wire`] of every single packet, indexed by `id - 7`, built at compile time from [`PACKET_TABLE`]:
+/// the range is [`PacketSpec::wire_range`], except that a packet that wraps (the encoders) gets the
+/// whole `i32` range, where clamping is the identity, so `v as u16` wraps it exactly as before.
+static WIRE: [Wire; 52] = {
+    let mut table = [Wire {
+        size: 0,
+        lo: 0,
+        hi: 0,
+    }; 52];
+    let mut i = 0;
+    while i < 52 {
+        let s = &PACKET_TABLE[i];
+        let (lo, hi) = if wraps_around(s.id) {
+            (i32::MIN, i32::MAX)
+        } else {
+            match (s.size, s.signed) {
+                (1, false) => (0, 255),
+                (1, true) => (-128, 127),
+                (_, false) => U16,
+                (_, true) => I16,
+            }
+        };
+        table[i] = Wire {
+            size: s.size,
+            lo,
+            hi,
+        };
+        i += 1;
+    }
+    table
+};
 
 /// Whether `model` answers packet or group `id` (Create 1: 0–42; Create 2: 0–58, 100, 101, 106, 107):
 /// a single packet when it is a member of the model's all-sensors group, a group when the model lists
@@ -355,7 +433,7 @@ pub fn check_available(id: u8, model: Model) -> Result<(), OiError> {
 
 /// True for the packets whose counters wrap around instead of saturating: the wheel encoders
 /// ("cumulative, wraps" [C2 p30–31]).
-fn wraps_around(id: u8) -> bool {
+const fn wraps_around(id: u8) -> bool {
     id == id::LEFT_ENCODER || id == id::RIGHT_ENCODER
 }
 
@@ -407,10 +485,49 @@ fn members_of(id: u8) -> Result<&'static [u8], OiError> {
 /// absent values as 0. This is exactly what the robot sends after the id in a stream frame, and the
 /// whole reply to Sensors (142) [C1 p13; C2 p21].
 pub fn encode_data(id: u8, values: &SensorValues, out: &mut Vec<u8>) -> Result<(), OiError> {
-    for &m in members_of(id)? {
-        encode_value(m, values.get_or_zero(m), out)?;
-    }
+    let mut buf: DataBuf = [0; 256];
+    let n = encode_data_into(id, values, &mut buf)?;
+    out.extend_from_slice(buf.get(..n).unwrap_or_default());
     Ok(())
+}
+
+/// A buffer that one packet's or group's data always fits in (at most 80 bytes, group 100), indexed
+/// by a byte so that no write can fall outside it.
+pub(crate) type DataBuf = [u8; 256];
+
+/// Like [`encode_data`], into the front of `buf`; returns the bytes written. Each member is encoded
+/// as [`encode_value`] does (its value or 0 when absent, saturated to its wire range, the encoders
+/// wrapped, big-endian), from the compile-time [`WIRE`] table and without a branch per member.
+pub(crate) fn encode_data_into(
+    id: u8,
+    values: &SensorValues,
+    buf: &mut DataBuf,
+) -> Result<usize, OiError> {
+    let (first, count) = member_run(id).ok_or(OiError::UnknownPacket(id))?;
+    let (first, count) = (usize::from(first), usize::from(count));
+    let (slots, present) = values.slots();
+    // Every run lies within packets 7..=58, so within both tables.
+    let start = first - usize::from(FIRST_PACKET);
+    let (Some(wires), Some(slots)) = (
+        WIRE.get(start..start + count),
+        slots.get(first..first + count),
+    ) else {
+        return Err(OiError::UnknownPacket(id));
+    };
+    let mut n = 0u8;
+    for (k, (w, &slot)) in wires.iter().zip(slots).enumerate() {
+        // `get_or_zero`: the slot when its presence bit is set, else 0.
+        let bit = ((present >> (first + k)) & 1) as i32;
+        let value = slot & bit.wrapping_neg();
+        // `clamp(lo, hi)` as max then min: the same for lo <= hi (every entry), without its check.
+        let [h, l] = (value.max(w.lo).min(w.hi) as u16).to_be_bytes();
+        // Two bytes are `h l`, one byte is `l` (`v as u8`). The byte after the value is written
+        // either way; when it is not the value's, the next member overwrites it.
+        buf[usize::from(n)] = if w.size == 2 { h } else { l };
+        buf[usize::from(n.wrapping_add(1))] = l;
+        n = n.wrapping_add(w.size);
+    }
+    Ok(usize::from(n))
 }
 
 /// Decodes the data of a single packet or a whole group (`bytes` must be exactly [`data_len`] long)

@@ -22,7 +22,8 @@
 
 use super::frame::{STREAM_HEADER, byte_sum, stream_payload_len};
 use super::packets::{group_members, spec};
-use super::plausible::{FrameContext, Implausible, WAIVE_AFTER, Waived, implausible_except};
+use super::plausible::{FrameCheck, FrameContext, Implausible, WAIVE_AFTER, Waived};
+use super::sensors::PACKET_SLOTS;
 use super::{Model, OiError, SensorValues};
 
 /// Counters of what the parser has seen since it was created.
@@ -54,6 +55,8 @@ struct ScanState {
     streak: Option<(u8, u32)>,
     /// Packets whose bound a run of [`WAIVE_AFTER`] frames proved wrong for this robot.
     waived: Waived,
+    /// The plausibility bounds laid out for the frames' model and packets.
+    check: Option<FrameCheck>,
 }
 
 impl ScanState {
@@ -62,14 +65,14 @@ impl ScanState {
     }
 
     /// Why `values` cannot be a frame from the robot, if plausibility is checked.
-    fn reject(&self, values: &SensorValues) -> Option<Implausible> {
+    fn reject(&mut self, values: &SensorValues) -> Option<Implausible> {
         let model = self.model?;
         let context = if self.skipped_at_accept == Some(self.stats.skipped_bytes) {
             FrameContext::FollowsFrame
         } else {
             FrameContext::First
         };
-        implausible_except(values, model, context, self.waived)
+        FrameCheck::implausible(&mut self.check, values, model, context, self.waived)
     }
 
     /// Counts a frame rejected for `why`; a long enough run for one packet waives its bound.
@@ -96,14 +99,23 @@ impl ScanState {
     }
 }
 
-/// Where one single packet's value sits in a frame.
+/// Where one single packet's value sits in a frame, and how to read it.
 #[derive(Debug, Clone, Copy)]
 struct Field {
-    offset: usize,
+    /// Below 258: a frame is at most 3 + 255 bytes.
+    offset: u16,
+    /// 7–58.
     id: u8,
-    size: u8,
-    signed: bool,
+    /// Two bytes (big-endian) rather than one.
+    two: bool,
+    /// Sign extension as a shift pair, `(raw << shift) >> shift` on an `i32`: 24 for a signed byte,
+    /// 16 for a signed 16-bit value, 0 for an unsigned one (exactly `as i8` / `as i16` / nothing).
+    shift: u8,
 }
+
+/// A frame copied for decoding: 512 bytes, so that an offset masked to 9 bits (all of them are
+/// below 258) is always inside it, and bytes beyond the frame read as 0.
+type FrameBuf = [u8; 512];
 
 /// The fixed shape of a valid frame for the requested list.
 #[derive(Debug, Clone)]
@@ -113,6 +125,8 @@ struct Layout {
     /// `(offset in frame, expected id byte)` for each requested id.
     id_checks: Vec<(usize, u8)>,
     fields: Vec<Field>,
+    /// The presence bit of every field's packet: what decoding a frame marks present.
+    present: u64,
 }
 
 /// What a window starting at a header byte turned out to be.
@@ -142,19 +156,28 @@ impl Layout {
                 .ok_or(OiError::UnknownPacket(id))?;
             for s in members.iter().filter_map(|&m| spec(m)) {
                 fields.push(Field {
-                    offset,
+                    offset: offset as u16, // < 258, checked by stream_payload_len
                     id: s.id,
-                    size: s.size,
-                    signed: s.signed,
+                    two: s.size == 2,
+                    shift: match (s.size, s.signed) {
+                        (_, false) => 0,
+                        (1, true) => 24,
+                        (_, true) => 16,
+                    },
                 });
                 offset += usize::from(s.size);
             }
         }
+        let present = fields
+            .iter()
+            .filter(|f| usize::from(f.id) < PACKET_SLOTS)
+            .fold(0u64, |mask, f| mask | 1 << f.id);
         Ok(Layout {
             payload_len: payload_len as u8, // <= 255, checked by stream_payload_len
             frame_len: payload_len + 3,
             id_checks,
             fields,
+            present,
         })
     }
 
@@ -179,27 +202,25 @@ impl Layout {
         }
     }
 
-    /// The values of a frame already judged good.
+    /// The values of a frame already judged good: every field in order (a packet requested twice
+    /// keeps its last value), written straight into the snapshot's slots without a branch per field.
     fn decode(&self, frame: &[u8]) -> SensorValues {
-        let mut values = SensorValues::new();
-        for f in &self.fields {
-            let hi = frame.get(f.offset).copied().unwrap_or(0);
-            let v = match (f.size, f.signed) {
-                (1, false) => i32::from(hi),
-                (1, true) => i32::from(hi as i8),
-                (_, signed) => {
-                    let lo = frame.get(f.offset + 1).copied().unwrap_or(0);
-                    let raw = u16::from_be_bytes([hi, lo]);
-                    if signed {
-                        i32::from(raw as i16)
-                    } else {
-                        i32::from(raw)
-                    }
-                }
-            };
-            values.set(f.id, v);
+        let mut bytes: FrameBuf = [0; 512];
+        let len = frame.len().min(self.frame_len).min(bytes.len());
+        if let (Some(dst), Some(src)) = (bytes.get_mut(..len), frame.get(..len)) {
+            dst.copy_from_slice(src);
         }
-        values
+        // Indexed by id masked to 6 bits (ids are 7–58), then cut to the snapshot's 59 slots; a
+        // slot no field writes stays 0, as an absent packet's must.
+        let mut slots = [0i32; 64];
+        for f in &self.fields {
+            let at = usize::from(f.offset) & 511;
+            let hi = u32::from(bytes[at]);
+            let lo = u32::from(bytes[(at + 1) & 511]);
+            let raw = if f.two { hi << 8 | lo } else { hi };
+            slots[usize::from(f.id) & 63] = (raw << f.shift) as i32 >> f.shift;
+        }
+        SensorValues::from_slots(&slots, self.present)
     }
 
     /// Scans candidate frame starts `0..start_limit` of `data`, handing over good frames. Returns where

@@ -101,6 +101,20 @@ impl SensorValues {
         (&self.values, self.present)
     }
 
+    /// A snapshot of the first [`PACKET_SLOTS`] of `slots` with presence mask `present` (bits above
+    /// the slots are dropped), for the parser's decoding. A slot whose bit is clear must hold 0, as
+    /// [`SensorValues::slots`] promises its readers.
+    pub(crate) fn from_slots(slots: &[i32; 64], present: u64) -> Self {
+        let mut values = [0; PACKET_SLOTS];
+        if let Some(head) = slots.get(..PACKET_SLOTS) {
+            values.copy_from_slice(head);
+        }
+        SensorValues {
+            values,
+            present: present & ((1 << PACKET_SLOTS) - 1),
+        }
+    }
+
     /// True when no packet is present.
     pub fn is_empty(&self) -> bool {
         self.present == 0

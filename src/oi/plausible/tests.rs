@@ -548,3 +548,43 @@ fn a_robot_that_persistently_breaks_a_bound_loses_only_a_few_frames() {
         vec![id::REQUESTED_VELOCITY]
     );
 }
+
+proptest::proptest! {
+    /// The parser's laid-out bounds give the answer of the ordered search, whatever the values (near and
+    /// beyond the bounds), the packets present and waived, the model and the context; the cache is kept
+    /// across calls, as the parser keeps it.
+    #[test]
+    fn laid_out_bounds_answer_as_the_search_does(
+        frames in proptest::collection::vec(
+            (
+                proptest::collection::vec(
+                    proptest::prop_oneof![4 => 0..2i32, 1 => -2..5_000i32, 1 => proptest::num::i32::ANY],
+                    59,
+                ),
+                proptest::num::u64::ANY,
+                proptest::num::u64::ANY,
+                proptest::bool::ANY,
+                proptest::bool::ANY,
+            ),
+            1..20,
+        ),
+    ) {
+        let mut cache = None;
+        for (raw, present, waived, create2, follows) in frames {
+            let model = if create2 { Model::Create2 } else { Model::Create1 };
+            let context = if follows { FrameContext::FollowsFrame } else { FrameContext::First };
+            let mut values = SensorValues::new();
+            for (id, &v) in raw.iter().enumerate() {
+                if present & (1 << id) != 0 {
+                    values.set(id as u8, v);
+                }
+            }
+            // Mostly nothing waived, as in a running parser.
+            let waived = Waived(if waived % 4 == 0 { waived } else { 0 });
+            proptest::prop_assert_eq!(
+                FrameCheck::implausible(&mut cache, &values, model, context, waived),
+                implausible_except(&values, model, context, waived)
+            );
+        }
+    }
+}
