@@ -264,6 +264,18 @@ impl Enclosure {
 mod tests {
     use super::*;
 
+    /// A slanted quadrilateral with a zero-length wall, and walls not on the axes.
+    fn slanted_quad() -> Enclosure {
+        let corner = |x, y| Vec2::new(x, y);
+        let wall = |a, b| Segment { a, b };
+        Enclosure::new(vec![
+            wall(corner(-0.3, 0.1), corner(1.7, -0.4)),
+            wall(corner(1.7, -0.4), corner(1.7, -0.4)),
+            wall(corner(1.7, -0.4), corner(0.9, 1.3)),
+            wall(corner(0.9, 1.3), corner(-0.3, 0.1)),
+        ])
+    }
+
     #[test]
     fn closest_point_clamps_to_the_ends() {
         let s = Segment {
@@ -357,25 +369,7 @@ mod tests {
         let arenas = [
             Enclosure::right_triangle(1.0),
             Enclosure::right_triangle(2.5),
-            // A slanted quadrilateral with a zero-length wall, and walls not on the axes.
-            Enclosure::new(vec![
-                Segment {
-                    a: Vec2::new(-0.3, 0.1),
-                    b: Vec2::new(1.7, -0.4),
-                },
-                Segment {
-                    a: Vec2::new(1.7, -0.4),
-                    b: Vec2::new(1.7, -0.4),
-                },
-                Segment {
-                    a: Vec2::new(1.7, -0.4),
-                    b: Vec2::new(0.9, 1.3),
-                },
-                Segment {
-                    a: Vec2::new(0.9, 1.3),
-                    b: Vec2::new(-0.3, 0.1),
-                },
-            ]),
+            slanted_quad(),
         ];
         for e in &arenas {
             for _ in 0..20_000 {
@@ -440,24 +434,7 @@ mod tests {
     #[test]
     fn ray_distance_is_the_least_hit_of_every_wall() {
         let mut rng = crate::rng::Rng::new(7);
-        let quad = Enclosure::new(vec![
-            Segment {
-                a: Vec2::new(-0.3, 0.1),
-                b: Vec2::new(1.7, -0.4),
-            },
-            Segment {
-                a: Vec2::new(1.7, -0.4),
-                b: Vec2::new(1.7, -0.4),
-            },
-            Segment {
-                a: Vec2::new(1.7, -0.4),
-                b: Vec2::new(0.9, 1.3),
-            },
-            Segment {
-                a: Vec2::new(0.9, 1.3),
-                b: Vec2::new(-0.3, 0.1),
-            },
-        ]);
+        let quad = slanted_quad();
         let mut hits = 0;
         for e in [Enclosure::right_triangle(1.0), quad] {
             for i in 0..50_000 {
