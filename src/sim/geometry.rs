@@ -85,16 +85,21 @@ impl Segment {
     /// Distance along the ray `origin + t·dir` (`dir` a unit vector, `t ≥ 0`) at which it meets the
     /// segment, if it does.
     pub fn ray_hit(&self, origin: Vec2, dir: Vec2) -> Option<f64> {
-        let ab = self.b - self.a;
-        let denom = dir.cross(ab);
-        if denom.abs() < 1e-12 {
-            return None; // parallel
-        }
-        let ao = self.a - origin;
-        let t = ao.cross(ab) / denom;
-        let u = ao.cross(dir) / denom;
-        (t >= 0.0 && (0.0..=1.0).contains(&u)).then_some(t)
+        ray_hit(self.a, self.b - self.a, origin, dir)
     }
+}
+
+/// Distance along the ray `origin + t·dir` at which it meets the segment from `a` to `a + ab`, if it does.
+#[inline]
+fn ray_hit(a: Vec2, ab: Vec2, origin: Vec2, dir: Vec2) -> Option<f64> {
+    let denom = dir.cross(ab);
+    if denom.abs() < 1e-12 {
+        return None; // parallel
+    }
+    let ao = a - origin;
+    let t = ao.cross(ab) / denom;
+    let u = ao.cross(dir) / denom;
+    (t >= 0.0 && (0.0..=1.0).contains(&u)).then_some(t)
 }
 
 /// The robot's body touching a wall.
@@ -181,15 +186,7 @@ impl ReachFilter {
     /// [`Segment::ray_hit`] of the wall, with its `ab` computed once.
     #[inline]
     fn ray_hit(&self, origin: Vec2, dir: Vec2) -> Option<f64> {
-        let ab = self.ab;
-        let denom = dir.cross(ab);
-        if denom.abs() < 1e-12 {
-            return None; // parallel
-        }
-        let ao = self.a - origin;
-        let t = ao.cross(ab) / denom;
-        let u = ao.cross(dir) / denom;
-        (t >= 0.0 && (0.0..=1.0).contains(&u)).then_some(t)
+        ray_hit(self.a, self.ab, origin, dir)
     }
 }
 
