@@ -320,7 +320,7 @@ pub fn group_members(id: u8) -> Option<&'static [u8]> {
 }
 
 /// Data bytes of a single packet or of a whole group (group 6: 52, group 100: 80); `None` if unknown.
-/// A table lookup: the sums over the members are computed once, at compile time ([`DATA_LEN`]).
+/// A table lookup: the sums over the members are computed once, at compile time (the table `DATA_LEN`).
 pub fn data_len(id: u8) -> Option<usize> {
     match DATA_LEN[usize::from(id)] {
         0 => None,
