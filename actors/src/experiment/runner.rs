@@ -303,4 +303,59 @@ mod tests {
             "the run's ticks changed"
         );
     }
+
+    /// Whole 6-minute runs (18 000 ticks) of the default stall study, pinned: runs 0 (reactive) and 1
+    /// (Pavlovian) of study seed 1, run 1 of seeds 2 and 3. The simulated Create, the OI bytes, learning and
+    /// the recorder's encoding were made cheaper per tick (issue 26) on the promise that no recorded bit
+    /// moves. Each hash is that of the tick messages of the run's recording as the code before that work
+    /// (4582006) wrote it in `experiment stall --seed S` (`runs/00-reactive`, `runs/01-pavlovian`).
+    #[test]
+    fn whole_stall_runs_record_exactly_the_pinned_ticks() {
+        use pavlov::control::Mode::{Pavlovian, Reactive};
+        let pinned = [
+            (
+                1,
+                0,
+                Reactive,
+                "b0fee02d929dad5ddd34cbaf3dd1dc1ae30b33c5825fdeb465373a3dee45afbf",
+            ),
+            (
+                1,
+                1,
+                Pavlovian,
+                "26235f3ee0973aafc043838644460cae2da3b509d62d800c3966990a978877a6",
+            ),
+            (
+                2,
+                1,
+                Pavlovian,
+                "2ac4780c10ad10ec637c3e0d2e786d0fdaba30040a63d6620caa0a3a50b8ab89",
+            ),
+            (
+                3,
+                1,
+                Pavlovian,
+                "288fd2b360f2d66d36a96a4be82d7eedfab513dcc66bf3ac46419301e07fa125",
+            ),
+        ];
+        let mut changed = Vec::new();
+        for (seed, index, mode, want) in pinned {
+            let mut config = Config::from_toml(include_str!("../../../config/stall.toml"))
+                .expect("stall config");
+            config.control.mode = mode;
+            config.sim.seed = super::super::stall::run_seed(seed, index);
+            let request = RunRequest {
+                config,
+                ticks: 18_000,
+                record: None,
+            };
+            let done = run_paused(request, Hash::default()).expect("run");
+            let (hash, n) = done.output;
+            assert_eq!(n, 18_000);
+            if hash != want {
+                changed.push(format!("seed {seed} run {index} ({mode:?}): {hash}"));
+            }
+        }
+        assert!(changed.is_empty(), "the runs' ticks changed: {changed:#?}");
+    }
 }
