@@ -307,16 +307,7 @@ mod tests {
             4_503_599_627_370_495.5,
             4_503_599_627_370_496.0,
         ] {
-            for sign in [1.0, -1.0] {
-                let mut v: f64 = sign * base;
-                for _ in 0..4 {
-                    v = v.next_down();
-                }
-                for _ in 0..9 {
-                    values.push(v);
-                    v = v.next_up();
-                }
-            }
+            values.extend(crate::sim::test_floats::around(base));
         }
         values.extend([
             0.0,
